@@ -1,0 +1,13 @@
+// Every `handdb` subcommand: int RunX(int argc, char** argv), argv[0] is the subcommand name.
+// Exit codes: 0 success, 1 user error (one clear line on stderr), 2 bad usage.
+#pragma once
+
+namespace handdb::cli {
+
+constexpr int kExitOk = 0;
+constexpr int kExitError = 1;
+constexpr int kExitUsage = 2;
+
+int RunVersion(int argc, char** argv);
+
+}  // namespace handdb::cli

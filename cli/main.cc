@@ -1,0 +1,77 @@
+// One `handdb` binary dispatching subcommands from a table (after COLMAP).
+#include <cstdio>
+#include <cstring>
+#include <exception>
+#include <iostream>
+#include <string>
+#include <vector>
+
+#include "cli/commands.h"
+#include "handdb_version.h"
+
+namespace handdb::cli {
+namespace {
+
+struct Command {
+  const char* name;
+  int (*run)(int, char**);
+  const char* summary;
+};
+
+// Keep in the order of the pipeline.
+const std::vector<Command>& Commands() {
+  static const std::vector<Command> kCommands = {
+      {"version", RunVersion, "print the handdb version"},
+  };
+  return kCommands;
+}
+
+void PrintHelp(std::FILE* out) {
+  std::fprintf(out,
+               "handdb %s - databases of synthetic hand views for 3D hand pose estimation by "
+               "retrieval\n\nUsage: handdb <command> [options]   (handdb <command> --help for "
+               "details)\n\nCommands:\n",
+               HANDDB_VERSION);
+  for (const auto& c : Commands()) std::fprintf(out, "  %-10s %s\n", c.name, c.summary);
+  std::fprintf(out, "  %-10s %s\n", "help", "show this help");
+}
+
+}  // namespace
+
+int RunVersion(int argc, char** argv) {
+  if (argc > 1 && (std::strcmp(argv[1], "--help") == 0 || std::strcmp(argv[1], "-h") == 0)) {
+    std::printf("Usage: handdb version\nPrints the handdb version.\n");
+    return kExitOk;
+  }
+  std::printf("handdb %s\n", HANDDB_VERSION);
+  return kExitOk;
+}
+
+}  // namespace handdb::cli
+
+int main(int argc, char** argv) {
+  using namespace handdb::cli;
+  if (argc < 2) {
+    PrintHelp(stderr);
+    return kExitUsage;
+  }
+  const std::string name = argv[1];
+  if (name == "help" || name == "--help" || name == "-h") {
+    PrintHelp(stdout);
+    return kExitOk;
+  }
+  if (name == "--version") return RunVersion(1, argv + 1);
+  for (const auto& c : Commands()) {
+    if (name == c.name) {
+      try {
+        return c.run(argc - 1, argv + 1);
+      } catch (const std::exception& e) {
+        // A broken internal invariant: report it, never crash silently.
+        std::fprintf(stderr, "handdb %s: internal error: %s\n", c.name, e.what());
+        return kExitError;
+      }
+    }
+  }
+  std::fprintf(stderr, "handdb: unknown command '%s' (see 'handdb help')\n", name.c_str());
+  return kExitUsage;
+}

@@ -1,0 +1,35 @@
+# One-call helpers for libraries and tests, with explicit file lists (no globbing).
+#
+#   handdb_add_library(NAME handdb_format SRCS a.cc b.cc DEPS PUBLIC x PRIVATE y)
+#   handdb_add_test(NAME format/shard_reader_test SRCS format/shard_reader_test.cc DEPS handdb_format)
+#
+# Test names are "<module>/<file stem>" so `ctest -R format/` selects a module.
+include_guard(GLOBAL)
+
+function(handdb_add_library)
+  cmake_parse_arguments(ARG "" "NAME" "SRCS;PUBLIC_DEPS;PRIVATE_DEPS" ${ARGN})
+  add_library(${ARG_NAME} STATIC ${ARG_SRCS})
+  target_include_directories(${ARG_NAME} PUBLIC ${PROJECT_SOURCE_DIR})
+  target_link_libraries(${ARG_NAME} PUBLIC ${ARG_PUBLIC_DEPS} PRIVATE ${ARG_PRIVATE_DEPS})
+  target_compile_options(${ARG_NAME} PRIVATE ${HANDDB_WARNINGS})
+endfunction()
+
+function(handdb_add_test)
+  cmake_parse_arguments(ARG "" "NAME;TIMEOUT" "SRCS;DEPS;LABELS" ${ARGN})
+  if(NOT HANDDB_BUILD_TESTS)
+    return()
+  endif()
+  string(REPLACE "/" "_" target ${ARG_NAME})
+  add_executable(${target} ${ARG_SRCS})
+  target_link_libraries(${target} PRIVATE ${ARG_DEPS} GTest::gtest GTest::gtest_main)
+  target_compile_options(${target} PRIVATE ${HANDDB_WARNINGS})
+  add_test(NAME ${ARG_NAME} COMMAND ${target})
+  set_tests_properties(${ARG_NAME} PROPERTIES
+    ENVIRONMENT "HANDDB_SOURCE_DIR=${PROJECT_SOURCE_DIR};HANDDB_BINARY_DIR=${PROJECT_BINARY_DIR}")
+  if(ARG_TIMEOUT)
+    set_tests_properties(${ARG_NAME} PROPERTIES TIMEOUT ${ARG_TIMEOUT})
+  endif()
+  if(ARG_LABELS)
+    set_tests_properties(${ARG_NAME} PROPERTIES LABELS "${ARG_LABELS}")
+  endif()
+endfunction()

@@ -1,0 +1,52 @@
+// Every file handdb writes appears atomically: written to a temp file in the same directory,
+// fsync'ed, renamed over the target, and the directory fsync'ed. A crash leaves either the old
+// file or the new one, never a half-written one; stale temp files are named "<target>.tmp-*".
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <string_view>
+
+#include "format/status.h"
+
+namespace handdb {
+
+class AtomicFileWriter {
+ public:
+  AtomicFileWriter() = default;
+  ~AtomicFileWriter();  // removes the temp file unless Commit() succeeded
+  AtomicFileWriter(const AtomicFileWriter&) = delete;
+  AtomicFileWriter& operator=(const AtomicFileWriter&) = delete;
+
+  Status Open(const std::filesystem::path& target);
+  Status Write(const void* data, size_t size);
+  Status Write(std::string_view data) { return Write(data.data(), data.size()); }
+  // Overwrites bytes already written (used to patch headers after streaming).
+  Status WriteAt(uint64_t offset, const void* data, size_t size);
+  uint64_t bytes_written() const { return size_; }
+  // fsync + rename + fsync(dir).
+  Status Commit();
+  void Abort();
+
+  const std::filesystem::path& target() const { return target_; }
+  const std::filesystem::path& temp_path() const { return temp_; }
+
+ private:
+  std::filesystem::path target_;
+  std::filesystem::path temp_;
+  int fd_ = -1;
+  uint64_t size_ = 0;
+  bool committed_ = false;
+};
+
+// Convenience: the whole content at once.
+Status WriteFileAtomic(const std::filesystem::path& target, std::string_view data);
+
+// Reads a whole (small) file; kNotFound / kIoError name the path.
+Result<std::string> ReadFileToString(const std::filesystem::path& path);
+
+// fsync a directory (after creating/renaming entries in it).
+Status SyncDirectory(const std::filesystem::path& dir);
+
+}  // namespace handdb

@@ -1,0 +1,40 @@
+// A progress line on stderr for long work: "convert  1234/2236  55%  812 views/s  ETA 0:01".
+// Redrawn in place on a terminal, printed every few seconds otherwise (CI logs), silent when
+// disabled. Thread-safe: workers call Add() concurrently.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <mutex>
+#include <string>
+
+namespace handdb {
+
+class Progress {
+ public:
+  Progress(std::string label, uint64_t total, bool enabled = true, std::string unit = "items");
+  ~Progress();  // prints the final line
+  Progress(const Progress&) = delete;
+  Progress& operator=(const Progress&) = delete;
+
+  void Add(uint64_t n = 1);
+  void SetTotal(uint64_t total);
+  void Finish();
+  uint64_t done() const { return done_.load(); }
+
+ private:
+  void Draw(bool final);
+  std::string label_;
+  std::string unit_;
+  std::atomic<uint64_t> total_;
+  std::atomic<uint64_t> done_{0};
+  bool enabled_;
+  bool tty_;
+  bool finished_ = false;
+  std::mutex mu_;
+  std::chrono::steady_clock::time_point start_;
+  std::chrono::steady_clock::time_point last_draw_;
+};
+
+}  // namespace handdb

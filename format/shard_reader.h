@@ -1,0 +1,74 @@
+// Reads one shard. Open() memory-maps the file read-only and runs the cheap checks (header,
+// section table, footer, view-table bounds); VerifyChecksums() hashes every section on demand.
+// All accessors are const and safe from many threads; spans point into the mapping (zero-copy)
+// and live as long as the reader.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "format/status.h"
+#include "format/view.h"
+
+namespace handdb {
+
+struct SectionInfo {
+  uint32_t type = 0;
+  uint32_t flags = 0;
+  uint64_t offset = 0;
+  uint64_t size = 0;
+  uint64_t count = 0;
+  uint64_t checksum = 0;
+  std::string name;  // "metadata", "views", "points", or "unknown(0x...)"
+};
+
+struct ShardHeaderInfo {
+  uint16_t version_major = 0;
+  uint16_t version_minor = 0;
+  uint64_t required_features = 0;
+  uint64_t optional_features = 0;
+  uint64_t num_views = 0;
+  uint64_t num_points = 0;
+  uint64_t file_size = 0;
+};
+
+class ShardReader {
+ public:
+  ~ShardReader();
+  ShardReader(const ShardReader&) = delete;
+  ShardReader& operator=(const ShardReader&) = delete;
+  ShardReader(ShardReader&&) noexcept;
+  ShardReader& operator=(ShardReader&&) noexcept;
+
+  // mmap a file. Errors name the path, the offset and the raw values.
+  static Result<ShardReader> Open(const std::filesystem::path& path);
+  // Parse bytes already in memory (tests, fuzzing). `bytes` must outlive the reader;
+  // `name` is used in messages.
+  static Result<ShardReader> FromMemory(std::span<const uint8_t> bytes, std::string name);
+
+  // Hash every section and the header; kChecksumMismatch names the section.
+  Status VerifyChecksums() const;
+
+  const ShardHeaderInfo& header() const;
+  const std::vector<SectionInfo>& sections() const;
+  std::string_view metadata_json() const;
+  const std::string& name() const;
+
+  size_t num_views() const;
+  ViewLabel label(size_t i) const;                   // bounds-checked (THROW_CHECK)
+  std::span<const PointQ> points(size_t i) const;    // bounds-checked, zero-copy
+  std::span<const PointQ> all_points() const;        // the whole flat array
+  uint64_t point_offset(size_t i) const;             // index into all_points()
+
+ private:
+  struct Impl;
+  explicit ShardReader(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace handdb

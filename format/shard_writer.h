@@ -1,0 +1,47 @@
+// Streams canonical views into one shard file (docs/format.md). Points go to disk as they
+// arrive; only the fixed-size view table is kept in memory until Finish(), which writes the
+// table, metadata, section table and footer, then commits atomically (temp, fsync, rename).
+// Same inputs in the same order -> byte-identical file.
+#pragma once
+
+#include <filesystem>
+#include <memory>
+#include <span>
+#include <string>
+
+#include "format/status.h"
+#include "format/view.h"
+
+namespace handdb {
+
+struct ShardWriterOptions {
+  std::string metadata_json = "{}";  // generation config, hand-model hash, versions, label names
+  bool Check() const;
+};
+
+struct ShardSummary {
+  std::filesystem::path path;
+  uint64_t num_views = 0;
+  uint64_t num_points = 0;
+  uint64_t file_size = 0;
+  std::string checksum;  // xxh3-64 of the whole file, 16 lowercase hex digits
+};
+
+class ShardWriter {
+ public:
+  ShardWriter();
+  ~ShardWriter();  // an unfinished shard leaves no file behind
+  ShardWriter(const ShardWriter&) = delete;
+  ShardWriter& operator=(const ShardWriter&) = delete;
+
+  Status Open(const std::filesystem::path& path, const ShardWriterOptions& options);
+  // Points in the canonical normalised frame; label.render_id etc. filled by the caller.
+  Status AddView(const ViewLabel& label, std::span<const PointQ> points);
+  Result<ShardSummary> Finish();
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace handdb

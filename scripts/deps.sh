@@ -1,0 +1,77 @@
+#!/usr/bin/env bash
+# Installs everything handdb needs on a fresh Debian 12 machine (as root), idempotently:
+# Debian packages, and the default hand asset from the npm registry (pinned version + sha256).
+#   scripts/deps.sh            # packages + asset
+#   scripts/deps.sh --asset    # only the hand asset
+set -euo pipefail
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+
+PACKAGES=(
+  build-essential cmake ninja-build pkg-config git ca-certificates
+  blender python3-numpy python3-pytest python3-opencv python3-jsonschema
+  libopenimageio-dev openimageio-tools libopenexr-dev libopencv-dev libeigen3-dev
+  libpcl-dev libnanoflann-dev libcli11-dev nlohmann-json3-dev libzstd-dev libxxhash-dev
+  libgtest-dev libgmock-dev libbenchmark-dev clang libclang-rt-14-dev clang-format clang-tidy
+  slurm-wlm munge xxhash
+)
+# npm may come from elsewhere on the machine (it does on these images); Debian's only if absent.
+command -v npm > /dev/null 2>&1 || PACKAGES+=(npm)
+
+install_packages() {
+  local missing=()
+  for p in "${PACKAGES[@]}"; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+  done
+  if [ ${#missing[@]} -eq 0 ]; then
+    echo "deps: all ${#PACKAGES[@]} Debian packages present"
+    return
+  fi
+  echo "deps: installing ${#missing[@]} Debian packages: ${missing[*]}"
+  local sudo=""
+  [ "$(id -u)" -eq 0 ] || sudo="sudo"
+  $sudo apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" \
+    > /tmp/handdb-apt.log 2>&1 || { tail -30 /tmp/handdb-apt.log; echo "deps: apt-get install failed (log: /tmp/handdb-apt.log)" >&2; exit 1; }
+}
+
+# The default hand: WebXR generic hand, MIT licence (see third_party/README.md).
+ASSET_PACKAGE="@webxr-input-profiles/assets"
+ASSET_VERSION="1.0.20"
+ASSET_TGZ_SHA256="30df2a2268220fc0d0e034bed1550aabdd7a2500573c5216f64fc70d59c3d91e"
+ASSET_GLB_SHA256="291790c14f7f88a7f9bd35330c47392ed8e8d395ae6728f4bb7089f1bc1f2b96"
+ASSET_DIR="${HANDDB_ASSET_DIR:-$here/third_party/assets}"
+
+install_asset() {
+  local glb="$ASSET_DIR/generic-hand/right.glb"
+  if [ -f "$glb" ] && echo "$ASSET_GLB_SHA256  $glb" | sha256sum -c --status; then
+    echo "deps: hand asset present ($glb)"
+    return
+  fi
+  command -v npm > /dev/null || { echo "deps: npm is missing (install the nodejs/npm packages)" >&2; exit 1; }
+  local tmp
+  tmp="$(mktemp -d)"
+  trap 'rm -rf "$tmp"' RETURN
+  echo "deps: fetching $ASSET_PACKAGE@$ASSET_VERSION from the npm registry"
+  (cd "$tmp" && npm pack --silent "$ASSET_PACKAGE@$ASSET_VERSION" > /dev/null)
+  local tgz="$tmp/webxr-input-profiles-assets-$ASSET_VERSION.tgz"
+  echo "$ASSET_TGZ_SHA256  $tgz" | sha256sum -c --status || {
+    echo "deps: $tgz: sha256 mismatch (expected $ASSET_TGZ_SHA256, got $(sha256sum "$tgz" | cut -d' ' -f1))" >&2
+    exit 1
+  }
+  tar -xzf "$tgz" -C "$tmp" package/dist/profiles/generic-hand/right.glb package/LICENSE.md package/package.json
+  echo "$ASSET_GLB_SHA256  $tmp/package/dist/profiles/generic-hand/right.glb" | sha256sum -c --status || {
+    echo "deps: right.glb: sha256 mismatch" >&2
+    exit 1
+  }
+  mkdir -p "$ASSET_DIR/generic-hand"
+  cp "$tmp/package/LICENSE.md" "$ASSET_DIR/generic-hand/LICENSE.md"
+  cp "$tmp/package/package.json" "$ASSET_DIR/generic-hand/package.json"
+  cp "$tmp/package/dist/profiles/generic-hand/right.glb" "$glb.tmp" && sync "$glb.tmp" && mv "$glb.tmp" "$glb"
+  echo "deps: installed $glb (sha256 $ASSET_GLB_SHA256)"
+}
+
+case "${1:-}" in
+  --asset) install_asset ;;
+  "") install_packages; install_asset ;;
+  *) echo "usage: scripts/deps.sh [--asset]" >&2; exit 2 ;;
+esac

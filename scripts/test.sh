@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# Runs every test on a fresh Debian machine: installs deps, builds (warnings as errors), runs
+# the C++ tests (CTest), the Python tests (pytest, Debian's python3), then the C++ tests again
+# under ASan+UBSan, and a short libFuzzer run of every parser.
+#   scripts/test.sh            # everything
+#   HANDDB_TEST_QUICK=1 scripts/test.sh   # skip the sanitizer build and the fuzz run
+set -euo pipefail
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$here"
+jobs="$(nproc)"
+start=$(date +%s)
+step() { echo; echo "=== test.sh: $* ($(( $(date +%s) - start ))s)"; }
+
+step "dependencies"
+scripts/deps.sh
+
+step "build (Release with debug info, -Werror)"
+scripts/build.sh "$here/build" -DHANDDB_WERROR=ON
+
+step "C++ tests"
+(cd build && ctest --output-on-failure -j "$jobs" --timeout 900)
+
+step "Python tests (Debian python3)"
+/usr/bin/python3 -m pytest -q blender_scripts tests/python
+
+if [ "${HANDDB_TEST_QUICK:-0}" != 1 ]; then
+  step "build with ASan+UBSan"
+  scripts/build.sh "$here/build-asan" -DHANDDB_WERROR=ON -DHANDDB_SANITIZE=ON -DHANDDB_BUILD_BENCH=OFF \
+    -DCMAKE_BUILD_TYPE=Debug
+  step "C++ tests under ASan+UBSan"
+  (cd build-asan && ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+    ctest --output-on-failure -j "$jobs" --timeout 1800 -LE no_sanitizer)
+
+  step "fuzz targets (short libFuzzer runs)"
+  scripts/fuzz.sh 60
+fi
+step "all tests passed"
