@@ -7,10 +7,9 @@
 #pragma once
 
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <string_view>
-
-#include <nlohmann/json.hpp>
 
 #include "format/status.h"
 
@@ -20,11 +19,20 @@ namespace handdb {
 std::string_view EmbeddedSchema(std::string_view schema_name);
 
 // kSchemaViolation with "<what>: <json pointer>: <problem> (value: <raw>)" for the first problem.
-Status ValidateJson(const nlohmann::json& doc, std::string_view schema_name, const std::string& what);
+Status ValidateJson(const nlohmann::json& doc,
+                    std::string_view schema_name,
+                    const std::string& what);
+
+// The same against a schema given as JSON (tests, user-supplied schemas); "$ref": "#/..." resolves
+// inside `schema`, "name.schema.json#/..." in an embedded schema.
+Status ValidateJsonWithSchema(const nlohmann::json& doc,
+                              const nlohmann::json& schema,
+                              const std::string& what);
 
 // Reads and parses a JSON file, then validates it (skipped when schema_name is empty).
 // Errors: kNotFound, kIoError, kBadJson ("<path>: line L, column C: ..."), kSchemaViolation.
-Result<nlohmann::json> ReadJsonFile(const std::filesystem::path& path, std::string_view schema_name);
+Result<nlohmann::json> ReadJsonFile(const std::filesystem::path& path,
+                                    std::string_view schema_name);
 
 // Serialises with 2-space indent + trailing newline (stable bytes) and writes atomically.
 Status WriteJsonFileAtomic(const std::filesystem::path& path, const nlohmann::json& doc);
