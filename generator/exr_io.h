@@ -1,0 +1,39 @@
+// Reading the Blender multilayer EXRs the renderer writes (docs/conventions.md, "EXR channels"):
+// the link-label channel is the one whose name ends in "IndexMA.X" (material pass index, exact
+// integers 0..16), depth the one ending in "Depth.Z". Everything about the file is validated
+// before a label image is returned, so a bad render never reaches a shard.
+#pragma once
+
+#include <filesystem>
+#include <string>
+
+#include "format/status.h"
+#include "generator/edges.h"
+
+namespace handdb {
+
+inline constexpr const char* kLabelChannelSuffix = "IndexMA.X";
+inline constexpr const char* kDepthChannelSuffix = "Depth.Z";
+
+struct ExrReadOptions {
+  int expected_width = 0;   // 0: any
+  int expected_height = 0;  // 0: any
+  bool require_depth = true;
+  bool Check() const;
+};
+
+// Errors, each "<path>: <problem>":
+//   kNotFound (no file), kBadImage (not an EXR / unreadable header / no label or depth channel),
+//   kSizeMismatch (resolution or data window differs from the expected one), kTruncated (pixel
+//   data cannot be read: truncated or corrupt), kOutOfRange (a label that is not an integer in
+//   0..16, or non-finite depth on the hand).
+Result<LabelImage> ReadLabelExr(const std::filesystem::path& path, const ExrReadOptions& options);
+
+// Writes a label image the way Blender does (32-bit float channels "<layer>.IndexMA.X" and, with
+// depth, "<layer>.Depth.Z"; ZIP compression), atomically. For tests, benchmarks and tools that
+// synthesise label renders.
+Status WriteLabelExr(const std::filesystem::path& path,
+                     const LabelImage& image,
+                     const std::string& layer = "ViewLayer");
+
+}  // namespace handdb
