@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <span>
 #include <string>
@@ -23,6 +24,7 @@ struct SectionInfo {
   uint64_t offset = 0;
   uint64_t size = 0;
   uint64_t count = 0;
+  uint32_t element_size = 0;
   uint64_t checksum = 0;
   std::string name;  // "metadata", "views", "points", or "unknown(0x...)"
 };
@@ -37,8 +39,17 @@ struct ShardHeaderInfo {
   uint64_t file_size = 0;
 };
 
+struct ScanOptions {
+  // Hash the views and points sections while scanning (plus the small sections at the end), so a
+  // full verification costs one pass instead of two; a mismatch is returned after the last view.
+  bool verify_checksums = false;
+};
+
 class ShardReader {
  public:
+  using ViewCallback =
+      std::function<Status(size_t index, const ViewLabel& label, std::span<const PointQ> points)>;
+
   ~ShardReader();
   ShardReader(const ShardReader&) = delete;
   ShardReader& operator=(const ShardReader&) = delete;
@@ -60,14 +71,23 @@ class ShardReader {
   const std::string& name() const;
 
   size_t num_views() const;
-  ViewLabel label(size_t i) const;                   // bounds-checked (THROW_CHECK)
-  std::span<const PointQ> points(size_t i) const;    // bounds-checked, zero-copy
-  std::span<const PointQ> all_points() const;        // the whole flat array
-  uint64_t point_offset(size_t i) const;             // index into all_points()
+  ViewLabel label(size_t i) const;                 // bounds-checked (THROW_CHECK)
+  std::span<const PointQ> points(size_t i) const;  // bounds-checked, zero-copy
+  std::span<const PointQ> all_points() const;      // the whole flat array
+  uint64_t point_offset(size_t i) const;           // index into all_points()
+
+  // Sequential streaming mode: calls fn for every view in file order, advising the kernel that
+  // the views and points are read sequentially (MADV_SEQUENTIAL + read-ahead windows), so a scan
+  // of a shard larger than the page cache streams at disk speed. Stops at fn's first error.
+  Status ScanViews(const ViewCallback& fn, const ScanOptions& options = {}) const;
+
+  // The whole file (the mapping or the caller's memory).
+  std::span<const uint8_t> bytes() const;
 
  private:
   struct Impl;
   explicit ShardReader(std::unique_ptr<Impl> impl);
+  static Result<ShardReader> Init(std::unique_ptr<Impl> impl);
   std::unique_ptr<Impl> impl_;
 };
 

@@ -8,14 +8,24 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <vector>
 
 #include "format/status.h"
 #include "format/view.h"
 
 namespace handdb {
 
+// A section beyond the three v1 ones (element_size 1), written after the view table. Used by
+// later minor versions and by the forward-compatibility tests; the type must not be 1, 2 or 3.
+struct ShardExtraSection {
+  uint32_t type = 0;
+  uint32_t flags = 0;  // shard::kSectionFlagRequired or 0
+  std::string data;
+};
+
 struct ShardWriterOptions {
   std::string metadata_json = "{}";  // generation config, hand-model hash, versions, label names
+  std::vector<ShardExtraSection> extra_sections;
   bool Check() const;
 };
 
@@ -36,6 +46,9 @@ class ShardWriter {
 
   Status Open(const std::filesystem::path& path, const ShardWriterOptions& options);
   // Points in the canonical normalised frame; label.render_id etc. filled by the caller.
+  // Refuses (kOutOfRange / kNonZeroReserved) coordinates beyond +-6144 (384 px), non-finite label
+  // values and non-zero label.flags, so a writer never produces a shard the validator rejects
+  // for those reasons.
   Status AddView(const ViewLabel& label, std::span<const PointQ> points);
   Result<ShardSummary> Finish();
 

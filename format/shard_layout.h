@@ -1,0 +1,248 @@
+// The byte layout of a shard (docs/format.md) and the structural checks shared by the writer, the
+// reader and the validator. Parsing (ParseHeader, ParseSection) only decodes bytes; meaning
+// (CheckLayout, CheckViewTable, CheckSectionChecksums) is checked separately and every problem
+// goes to a ProblemList, which either stops at the first problem (the reader) or collects all of
+// them (the validator). Little-endian on disk; this code assumes a little-endian host.
+#pragma once
+
+#include <array>
+#include <bit>
+#include <cstdint>
+#include <cstring>
+#include <map>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "format/status.h"
+#include "format/view.h"
+
+namespace handdb::shard {
+
+static_assert(std::endian::native == std::endian::little,
+              "handdb shards are little-endian; a big-endian host needs byte swapping here");
+
+// First byte non-ASCII (catches 7-bit transfers), CR LF / LF catch newline translation, 0x1a stops
+// `type` on DOS (after PNG).
+constexpr std::array<uint8_t, 8> kMagic = {0x89, 'H', 'D', 'B', '\r', '\n', 0x1a, '\n'};
+constexpr uint16_t kVersionMajor = 1;
+constexpr uint16_t kVersionMinor = 0;
+
+constexpr uint64_t kAlignment = 64;
+constexpr uint32_t kHeaderSize = 128;       // v1.0 header; newer minors may grow it
+constexpr uint32_t kSectionEntrySize = 48;  // v1.0 entry; newer minors may grow it
+constexpr uint64_t kFooterSize = 16;        // u64 file_size + magic
+constexpr uint32_t kMaxSections = 4096;     // sanity bound on section_count
+constexpr uint64_t kMinFileSize = kHeaderSize + kFooterSize;
+
+// Header field offsets (bytes from the start of the file).
+constexpr size_t kOffMagic = 0;
+constexpr size_t kOffVersionMajor = 8;
+constexpr size_t kOffVersionMinor = 10;
+constexpr size_t kOffHeaderSize = 12;
+constexpr size_t kOffRequiredFeatures = 16;
+constexpr size_t kOffOptionalFeatures = 24;
+constexpr size_t kOffFileSize = 32;
+constexpr size_t kOffNumViews = 40;
+constexpr size_t kOffNumPoints = 48;
+constexpr size_t kOffSectionTableOffset = 56;
+constexpr size_t kOffSectionCount = 64;
+constexpr size_t kOffSectionEntrySize = 68;
+constexpr size_t kOffSectionTableChecksum = 72;
+constexpr size_t kOffHeaderReserved = 80;  // up to header_size - 8, zero
+// The header checksum is the last 8 bytes of the header (offset header_size - 8).
+
+// Feature bits known to this reader (v1.0 defines none). Unknown required bits are refused.
+constexpr uint64_t kKnownRequiredFeatures = 0;
+
+// Section types.
+constexpr uint32_t kSectionMetadata = 1;  // UTF-8 JSON object, element_size 1
+constexpr uint32_t kSectionViews = 2;     // fixed-stride view records, element_size kViewRecordSize
+constexpr uint32_t kSectionPoints = 3;    // PointQ array, element_size 4
+// Section flags.
+constexpr uint32_t kSectionFlagRequired = 1u
+                                          << 0;  // a reader that does not know the type must refuse
+constexpr uint32_t kKnownSectionFlags = kSectionFlagRequired;
+
+// Section-table entry field offsets (relative to the entry).
+constexpr size_t kSecOffType = 0;
+constexpr size_t kSecOffFlags = 4;
+constexpr size_t kSecOffOffset = 8;
+constexpr size_t kSecOffSize = 16;
+constexpr size_t kSecOffCount = 24;
+constexpr size_t kSecOffElementSize = 32;
+constexpr size_t kSecOffReserved = 36;
+constexpr size_t kSecOffChecksum = 40;
+
+// View record (one per canonical view), little-endian, fields at these offsets.
+constexpr uint32_t kViewRecordSize = 400;
+constexpr size_t kViewOffRenderId = 0;
+constexpr size_t kViewOffShapeId = 4;
+constexpr size_t kViewOffDirId = 8;
+constexpr size_t kViewOffFlags = 12;          // reserved, zero
+constexpr size_t kViewOffJointAngles = 16;    // f32[20]
+constexpr size_t kViewOffViewDirection = 96;  // f32[3]
+constexpr size_t kViewOffViewTheta = 108;
+constexpr size_t kViewOffViewPhi = 112;
+constexpr size_t kViewOffCameraRoll = 116;
+constexpr size_t kViewOffKeypoints = 120;  // f32[21][3]
+constexpr size_t kViewOffSourceDiameter = 372;
+constexpr size_t kViewOffScale = 376;
+constexpr size_t kViewOffSourceCentre = 380;  // f32[2]
+constexpr size_t kViewOffPointCount = 388;    // u32
+constexpr size_t kViewOffPointOffset = 392;   // u64, index into the points section
+constexpr size_t kViewFloatsBegin = kViewOffJointAngles;
+constexpr size_t kViewFloatsEnd = kViewOffPointCount;  // every f32 of the label lies in between
+
+constexpr uint32_t kPointSize = sizeof(PointQ);
+// Largest |x| or |y| of a stored point: 384 px (twice the normalised diameter) in 1/16 px.
+constexpr int kMaxAbsPointCoord = 6144;
+
+template <typename T>
+inline T Load(const uint8_t* p) {
+  T v;
+  std::memcpy(&v, p, sizeof(T));
+  return v;
+}
+template <typename T>
+inline void Store(uint8_t* p, T v) {
+  std::memcpy(p, &v, sizeof(T));
+}
+
+inline constexpr uint64_t AlignUp(uint64_t x) { return (x + kAlignment - 1) & ~(kAlignment - 1); }
+
+// XXH3-64 with seed 0, the only checksum the format uses.
+uint64_t Checksum(const void* data, size_t size);
+// 16 lowercase hex digits (the canonical big-endian form xxhsum -H3 prints).
+std::string ChecksumHex(uint64_t checksum);
+
+// XXH3-64 (seed 0) over data fed in pieces; equals Checksum() of the concatenation.
+class StreamingChecksum {
+ public:
+  StreamingChecksum();
+  ~StreamingChecksum();
+  StreamingChecksum(const StreamingChecksum&) = delete;
+  StreamingChecksum& operator=(const StreamingChecksum&) = delete;
+  void Reset();
+  void Update(const void* data, size_t size);
+  uint64_t Digest() const;
+
+ private:
+  void* state_;  // XXH3_state_t, kept out of this header
+};
+
+// XXH3-64 of a whole file, read sequentially with pread (kNotFound / kIoError name the path).
+Result<uint64_t> FileChecksum(const std::string& path);
+
+struct RawHeader {
+  std::array<uint8_t, 8> magic{};
+  uint16_t version_major = 0;
+  uint16_t version_minor = 0;
+  uint32_t header_size = 0;
+  uint64_t required_features = 0;
+  uint64_t optional_features = 0;
+  uint64_t file_size = 0;
+  uint64_t num_views = 0;
+  uint64_t num_points = 0;
+  uint64_t section_table_offset = 0;
+  uint32_t section_count = 0;
+  uint32_t section_entry_size = 0;
+  uint64_t section_table_checksum = 0;
+  uint64_t header_checksum = 0;  // at header_size - 8 (when that lies inside the bytes given)
+};
+
+struct RawSection {
+  uint32_t type = 0;
+  uint32_t flags = 0;
+  uint64_t offset = 0;
+  uint64_t size = 0;
+  uint64_t count = 0;
+  uint32_t element_size = 0;
+  uint32_t reserved = 0;
+  uint64_t checksum = 0;
+};
+
+// Decodes the fixed v1 fields from `bytes` (needs at least kHeaderSize bytes; THROW_CHECK).
+RawHeader ParseHeader(std::span<const uint8_t> bytes);
+// Writes a v1.0 header into out[0, kHeaderSize): reserved bytes zero, header_checksum computed.
+void SerializeHeader(const RawHeader& header, std::span<uint8_t> out);
+RawSection ParseSection(const uint8_t* entry);
+void SerializeSection(const RawSection& section, uint8_t* entry);
+// Checksum of the header bytes [0, header_size - 8).
+uint64_t HeaderChecksum(std::span<const uint8_t> header_bytes);
+
+// "metadata", "views", "points" or "unknown(0x...)".
+std::string SectionName(uint32_t type);
+
+// Problems found in one file. Messages read "<file>: offset <o>: <problem>". With stop_at_first
+// the first Add() ends checking (the reader); otherwise everything is collected (the validator),
+// with at most max_per_check listed per check tag and the rest only counted.
+struct Problem {
+  StatusCode code = StatusCode::kOk;
+  uint64_t offset = 0;
+  std::string message;
+};
+
+class ProblemList {
+ public:
+  ProblemList(std::string file, bool stop_at_first, size_t max_per_check = 0)
+      : file_(std::move(file)), stop_at_first_(stop_at_first), max_per_check_(max_per_check) {}
+  void Add(const char* check, StatusCode code, uint64_t offset, const std::string& what);
+  // A problem not tied to an offset ("<file>: <problem>").
+  void AddFileLevel(const char* check, StatusCode code, const std::string& what);
+  // True when the caller should stop checking (stop_at_first and something was found).
+  bool done() const { return stop_at_first_ && !problems_.empty(); }
+  bool empty() const { return problems_.empty() && suppressed_ == 0; }
+  const std::vector<Problem>& problems() const { return problems_; }
+  uint64_t suppressed() const { return suppressed_; }
+  const std::string& file() const { return file_; }
+  Status FirstStatus() const;
+
+ private:
+  bool Admit(const char* check);
+  std::string file_;
+  bool stop_at_first_;
+  size_t max_per_check_;
+  std::map<std::string, size_t> per_check_;
+  std::vector<Problem> problems_;
+  uint64_t suppressed_ = 0;
+};
+
+// What the structural checks learned; valid() means the known sections and the view table may be
+// accessed within the bounds recorded here.
+struct Layout {
+  RawHeader header;
+  std::vector<RawSection> sections;  // in table (= file) order
+  int metadata = -1;                 // indices into sections
+  int views = -1;
+  int points = -1;
+  uint32_t view_stride = kViewRecordSize;
+  bool structure_ok = false;  // header, table, section bounds and footer are usable
+  bool views_ok = false;      // every view's point range lies inside the points section
+};
+
+// Cheap checks at open: header (magic, version, size, features, reserved, checksum), section table
+// (checksum, entries, alignment, monotonic and exact coverage, zero padding, known element sizes,
+// required sections), footer (magic, length), counts vs sections, and every view's point range.
+Layout CheckLayout(std::span<const uint8_t> bytes, ProblemList* problems);
+
+// Hashes every section (and checks the header and table checksums once more); each mismatch names
+// the section, its offset and both values.
+void CheckSectionChecksums(std::span<const uint8_t> bytes,
+                           const Layout& layout,
+                           ProblemList* problems);
+
+// Decodes the label fields of a view record (no range checks).
+ViewLabel DecodeViewLabel(const uint8_t* record);
+// Encodes a label + point range into a record of kViewRecordSize bytes (reserved fields zero).
+void EncodeViewRecord(const ViewLabel& label,
+                      uint64_t point_offset,
+                      uint32_t point_count,
+                      uint8_t* record);
+
+// For tests and tools that patch a shard on purpose: recomputes every section checksum, the
+// table checksum and the header checksum in place, using the table as it stands. Returns false if
+// the structure is too broken to locate them.
+bool RewriteChecksums(std::span<uint8_t> bytes);
+
+}  // namespace handdb::shard

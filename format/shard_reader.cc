@@ -1,0 +1,243 @@
+#include "format/shard_reader.h"
+
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+
+#include "format/shard_layout.h"
+
+namespace handdb {
+
+using namespace shard;  // NOLINT(google-build-using-namespace): the layout constants
+
+struct ShardReader::Impl {
+  std::string name;
+  void* map = nullptr;  // mmap'ed file, or null when reading from memory
+  size_t map_size = 0;
+  std::vector<uint64_t> owned;  // aligned copy when FromMemory() got misaligned bytes
+  std::span<const uint8_t> bytes;
+  Layout layout;
+  ShardHeaderInfo header;
+  std::vector<SectionInfo> sections;
+  const uint8_t* views = nullptr;
+  uint64_t view_stride = kViewRecordSize;
+  size_t num_views = 0;
+  const PointQ* points = nullptr;
+  uint64_t num_points = 0;
+  std::string_view metadata;
+
+  ~Impl() {
+    if (map != nullptr) ::munmap(map, map_size);
+  }
+  const uint8_t* record(size_t i) const { return views + i * view_stride; }
+};
+
+ShardReader::ShardReader(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+ShardReader::~ShardReader() = default;
+ShardReader::ShardReader(ShardReader&&) noexcept = default;
+ShardReader& ShardReader::operator=(ShardReader&&) noexcept = default;
+
+Result<ShardReader> ShardReader::Open(const std::filesystem::path& path) {
+  auto impl = std::make_unique<Impl>();
+  impl->name = path.string();
+  int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) {
+    const StatusCode code = errno == ENOENT ? StatusCode::kNotFound : StatusCode::kIoError;
+    return Status(code, impl->name + ": cannot open: " + std::strerror(errno));
+  }
+  struct stat st {};
+  if (::fstat(fd, &st) != 0) {
+    Status s(StatusCode::kIoError, impl->name + ": fstat failed: " + std::strerror(errno));
+    ::close(fd);
+    return s;
+  }
+  if (!S_ISREG(st.st_mode)) {
+    ::close(fd);
+    return Status(StatusCode::kIoError, impl->name + ": not a regular file");
+  }
+  const auto size = static_cast<size_t>(st.st_size);
+  if (size > 0) {
+    void* map = ::mmap(nullptr, size, PROT_READ, MAP_PRIVATE, fd, 0);
+    if (map == MAP_FAILED) {
+      Status s(StatusCode::kIoError,
+               impl->name + ": mmap of " + std::to_string(size) +
+                   " bytes failed: " + std::strerror(errno));
+      ::close(fd);
+      return s;
+    }
+    impl->map = map;
+    impl->map_size = size;
+    impl->bytes = std::span<const uint8_t>(static_cast<const uint8_t*>(map), size);
+  }
+  ::close(fd);
+  return Init(std::move(impl));
+}
+
+Result<ShardReader> ShardReader::FromMemory(std::span<const uint8_t> bytes, std::string name) {
+  auto impl = std::make_unique<Impl>();
+  impl->name = std::move(name);
+  if (reinterpret_cast<uintptr_t>(bytes.data()) % alignof(uint64_t) != 0) {
+    // Spans of PointQ need aligned storage; misaligned input (fuzzers, sub-buffers) is copied.
+    impl->owned.resize((bytes.size() + 7) / 8);
+    if (!bytes.empty()) std::memcpy(impl->owned.data(), bytes.data(), bytes.size());
+    impl->bytes = std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(impl->owned.data()),
+                                           bytes.size());
+  } else {
+    impl->bytes = bytes;
+  }
+  return Init(std::move(impl));
+}
+
+Result<ShardReader> ShardReader::Init(std::unique_ptr<Impl> impl) {
+  ProblemList problems(impl->name, /*stop_at_first=*/true);
+  impl->layout = CheckLayout(impl->bytes, &problems);
+  if (!problems.empty()) return problems.FirstStatus();
+  THROW_CHECK(impl->layout.structure_ok && impl->layout.views_ok);
+  const Layout& layout = impl->layout;
+  const uint8_t* b = impl->bytes.data();
+  const RawHeader& h = layout.header;
+  impl->header.version_major = h.version_major;
+  impl->header.version_minor = h.version_minor;
+  impl->header.required_features = h.required_features;
+  impl->header.optional_features = h.optional_features;
+  impl->header.num_views = h.num_views;
+  impl->header.num_points = h.num_points;
+  impl->header.file_size = h.file_size;
+  for (const RawSection& s : layout.sections) {
+    SectionInfo info;
+    info.type = s.type;
+    info.flags = s.flags;
+    info.offset = s.offset;
+    info.size = s.size;
+    info.count = s.count;
+    info.element_size = s.element_size;
+    info.checksum = s.checksum;
+    info.name = SectionName(s.type);
+    impl->sections.push_back(std::move(info));
+  }
+  const RawSection& meta = layout.sections[layout.metadata];
+  impl->metadata = std::string_view(reinterpret_cast<const char*>(b + meta.offset),
+                                    static_cast<size_t>(meta.size));
+  const RawSection& views = layout.sections[layout.views];
+  impl->views = b + views.offset;
+  impl->view_stride = views.element_size;
+  impl->num_views = static_cast<size_t>(views.count);
+  const RawSection& points = layout.sections[layout.points];
+  impl->points = reinterpret_cast<const PointQ*>(b + points.offset);
+  impl->num_points = points.count;
+  return ShardReader(std::move(impl));
+}
+
+Status ShardReader::VerifyChecksums() const {
+  ProblemList problems(impl_->name, /*stop_at_first=*/true);
+  CheckSectionChecksums(impl_->bytes, impl_->layout, &problems);
+  return problems.FirstStatus();
+}
+
+const ShardHeaderInfo& ShardReader::header() const { return impl_->header; }
+const std::vector<SectionInfo>& ShardReader::sections() const { return impl_->sections; }
+std::string_view ShardReader::metadata_json() const { return impl_->metadata; }
+const std::string& ShardReader::name() const { return impl_->name; }
+size_t ShardReader::num_views() const { return impl_->num_views; }
+std::span<const uint8_t> ShardReader::bytes() const { return impl_->bytes; }
+
+ViewLabel ShardReader::label(size_t i) const {
+  THROW_CHECK_LT(i, impl_->num_views);
+  return DecodeViewLabel(impl_->record(i));
+}
+
+uint64_t ShardReader::point_offset(size_t i) const {
+  THROW_CHECK_LT(i, impl_->num_views);
+  return Load<uint64_t>(impl_->record(i) + kViewOffPointOffset);
+}
+
+std::span<const PointQ> ShardReader::points(size_t i) const {
+  THROW_CHECK_LT(i, impl_->num_views);
+  const uint8_t* r = impl_->record(i);
+  const uint64_t off = Load<uint64_t>(r + kViewOffPointOffset);
+  const uint32_t cnt = Load<uint32_t>(r + kViewOffPointCount);
+  return std::span<const PointQ>(impl_->points + off, cnt);  // range checked at open
+}
+
+std::span<const PointQ> ShardReader::all_points() const {
+  return std::span<const PointQ>(impl_->points, static_cast<size_t>(impl_->num_points));
+}
+
+Status ShardReader::ScanViews(const ViewCallback& fn, const ScanOptions& options) const {
+  const Impl& r = *impl_;
+  const Layout& layout = r.layout;
+  const RawSection& vs = layout.sections[layout.views];
+  const RawSection& ps = layout.sections[layout.points];
+  const uint8_t* base = r.bytes.data();
+  const bool mapped = r.map != nullptr;
+  auto advise = [&](uint64_t offset, uint64_t size, int advice) {
+    if (!mapped || size == 0) return;
+    const uint64_t page = 4096;
+    const uint64_t begin = offset & ~(page - 1);
+    const uint64_t end = std::min<uint64_t>(offset + size, r.map_size);
+    ::madvise(const_cast<uint8_t*>(base) + begin, end - begin, advice);
+  };
+  advise(vs.offset, vs.size, MADV_SEQUENTIAL);
+  advise(ps.offset, ps.size, MADV_SEQUENTIAL);
+  StreamingChecksum views_hash;
+  StreamingChecksum points_hash;
+  // Read ahead in chunks: WILLNEED on the next window keeps the disk busy while we compute.
+  constexpr uint64_t kWindow = 8u << 20;
+  uint64_t points_advised = 0;
+  uint64_t views_advised = 0;
+  for (size_t i = 0; i < r.num_views; ++i) {
+    const uint8_t* rec = r.record(i);
+    const uint64_t off = Load<uint64_t>(rec + kViewOffPointOffset);
+    const uint32_t cnt = Load<uint32_t>(rec + kViewOffPointCount);
+    const uint64_t points_end = (off + cnt) * kPointSize;
+    if (mapped && points_end + kWindow / 2 > points_advised && points_advised < ps.size) {
+      advise(
+          ps.offset + points_advised, std::min(kWindow, ps.size - points_advised), MADV_WILLNEED);
+      points_advised += kWindow;
+    }
+    const uint64_t views_end = (i + 1) * r.view_stride;
+    if (mapped && views_end + kWindow / 2 > views_advised && views_advised < vs.size) {
+      advise(vs.offset + views_advised, std::min(kWindow, vs.size - views_advised), MADV_WILLNEED);
+      views_advised += kWindow;
+    }
+    std::span<const PointQ> pts(r.points + off, cnt);
+    if (options.verify_checksums) {
+      views_hash.Update(rec, r.view_stride);
+      points_hash.Update(pts.data(), pts.size_bytes());
+    }
+    HANDDB_RETURN_IF_ERROR(fn(i, DecodeViewLabel(rec), pts));
+  }
+  if (options.verify_checksums) {
+    // Views cover the points contiguously (checked at open), so these are the section hashes.
+    ProblemList problems(r.name, /*stop_at_first=*/true);
+    auto compare = [&](const RawSection& s, uint64_t computed) {
+      if (computed != s.checksum) {
+        problems.Add("checksum",
+                     StatusCode::kChecksumMismatch,
+                     s.offset,
+                     "section '" + SectionName(s.type) + "' [" + std::to_string(s.offset) + ", +" +
+                         std::to_string(s.size) + "): checksum stored " + ChecksumHex(s.checksum) +
+                         ", computed " + ChecksumHex(computed));
+      }
+    };
+    compare(vs, views_hash.Digest());
+    compare(ps, points_hash.Digest());
+    if (!problems.empty()) return problems.FirstStatus();
+    // The small sections (header, table, metadata, unknown optional ones).
+    for (const RawSection& s : layout.sections) {
+      if (&s == &vs || &s == &ps) continue;
+      compare(s, Checksum(base + s.offset, s.size));
+      if (!problems.empty()) return problems.FirstStatus();
+    }
+  }
+  advise(vs.offset, vs.size, MADV_NORMAL);
+  advise(ps.offset, ps.size, MADV_NORMAL);
+  return Status::Ok();
+}
+
+}  // namespace handdb

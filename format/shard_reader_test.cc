@@ -1,0 +1,466 @@
+#include "format/shard_reader.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <set>
+
+#include "format/atomic_file.h"
+#include "format/shard_layout.h"
+#include "format/shard_testing.h"
+#include "format/shard_writer.h"
+
+namespace handdb {
+namespace {
+
+namespace fs = std::filesystem;
+
+fs::path TempDir(const std::string& name) {
+  auto dir = fs::temp_directory_path() /
+             ("handdb_shard_reader_" + name + "_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir;
+}
+
+std::vector<uint8_t> ReadBytes(const fs::path& path) {
+  auto s = ReadFileToString(path);
+  THROW_CHECK(s.ok());
+  return std::vector<uint8_t>(s->begin(), s->end());
+}
+
+// A small sample shard as bytes (5 views, 5..9 points each).
+std::vector<uint8_t> SampleShard(const std::string& name, ShardWriterOptions options = {}) {
+  auto dir = TempDir(name);
+  auto summary = testing::WriteSyntheticShard(dir / "s.hdb", 5, 0, std::move(options));
+  THROW_CHECK_MSG(summary.ok(), summary.status().ToString());
+  auto bytes = ReadBytes(dir / "s.hdb");
+  fs::remove_all(dir);
+  return bytes;
+}
+
+// Edits the header fields, then recomputes the header checksum (a well-formed file that says
+// something this reader must refuse or accept).
+void PatchHeader(std::vector<uint8_t>* bytes, size_t offset, const void* value, size_t size) {
+  std::memcpy(bytes->data() + offset, value, size);
+  ASSERT_TRUE(shard::RewriteChecksums(*bytes));
+}
+
+Status OpenAndVerify(std::span<const uint8_t> bytes) {
+  auto reader = ShardReader::FromMemory(bytes, "sample.hdb");
+  if (!reader.ok()) return reader.status();
+  return reader->VerifyChecksums();
+}
+
+void ExpectSameLabel(const ViewLabel& a, const ViewLabel& b) {
+  EXPECT_EQ(a.render_id, b.render_id);
+  EXPECT_EQ(a.shape_id, b.shape_id);
+  EXPECT_EQ(a.dir_id, b.dir_id);
+  EXPECT_EQ(a.flags, b.flags);
+  EXPECT_EQ(a.joint_angles, b.joint_angles);
+  EXPECT_EQ(a.view_direction, b.view_direction);
+  EXPECT_EQ(a.view_theta, b.view_theta);
+  EXPECT_EQ(a.view_phi, b.view_phi);
+  EXPECT_EQ(a.camera_roll, b.camera_roll);
+  EXPECT_EQ(a.keypoints, b.keypoints);
+  EXPECT_EQ(a.source_diameter_px, b.source_diameter_px);
+  EXPECT_EQ(a.scale, b.scale);
+  EXPECT_EQ(a.source_centre_px, b.source_centre_px);
+}
+
+TEST(ShardWriter, RoundTrip) {
+  auto dir = TempDir("roundtrip");
+  const uint32_t n = 40;
+  auto summary = testing::WriteSyntheticShard(dir / "a.hdb", n);
+  ASSERT_TRUE(summary.ok()) << summary.status().ToString();
+  EXPECT_EQ(summary->num_views, n);
+  EXPECT_EQ(summary->file_size, fs::file_size(dir / "a.hdb"));
+  auto whole = shard::FileChecksum((dir / "a.hdb").string());
+  ASSERT_TRUE(whole.ok());
+  EXPECT_EQ(summary->checksum, shard::ChecksumHex(*whole));
+  EXPECT_EQ(summary->checksum.size(), 16u);
+
+  auto reader = ShardReader::Open(dir / "a.hdb");
+  ASSERT_TRUE(reader.ok()) << reader.status().ToString();
+  ASSERT_TRUE(reader->VerifyChecksums().ok());
+  EXPECT_EQ(reader->header().version_major, 1);
+  EXPECT_EQ(reader->header().num_views, n);
+  EXPECT_EQ(reader->header().file_size, summary->file_size);
+  EXPECT_EQ(reader->metadata_json(), testing::SyntheticMetadata());
+  ASSERT_EQ(reader->num_views(), n);
+  uint64_t total = 0;
+  for (uint32_t i = 0; i < n; ++i) {
+    ExpectSameLabel(reader->label(i), testing::SyntheticLabel(i));
+    auto expected = testing::SyntheticPoints(i, 5 + (i % 7));
+    auto got = reader->points(i);
+    ASSERT_EQ(got.size(), expected.size());
+    for (size_t k = 0; k < got.size(); ++k) {
+      EXPECT_EQ(got[k].x, expected[k].x);
+      EXPECT_EQ(got[k].y, expected[k].y);
+    }
+    EXPECT_EQ(reader->point_offset(i), total);
+    EXPECT_EQ(got.data(), reader->all_points().data() + total);  // zero-copy
+    total += got.size();
+  }
+  EXPECT_EQ(reader->all_points().size(), total);
+  EXPECT_EQ(summary->num_points, total);
+  EXPECT_THROW((void)reader->label(n), std::logic_error);
+  EXPECT_THROW((void)reader->points(n), std::logic_error);
+  fs::remove_all(dir);
+}
+
+TEST(ShardWriter, SectionsAreAlignedAndInFileOrder) {
+  auto bytes = SampleShard("aligned");
+  auto reader = ShardReader::FromMemory(bytes, "sample.hdb");
+  ASSERT_TRUE(reader.ok()) << reader.status().ToString();
+  ASSERT_EQ(reader->sections().size(), 3u);
+  uint64_t prev = 0;
+  std::set<std::string> names;
+  for (const auto& s : reader->sections()) {
+    EXPECT_EQ(s.offset % 64, 0u) << s.name;
+    EXPECT_GE(s.offset, prev);
+    EXPECT_EQ(s.flags & shard::kSectionFlagRequired, shard::kSectionFlagRequired);
+    prev = s.offset + s.size;
+    names.insert(s.name);
+  }
+  EXPECT_EQ(names, (std::set<std::string>{"metadata", "views", "points"}));
+  EXPECT_EQ(reinterpret_cast<uintptr_t>(reader->all_points().data()) % 64,
+            reinterpret_cast<uintptr_t>(bytes.data()) % 64);
+}
+
+TEST(ShardWriter, IsDeterministic) {
+  auto dir = TempDir("determinism");
+  ASSERT_TRUE(testing::WriteSyntheticShard(dir / "a.hdb", 30).ok());
+  ASSERT_TRUE(testing::WriteSyntheticShard(dir / "b.hdb", 30).ok());
+  EXPECT_EQ(ReadBytes(dir / "a.hdb"), ReadBytes(dir / "b.hdb"));
+  fs::remove_all(dir);
+}
+
+TEST(ShardWriter, EmptyShardRoundTrips) {
+  auto dir = TempDir("empty");
+  auto summary = testing::WriteSyntheticShard(dir / "e.hdb", 0);
+  ASSERT_TRUE(summary.ok());
+  auto reader = ShardReader::Open(dir / "e.hdb");
+  ASSERT_TRUE(reader.ok()) << reader.status().ToString();
+  EXPECT_EQ(reader->num_views(), 0u);
+  EXPECT_TRUE(reader->all_points().empty());
+  EXPECT_TRUE(reader->VerifyChecksums().ok());
+  fs::remove_all(dir);
+}
+
+TEST(ShardWriter, RefusesBadViewsAndLeavesNoFile) {
+  auto dir = TempDir("refuses");
+  {
+    ShardWriter w;
+    ASSERT_TRUE(w.Open(dir / "x.hdb", {}).ok());
+    std::vector<PointQ> bad = {{0, 0}, {6145, 0}};
+    EXPECT_EQ(w.AddView(testing::SyntheticLabel(0), bad).code(), StatusCode::kOutOfRange);
+    ViewLabel nan_label = testing::SyntheticLabel(1);
+    nan_label.joint_angles[3] = std::nanf("");
+    EXPECT_EQ(w.AddView(nan_label, testing::SyntheticPoints(1, 4)).code(), StatusCode::kOutOfRange);
+    ViewLabel flagged = testing::SyntheticLabel(2);
+    flagged.flags = 1;
+    EXPECT_EQ(w.AddView(flagged, testing::SyntheticPoints(2, 4)).code(),
+              StatusCode::kNonZeroReserved);
+    ASSERT_TRUE(w.AddView(testing::SyntheticLabel(3), testing::SyntheticPoints(3, 4)).ok());
+    // Destroyed without Finish(): nothing may be left behind.
+  }
+  EXPECT_TRUE(fs::is_empty(dir));
+  fs::remove_all(dir);
+}
+
+TEST(ShardWriterOptions, Check) {
+  ShardWriterOptions good;
+  EXPECT_TRUE(good.Check());
+  ShardWriterOptions bad;
+  bad.extra_sections.push_back({shard::kSectionPoints, 0, "x"});
+  EXPECT_FALSE(bad.Check());
+}
+
+TEST(ShardReader, FromMemoryMatchesPath) {
+  auto dir = TempDir("memory");
+  ASSERT_TRUE(testing::WriteSyntheticShard(dir / "a.hdb", 12).ok());
+  auto bytes = ReadBytes(dir / "a.hdb");
+  auto from_path = ShardReader::Open(dir / "a.hdb");
+  auto from_memory = ShardReader::FromMemory(bytes, "a.hdb");
+  ASSERT_TRUE(from_path.ok() && from_memory.ok());
+  EXPECT_EQ(from_memory->name(), "a.hdb");
+  ASSERT_EQ(from_path->num_views(), from_memory->num_views());
+  for (size_t i = 0; i < from_path->num_views(); ++i) {
+    ExpectSameLabel(from_path->label(i), from_memory->label(i));
+    ASSERT_EQ(from_path->points(i).size(), from_memory->points(i).size());
+  }
+  // Misaligned memory is copied, not read through a misaligned PointQ*.
+  std::vector<uint8_t> shifted(bytes.size() + 1);
+  std::memcpy(shifted.data() + 1, bytes.data(), bytes.size());
+  auto misaligned = ShardReader::FromMemory(std::span(shifted).subspan(1), "shifted.hdb");
+  ASSERT_TRUE(misaligned.ok()) << misaligned.status().ToString();
+  EXPECT_TRUE(misaligned->VerifyChecksums().ok());
+  EXPECT_EQ(misaligned->points(3)[0].x, from_path->points(3)[0].x);
+  fs::remove_all(dir);
+}
+
+TEST(ShardReader, MissingFileAndDirectory) {
+  auto dir = TempDir("missing");
+  auto missing = ShardReader::Open(dir / "nope.hdb");
+  ASSERT_FALSE(missing.ok());
+  EXPECT_EQ(missing.status().code(), StatusCode::kNotFound);
+  EXPECT_NE(missing.status().message().find("nope.hdb"), std::string::npos);
+  auto directory = ShardReader::Open(dir);
+  ASSERT_FALSE(directory.ok());
+  EXPECT_EQ(directory.status().code(), StatusCode::kIoError);
+  ASSERT_TRUE(WriteFileAtomic(dir / "empty.hdb", "").ok());
+  auto empty = ShardReader::Open(dir / "empty.hdb");
+  ASSERT_FALSE(empty.ok());
+  EXPECT_EQ(empty.status().code(), StatusCode::kTruncated);
+  fs::remove_all(dir);
+}
+
+TEST(ShardReader, RejectsBadMagic) {
+  auto bytes = SampleShard("badmagic");
+  bytes[1] = 'X';
+  auto r = ShardReader::FromMemory(bytes, "sample.hdb");
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), StatusCode::kBadMagic);
+  EXPECT_NE(r.status().message().find("sample.hdb: offset 0"), std::string::npos);
+  // A text file is not a shard either.
+  std::string text = "{\"format\": \"handdb-manifest\"}\n";
+  auto t = ShardReader::FromMemory(
+      std::span(reinterpret_cast<const uint8_t*>(text.data()), text.size()), "manifest.json");
+  ASSERT_FALSE(t.ok());
+  EXPECT_EQ(t.status().code(), StatusCode::kBadMagic);
+}
+
+TEST(ShardReader, RejectsBadTrailingMagic) {
+  auto bytes = SampleShard("badtrailer");
+  bytes[bytes.size() - 1] ^= 0xff;
+  auto r = ShardReader::FromMemory(bytes, "sample.hdb");
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), StatusCode::kBadMagic);
+  EXPECT_NE(r.status().message().find("trailing magic"), std::string::npos);
+}
+
+TEST(ShardReader, RejectsNewerMajorVersion) {
+  auto bytes = SampleShard("major");
+  const uint16_t major = 2;
+  PatchHeader(&bytes, shard::kOffVersionMajor, &major, 2);
+  auto r = ShardReader::FromMemory(bytes, "sample.hdb");
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), StatusCode::kUnsupportedVersion);
+  EXPECT_NE(r.status().message().find("version 2.0"), std::string::npos);
+  const uint16_t zero = 0;
+  PatchHeader(&bytes, shard::kOffVersionMajor, &zero, 2);
+  EXPECT_EQ(ShardReader::FromMemory(bytes, "s").status().code(), StatusCode::kUnsupportedVersion);
+}
+
+TEST(ShardReader, AcceptsNewerMinorVersion) {
+  auto bytes = SampleShard("minor");
+  const uint16_t minor = 7;
+  PatchHeader(&bytes, shard::kOffVersionMinor, &minor, 2);
+  auto r = ShardReader::FromMemory(bytes, "sample.hdb");
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(r->header().version_minor, 7);
+  EXPECT_TRUE(r->VerifyChecksums().ok());
+}
+
+TEST(ShardReader, RefusesUnknownRequiredFeatureBit) {
+  auto bytes = SampleShard("reqbit");
+  const uint64_t bit = uint64_t{1} << 5;
+  PatchHeader(&bytes, shard::kOffRequiredFeatures, &bit, 8);
+  auto r = ShardReader::FromMemory(bytes, "sample.hdb");
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), StatusCode::kUnknownRequiredFeature);
+  EXPECT_NE(r.status().message().find("0x20"), std::string::npos);
+}
+
+TEST(ShardReader, IgnoresUnknownOptionalFeatureBit) {
+  auto bytes = SampleShard("optbit");
+  const uint64_t bits = 0xf0f0;
+  PatchHeader(&bytes, shard::kOffOptionalFeatures, &bits, 8);
+  auto r = ShardReader::FromMemory(bytes, "sample.hdb");
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(r->header().optional_features, 0xf0f0u);
+}
+
+TEST(ShardReader, SkipsUnknownOptionalSection) {
+  ShardWriterOptions options;
+  options.extra_sections.push_back({0x7777, 0, "a section from a future minor version"});
+  auto bytes = SampleShard("optsection", options);
+  auto r = ShardReader::FromMemory(bytes, "sample.hdb");
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  ASSERT_EQ(r->sections().size(), 4u);
+  EXPECT_EQ(r->sections()[3].name, "unknown(0x7777)");
+  EXPECT_TRUE(r->VerifyChecksums().ok());
+  EXPECT_EQ(r->num_views(), 5u);
+  ExpectSameLabel(r->label(4), testing::SyntheticLabel(4));
+  // Its bytes are still checksummed.
+  bytes[r->sections()[3].offset + 2] ^= 1;
+  EXPECT_EQ(OpenAndVerify(bytes).code(), StatusCode::kChecksumMismatch);
+}
+
+TEST(ShardReader, RefusesUnknownRequiredSection) {
+  ShardWriterOptions options;
+  options.extra_sections.push_back({0x7777, shard::kSectionFlagRequired, "must understand"});
+  auto bytes = SampleShard("reqsection", options);
+  auto r = ShardReader::FromMemory(bytes, "sample.hdb");
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), StatusCode::kUnknownRequiredFeature);
+  EXPECT_NE(r.status().message().find("0x7777"), std::string::npos);
+}
+
+TEST(ShardReader, RejectsNonZeroReserved) {
+  auto bytes = SampleShard("reserved");
+  const uint8_t one = 1;
+  PatchHeader(&bytes, shard::kOffHeaderReserved + 3, &one, 1);
+  EXPECT_EQ(ShardReader::FromMemory(bytes, "s").status().code(), StatusCode::kNonZeroReserved);
+  // Padding between sections must be zero too (not checksummed, so checked at open).
+  auto padded = SampleShard("padding");
+  auto r = ShardReader::FromMemory(padded, "s");
+  ASSERT_TRUE(r.ok());
+  const auto& meta = r->sections()[0];
+  ASSERT_EQ(meta.name, "metadata");
+  ASSERT_NE((meta.offset + meta.size) % 64, 0u);
+  padded[meta.offset + meta.size] = 0x20;
+  EXPECT_EQ(ShardReader::FromMemory(padded, "s").status().code(), StatusCode::kNonZeroReserved);
+}
+
+TEST(ShardReader, RejectsViewPointsOutsidePointsSection) {
+  auto bytes = SampleShard("viewrange");
+  auto r = ShardReader::FromMemory(bytes, "s");
+  ASSERT_TRUE(r.ok());
+  uint64_t views_offset = 0;
+  for (const auto& s : r->sections()) {
+    if (s.name == "views") views_offset = s.offset;
+  }
+  // A count that would run past the points section, with every checksum made consistent.
+  const uint32_t huge = 0xfffffff0u;
+  std::memcpy(bytes.data() + views_offset + 4 * shard::kViewRecordSize + shard::kViewOffPointCount,
+              &huge,
+              4);
+  ASSERT_TRUE(shard::RewriteChecksums(bytes));
+  auto bad = ShardReader::FromMemory(bytes, "s");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.status().code(), StatusCode::kOutOfRange);
+  EXPECT_NE(bad.status().message().find("view 4"), std::string::npos);
+}
+
+TEST(ShardReader, RejectsTrailingBytes) {
+  auto bytes = SampleShard("trailing");
+  bytes.push_back(0);
+  EXPECT_EQ(ShardReader::FromMemory(bytes, "s").status().code(), StatusCode::kSizeMismatch);
+}
+
+TEST(ShardReader, EveryTruncationFailsCleanly) {
+  const auto bytes = SampleShard("truncation");
+  ASSERT_TRUE(OpenAndVerify(bytes).ok());
+  for (size_t len = 0; len < bytes.size(); ++len) {
+    // A fresh exact-size heap copy so ASan sees any read past the end.
+    std::vector<uint8_t> prefix(bytes.begin(), bytes.begin() + static_cast<ptrdiff_t>(len));
+    auto r = ShardReader::FromMemory(prefix, "t.hdb");
+    ASSERT_FALSE(r.ok()) << "truncated to " << len << " bytes was accepted";
+    const StatusCode code = r.status().code();
+    EXPECT_TRUE(code == StatusCode::kTruncated || code == StatusCode::kBadMagic) << len;
+  }
+}
+
+// Flips one bit, checks open + VerifyChecksums fails, flips it back.
+void ExpectFlipDetected(std::vector<uint8_t>* bytes, size_t bit, std::set<StatusCode>* codes) {
+  (*bytes)[bit / 8] ^= static_cast<uint8_t>(1u << (bit % 8));
+  Status s = OpenAndVerify(*bytes);
+  (*bytes)[bit / 8] ^= static_cast<uint8_t>(1u << (bit % 8));
+  ASSERT_FALSE(s.ok()) << "bit " << bit << " (byte " << bit / 8 << ") flipped, still valid";
+  EXPECT_FALSE(s.message().empty());
+  codes->insert(s.code());
+}
+
+TEST(ShardReader, EverySingleBitFlipIsDetected) {
+  auto bytes = SampleShard("everybit", {"{}", {}});
+  std::set<StatusCode> codes;
+  for (size_t bit = 0; bit < bytes.size() * 8; ++bit) {
+    ExpectFlipDetected(&bytes, bit, &codes);
+    if (HasFatalFailure()) return;
+  }
+  EXPECT_TRUE(codes.count(StatusCode::kChecksumMismatch));
+  EXPECT_TRUE(codes.count(StatusCode::kBadMagic));
+  EXPECT_TRUE(codes.count(StatusCode::kNonZeroReserved));
+}
+
+TEST(ShardReader, RandomSingleBitFlipsAreDetected) {
+  auto dir = TempDir("flips");
+  ASSERT_TRUE(testing::WriteSyntheticShard(dir / "f.hdb", 64, 40).ok());
+  auto bytes = ReadBytes(dir / "f.hdb");
+  fs::remove_all(dir);
+  std::mt19937_64 rng(20010901);
+  std::uniform_int_distribution<size_t> pick(0, bytes.size() * 8 - 1);
+  std::set<StatusCode> codes;
+  for (int trial = 0; trial < 10000; ++trial) {
+    ExpectFlipDetected(&bytes, pick(rng), &codes);
+    if (HasFatalFailure()) return;
+  }
+  EXPECT_TRUE(OpenAndVerify(bytes).ok());  // every flip was undone
+}
+
+TEST(ShardReader, VerifyChecksumsNamesTheSection) {
+  auto bytes = SampleShard("names");
+  auto r = ShardReader::FromMemory(bytes, "sample.hdb");
+  ASSERT_TRUE(r.ok());
+  const SectionInfo* points = nullptr;
+  for (const auto& s : r->sections()) {
+    if (s.name == "points") points = &s;
+  }
+  ASSERT_NE(points, nullptr);
+  bytes[points->offset + 5] ^= 0x10;
+  Status s = r->VerifyChecksums();  // the reader maps `bytes`, so it sees the change
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.code(), StatusCode::kChecksumMismatch);
+  EXPECT_NE(s.message().find("'points'"), std::string::npos);
+  EXPECT_NE(s.message().find("offset " + std::to_string(points->offset)), std::string::npos);
+}
+
+TEST(ShardReader, ScanViewsVisitsEveryViewInOrder) {
+  auto dir = TempDir("scan");
+  ASSERT_TRUE(testing::WriteSyntheticShard(dir / "s.hdb", 25).ok());
+  auto r = ShardReader::Open(dir / "s.hdb");
+  ASSERT_TRUE(r.ok());
+  size_t next = 0;
+  uint64_t points = 0;
+  Status s = r->ScanViews(
+      [&](size_t i, const ViewLabel& label, std::span<const PointQ> pts) {
+        EXPECT_EQ(i, next++);
+        EXPECT_EQ(label.render_id, i);
+        EXPECT_EQ(pts.data(), r->points(i).data());
+        points += pts.size();
+        return Status::Ok();
+      },
+      {.verify_checksums = true});
+  EXPECT_TRUE(s.ok()) << s.ToString();
+  EXPECT_EQ(next, 25u);
+  EXPECT_EQ(points, r->all_points().size());
+  // The callback's error stops the scan.
+  next = 0;
+  s = r->ScanViews([&](size_t i, const ViewLabel&, std::span<const PointQ>) {
+    ++next;
+    return i == 3 ? Status(StatusCode::kCancelled, "stop") : Status::Ok();
+  });
+  EXPECT_EQ(s.code(), StatusCode::kCancelled);
+  EXPECT_EQ(next, 4u);
+  fs::remove_all(dir);
+}
+
+TEST(ShardReader, ScanWithVerificationDetectsCorruptPoints) {
+  auto bytes = SampleShard("scanverify");
+  auto r = ShardReader::FromMemory(bytes, "s");
+  ASSERT_TRUE(r.ok());
+  bytes[r->sections()[1].offset] ^= 4;  // points (file order: metadata, points, views)
+  ASSERT_EQ(r->sections()[1].name, "points");
+  Status s =
+      r->ScanViews([](size_t, const ViewLabel&, std::span<const PointQ>) { return Status::Ok(); },
+                   {.verify_checksums = true});
+  EXPECT_EQ(s.code(), StatusCode::kChecksumMismatch);
+}
+
+}  // namespace
+}  // namespace handdb
