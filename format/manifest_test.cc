@@ -1,0 +1,103 @@
+#include "format/manifest.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+
+#include "format/atomic_file.h"
+#include "format/json_schema.h"
+
+namespace handdb {
+namespace {
+
+namespace fs = std::filesystem;
+
+fs::path TempDir(const std::string& name) {
+  auto dir =
+      fs::temp_directory_path() / ("handdb_manifest_" + name + "_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir;
+}
+
+Manifest Sample() {
+  Manifest m;
+  m.tool_version = "0.1.0";
+  m.rolls = 48;
+  m.AddShard({"/somewhere/shard-00000.hdb", 10, 6000, 30016, "0123456789abcdef"});
+  m.AddShard({"shard-00001.hdb", 7, 4200, 21056, "fedcba9876543210"});
+  m.metadata = {{"config", {{"seed", 7}}}, {"hand_model_sha256", std::string(64, 'a')}};
+  m.skipped.push_back({17, "units/u00001/r000017.exr", "no hand pixels"});
+  return m;
+}
+
+TEST(Manifest, RoundTrip) {
+  auto dir = TempDir("roundtrip");
+  Manifest m = Sample();
+  EXPECT_EQ(m.num_views, 17u);
+  EXPECT_EQ(m.num_virtual_views, 17u * 48);
+  EXPECT_EQ(m.shards[0].file, "shard-00000.hdb");  // file name only
+  ASSERT_TRUE(WriteManifest(dir, m).ok());
+  auto back = ReadManifest(dir);
+  ASSERT_TRUE(back.ok()) << back.status().ToString();
+  EXPECT_EQ(ManifestToJson(*back), ManifestToJson(m));
+  EXPECT_EQ(back->skipped[0].reason, "no hand pixels");
+  EXPECT_EQ(back->labels.size(), Manifest::ShardLabelFields().size());
+  EXPECT_EQ(back->labels[3].name, "joint_angles");
+  EXPECT_EQ(back->labels[3].unit, "rad");
+  EXPECT_EQ(back->labels[3].count, 20u);
+  // Stable bytes: writing what was read gives the same file.
+  auto first = ReadFileToString(dir / "manifest.json");
+  ASSERT_TRUE(WriteManifest(dir, *back).ok());
+  EXPECT_EQ(*ReadFileToString(dir / "manifest.json"), *first);
+  fs::remove_all(dir);
+}
+
+TEST(Manifest, SchemaAcceptsWhatWeWrite) {
+  EXPECT_FALSE(EmbeddedSchema("manifest.schema.json").empty());
+  EXPECT_TRUE(ValidateJson(ManifestToJson(Sample()), "manifest.schema.json", "m").ok());
+}
+
+TEST(Manifest, RefusesToWriteInconsistentTotals) {
+  auto dir = TempDir("totals");
+  Manifest m = Sample();
+  m.num_views = 99;
+  Status s = WriteManifest(dir, m);
+  EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
+  EXPECT_FALSE(fs::exists(dir / "manifest.json"));
+  m = Sample();
+  m.shards.push_back(m.shards[0]);
+  m.UpdateTotals();
+  EXPECT_EQ(WriteManifest(dir, m).code(), StatusCode::kInvalidArgument);
+  m = Sample();
+  m.shards[0].xxh3 = "XYZ";
+  EXPECT_EQ(WriteManifest(dir, m).code(), StatusCode::kInvalidArgument);
+  fs::remove_all(dir);
+}
+
+TEST(Manifest, ReadErrors) {
+  auto dir = TempDir("errors");
+  auto missing = ReadManifest(dir);
+  EXPECT_EQ(missing.status().code(), StatusCode::kNotFound);
+  ASSERT_TRUE(WriteFileAtomic(dir / "manifest.json", "{\"format\": ").ok());
+  EXPECT_EQ(ReadManifest(dir).status().code(), StatusCode::kBadJson);
+  auto doc = ManifestToJson(Sample());
+  doc["shards"][1]["file"] = "../etc/passwd";
+  ASSERT_TRUE(WriteFileAtomic(dir / "manifest.json", doc.dump()).ok());
+  auto bad_name = ReadManifest(dir);
+  EXPECT_EQ(bad_name.status().code(), StatusCode::kSchemaViolation);
+  EXPECT_NE(bad_name.status().message().find("manifest.json"), std::string::npos);
+  doc = ManifestToJson(Sample());
+  doc["num_virtual_views"] = 5;
+  ASSERT_TRUE(WriteFileAtomic(dir / "manifest.json", doc.dump()).ok());
+  EXPECT_EQ(ReadManifest(dir).status().code(), StatusCode::kSizeMismatch);
+  doc = ManifestToJson(Sample());
+  doc["format"] = "something-else";
+  ASSERT_TRUE(WriteFileAtomic(dir / "manifest.json", doc.dump()).ok());
+  EXPECT_EQ(ReadManifest(dir).status().code(), StatusCode::kSchemaViolation);
+  fs::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace handdb

@@ -1,0 +1,508 @@
+#include "format/validator.h"
+
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <regex>
+#include <set>
+#include <sstream>
+#include <unordered_map>
+
+#include "format/manifest.h"
+#include "format/progress.h"
+#include "format/shard_layout.h"
+
+namespace handdb {
+
+using namespace shard;  // NOLINT(google-build-using-namespace): the layout constants
+namespace fs = std::filesystem;
+
+bool ValidateOptions::Check() const {
+  CHECK_OPTION_GE(joint_limit_tolerance, 0.0);
+  CHECK_OPTION(std::isfinite(joint_limit_tolerance));
+  return true;
+}
+
+void ValidationReport::Append(ValidationReport other) {
+  for (auto& p : other.problems) problems.push_back(std::move(p));
+  suppressed += other.suppressed;
+  files += other.files;
+  views += other.views;
+  points += other.points;
+}
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr float kMaxAbsKeypointXY = 384.0f;  // px, as for points
+constexpr float kMaxAbsKeypointZ = 2048.0f;  // px
+constexpr double kAngleTolerance = 1e-3;     // rad, for derived angles (theta, phi)
+
+// Name of the label float at `offset` inside a view record.
+std::string FieldName(size_t offset) {
+  auto idx = [&](size_t base) { return std::to_string((offset - base) / 4); };
+  if (offset < kViewOffViewDirection) return "joint_angles[" + idx(kViewOffJointAngles) + "]";
+  if (offset < kViewOffViewTheta) return "view_direction[" + idx(kViewOffViewDirection) + "]";
+  if (offset == kViewOffViewTheta) return "view_theta";
+  if (offset == kViewOffViewPhi) return "view_phi";
+  if (offset == kViewOffCameraRoll) return "camera_roll";
+  if (offset < kViewOffSourceDiameter) {
+    const size_t k = (offset - kViewOffKeypoints) / 4;
+    return "keypoints[" + std::to_string(k / 3) + "][" + std::to_string(k % 3) + "]";
+  }
+  if (offset == kViewOffSourceDiameter) return "source_diameter_px";
+  if (offset == kViewOffScale) return "scale";
+  return "source_centre_px[" + idx(kViewOffSourceCentre) + "]";
+}
+
+std::string Num(double v) {
+  std::ostringstream os;
+  os.precision(9);
+  os << v;
+  return os.str();
+}
+
+struct JointLimits {
+  std::array<std::array<double, 2>, kNumJointAngles> limits{};
+  std::string source;
+};
+
+// hand_model.joint_limits from the shard's metadata, when present.
+std::optional<JointLimits> ParseMetadata(std::string_view text,
+                                         uint64_t offset,
+                                         ProblemList* problems) {
+  nlohmann::json doc;
+  try {
+    doc = nlohmann::json::parse(text);
+  } catch (const nlohmann::json::parse_error& e) {
+    problems->Add("metadata",
+                  StatusCode::kBadJson,
+                  offset + std::min<uint64_t>(e.byte, text.size()),
+                  std::string("metadata section is not valid JSON: ") + e.what());
+    return std::nullopt;
+  }
+  if (!doc.is_object()) {
+    problems->Add("metadata",
+                  StatusCode::kSchemaViolation,
+                  offset,
+                  "metadata JSON is a " + std::string(doc.type_name()) + ", expected an object");
+    return std::nullopt;
+  }
+  auto hm = doc.find("hand_model");
+  if (hm == doc.end()) return std::nullopt;
+  if (!hm->is_object()) {
+    problems->Add(
+        "metadata", StatusCode::kSchemaViolation, offset, "metadata /hand_model is not an object");
+    return std::nullopt;
+  }
+  auto jl = hm->find("joint_limits");
+  if (jl == hm->end()) return std::nullopt;
+  auto bad = [&](const std::string& why) {
+    problems->Add(
+        "metadata",
+        StatusCode::kSchemaViolation,
+        offset,
+        "metadata /hand_model/joint_limits " + why + " (value: " + jl->dump().substr(0, 200) + ")");
+    return std::nullopt;
+  };
+  if (!jl->is_array() || jl->size() != kNumJointAngles) {
+    return bad("must be an array of " + std::to_string(kNumJointAngles) + " [lo, hi] pairs");
+  }
+  JointLimits out;
+  out.source = hm->value("name", std::string("hand model"));
+  for (int j = 0; j < kNumJointAngles; ++j) {
+    const auto& pair = (*jl)[j];
+    if (!pair.is_array() || pair.size() != 2 || !pair[0].is_number() || !pair[1].is_number()) {
+      return bad("[" + std::to_string(j) + "] is not a [lo, hi] pair of numbers");
+    }
+    out.limits[j] = {pair[0].get<double>(), pair[1].get<double>()};
+    if (!(out.limits[j][0] <= out.limits[j][1])) {
+      return bad("[" + std::to_string(j) + "] has lo > hi");
+    }
+  }
+  return out;
+}
+
+void CheckLabel(const uint8_t* rec,
+                uint64_t at,
+                uint64_t i,
+                const std::optional<JointLimits>& lim,
+                const ValidateOptions& options,
+                ProblemList* problems) {
+  const std::string view = "view " + std::to_string(i) + ": ";
+  bool finite = true;
+  for (size_t o = kViewFloatsBegin; o < kViewFloatsEnd; o += 4) {
+    const float v = Load<float>(rec + o);
+    if (!std::isfinite(v)) {
+      problems->Add("label-finite",
+                    StatusCode::kOutOfRange,
+                    at + o,
+                    view + FieldName(o) + " is " + Num(v) + " (not finite)");
+      finite = false;
+    }
+  }
+  const ViewLabel l = DecodeViewLabel(rec);
+  for (auto [value, field] : {std::pair{l.render_id, "render_id"},
+                              std::pair{l.shape_id, "shape_id"},
+                              std::pair{l.dir_id, "dir_id"}}) {
+    if (value == kInvalidRenderId) {
+      problems->Add("label-id",
+                    StatusCode::kOutOfRange,
+                    at,
+                    view + field + " is 0xffffffff (the invalid id: never filled in)");
+    }
+  }
+  if (!finite) return;
+  for (int j = 0; j < kNumJointAngles; ++j) {
+    const double a = l.joint_angles[j];
+    const double lo = lim ? lim->limits[j][0] : -2 * kPi;
+    const double hi = lim ? lim->limits[j][1] : 2 * kPi;
+    const double tol = lim ? options.joint_limit_tolerance : 0.0;
+    if (a < lo - tol || a > hi + tol) {
+      problems->Add("label-joints",
+                    StatusCode::kOutOfRange,
+                    at + kViewOffJointAngles + 4 * j,
+                    view + "joint_angles[" + std::to_string(j) + "] = " + Num(a) +
+                        " rad is outside [" + Num(lo) + ", " + Num(hi) + "] (" +
+                        (lim ? lim->source + " joint limits" : "no hand model: +-2 pi") + ")");
+    }
+  }
+  const auto& d = l.view_direction;
+  const double norm = std::sqrt(double{d[0]} * d[0] + double{d[1]} * d[1] + double{d[2]} * d[2]);
+  if (std::abs(norm - 1.0) > 1e-3) {
+    problems->Add("label-direction",
+                  StatusCode::kOutOfRange,
+                  at + kViewOffViewDirection,
+                  view + "view_direction (" + Num(d[0]) + ", " + Num(d[1]) + ", " + Num(d[2]) +
+                      ") has length " + Num(norm) + ", expected 1");
+  } else {
+    const double theta = std::acos(std::clamp(d[2] / norm, -1.0, 1.0));
+    if (std::abs(theta - l.view_theta) > kAngleTolerance) {
+      problems->Add("label-direction",
+                    StatusCode::kOutOfRange,
+                    at + kViewOffViewTheta,
+                    view + "view_theta is " + Num(l.view_theta) + ", acos(view_direction.z) is " +
+                        Num(theta));
+    }
+    if (std::sin(theta) > 1e-2) {
+      const double phi = std::atan2(double{d[1]}, double{d[0]});
+      const double diff = std::remainder(phi - l.view_phi, 2 * kPi);
+      if (std::abs(diff) > kAngleTolerance || std::abs(l.view_phi) > kPi + kAngleTolerance) {
+        problems->Add("label-direction",
+                      StatusCode::kOutOfRange,
+                      at + kViewOffViewPhi,
+                      view + "view_phi is " + Num(l.view_phi) +
+                          ", atan2(view_direction.y, view_direction.x) is " + Num(phi));
+      }
+    }
+  }
+  if (std::abs(l.camera_roll) > 2 * kPi + kAngleTolerance) {
+    problems->Add("label-roll",
+                  StatusCode::kOutOfRange,
+                  at + kViewOffCameraRoll,
+                  view + "camera_roll is " + Num(l.camera_roll) + " rad, outside [-2 pi, 2 pi]");
+  }
+  for (int k = 0; k < kNumKeypoints; ++k) {
+    const auto& kp = l.keypoints[k];
+    if (std::abs(kp[0]) > kMaxAbsKeypointXY || std::abs(kp[1]) > kMaxAbsKeypointXY ||
+        std::abs(kp[2]) > kMaxAbsKeypointZ) {
+      problems->Add("label-keypoints",
+                    StatusCode::kOutOfRange,
+                    at + kViewOffKeypoints + 12 * k,
+                    view + "keypoint " + std::to_string(k) + " (" + Num(kp[0]) + ", " + Num(kp[1]) +
+                        ", " + Num(kp[2]) + ") px is outside |x|,|y| <= " + Num(kMaxAbsKeypointXY) +
+                        ", |z| <= " + Num(kMaxAbsKeypointZ));
+    }
+  }
+  if (!(l.source_diameter_px > 0) || !(l.scale > 0) ||
+      std::abs(double{l.scale} * l.source_diameter_px - kNormalisedDiameter) >
+          1e-3 * kNormalisedDiameter) {
+    problems->Add("label-scale",
+                  StatusCode::kOutOfRange,
+                  at + kViewOffSourceDiameter,
+                  view + "scale " + Num(l.scale) + " x source_diameter_px " +
+                      Num(l.source_diameter_px) + " = " +
+                      Num(double{l.scale} * l.source_diameter_px) + ", expected " +
+                      Num(kNormalisedDiameter) + " (both > 0)");
+  }
+}
+
+void CheckPoints(const uint8_t* b,
+                 uint64_t offset,
+                 uint64_t first,
+                 uint64_t count,
+                 const std::string& owner,
+                 ProblemList* problems) {
+  for (uint64_t k = 0; k < count; ++k) {
+    const uint64_t at = offset + (first + k) * kPointSize;
+    const auto x = Load<int16_t>(b + at);
+    const auto y = Load<int16_t>(b + at + 2);
+    if (std::abs(x) > kMaxAbsPointCoord || std::abs(y) > kMaxAbsPointCoord) {
+      problems->Add("points-range",
+                    StatusCode::kOutOfRange,
+                    at,
+                    owner + "point " + std::to_string(first + k) + " (" + std::to_string(x) + ", " +
+                        std::to_string(y) + ") exceeds |x|,|y| <= " +
+                        std::to_string(kMaxAbsPointCoord) + " (1/16 px, i.e. 384 px)");
+    }
+  }
+}
+
+ValidationReport ToReport(const ProblemList& problems) {
+  ValidationReport report;
+  for (const auto& p : problems.problems()) {
+    report.problems.push_back({p.code, problems.file(), p.offset, p.message});
+  }
+  report.suppressed = problems.suppressed();
+  return report;
+}
+
+using RenderIdMap = std::unordered_map<render_id_t, std::string>;
+
+ValidationReport ValidateBytes(std::span<const uint8_t> bytes,
+                               const std::string& name,
+                               const ValidateOptions& options,
+                               RenderIdMap* seen) {
+  THROW_CHECK(options.Check());
+  ProblemList problems(name, /*stop_at_first=*/false, options.max_problems_per_check);
+  const Layout layout = CheckLayout(bytes, &problems);
+  ValidationReport counts;
+  counts.files = 1;
+  const uint8_t* b = bytes.data();
+  if (layout.header.header_size >= kHeaderSize && options.verify_checksums &&
+      layout.header.version_major == kVersionMajor && bytes.size() >= kMinFileSize) {
+    // Header and table checksums were compared by CheckLayout; hash the sections in bounds.
+    Layout sections_only = layout;
+    sections_only.header.header_checksum =
+        HeaderChecksum(bytes.subspan(0, std::min<size_t>(bytes.size(), layout.header.header_size)));
+    CheckSectionChecksums(bytes, sections_only, &problems);
+  }
+  if (layout.structure_ok) {
+    const RawSection& ms = layout.sections[layout.metadata];
+    const std::string_view meta(reinterpret_cast<const char*>(b + ms.offset), ms.size);
+    const std::optional<JointLimits> limits = ParseMetadata(meta, ms.offset, &problems);
+    const RawSection& vs = layout.sections[layout.views];
+    const RawSection& ps = layout.sections[layout.points];
+    for (uint64_t i = 0; i < vs.count; ++i) {
+      const uint64_t at = vs.offset + i * layout.view_stride;
+      CheckLabel(b + at, at, i, limits, options, &problems);
+      const auto render_id = Load<uint32_t>(b + at + kViewOffRenderId);
+      if (seen != nullptr && render_id != kInvalidRenderId) {
+        const std::string here = name + " view " + std::to_string(i);
+        auto [it, inserted] = seen->emplace(render_id, here);
+        if (!inserted) {
+          problems.Add("render-id",
+                       StatusCode::kBadLayout,
+                       at + kViewOffRenderId,
+                       "view " + std::to_string(i) + ": render_id " + std::to_string(render_id) +
+                           " already appears in " + it->second);
+        }
+      }
+      if (layout.views_ok) {
+        const uint64_t off = Load<uint64_t>(b + at + kViewOffPointOffset);
+        const uint32_t cnt = Load<uint32_t>(b + at + kViewOffPointCount);
+        CheckPoints(b, ps.offset, off, cnt, "view " + std::to_string(i) + ": ", &problems);
+      }
+    }
+    if (!layout.views_ok) CheckPoints(b, ps.offset, 0, ps.count, "", &problems);
+    counts.views = vs.count;
+    counts.points = ps.count;
+  }
+  ValidationReport report = ToReport(problems);
+  report.files = counts.files;
+  report.views = counts.views;
+  report.points = counts.points;
+  return report;
+}
+
+// A read-only mapping of a whole file (empty files map to an empty span).
+class MappedFile {
+ public:
+  ~MappedFile() {
+    if (map_ != nullptr) ::munmap(map_, size_);
+  }
+  Status Open(const fs::path& path) {
+    int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) {
+      return Status(errno == ENOENT ? StatusCode::kNotFound : StatusCode::kIoError,
+                    path.string() + ": cannot open: " + std::strerror(errno));
+    }
+    struct stat st {};
+    if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+      ::close(fd);
+      return Status(StatusCode::kIoError, path.string() + ": not a regular file");
+    }
+    size_ = static_cast<size_t>(st.st_size);
+    if (size_ > 0) {
+      void* map = ::mmap(nullptr, size_, PROT_READ, MAP_PRIVATE, fd, 0);
+      if (map == MAP_FAILED) {
+        Status s(StatusCode::kIoError, path.string() + ": mmap failed: " + std::strerror(errno));
+        ::close(fd);
+        return s;
+      }
+      map_ = map;
+      ::madvise(map_, size_, MADV_SEQUENTIAL);
+    }
+    ::close(fd);
+    return Status::Ok();
+  }
+  std::span<const uint8_t> bytes() const {
+    return {static_cast<const uint8_t*>(map_), map_ ? size_ : 0};
+  }
+
+ private:
+  void* map_ = nullptr;
+  size_t size_ = 0;
+};
+
+ValidationReport FileProblem(const std::string& file, const Status& status) {
+  ValidationReport r;
+  r.problems.push_back({status.code(), file, 0, status.message()});
+  return r;
+}
+
+}  // namespace
+
+ValidationReport ValidateShardBytes(std::span<const uint8_t> bytes,
+                                    const std::string& name,
+                                    const ValidateOptions& options) {
+  return ValidateBytes(bytes, name, options, nullptr);
+}
+
+ValidationReport ValidateShardFile(const fs::path& path, const ValidateOptions& options) {
+  MappedFile file;
+  Status s = file.Open(path);
+  if (!s.ok()) return FileProblem(path.string(), s);
+  RenderIdMap seen;
+  return ValidateBytes(file.bytes(), path.string(), options, &seen);
+}
+
+ValidationReport ValidateDatabase(const fs::path& db_dir, const ValidateOptions& options) {
+  ValidationReport report;
+  const std::string manifest_path = (db_dir / kManifestFileName).string();
+  Result<Manifest> manifest = ReadManifest(db_dir);
+  if (!manifest.ok()) report.Append(FileProblem(manifest_path, manifest.status()));
+
+  // The shard files present.
+  static const std::regex kShardName(R"(shard-[0-9]+\.hdb)");
+  std::set<std::string> present;
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(db_dir, ec)) {
+    const std::string file = entry.path().filename().string();
+    if (std::regex_match(file, kShardName)) present.insert(file);
+  }
+  if (ec) {
+    report.Append(
+        FileProblem(db_dir.string(),
+                    Status(StatusCode::kIoError,
+                           db_dir.string() + ": cannot list directory: " + ec.message())));
+    return report;
+  }
+
+  // Listed shards in manifest order; without a readable manifest, every shard present.
+  std::vector<const ManifestShard*> listed;
+  std::vector<ManifestShard> unlisted_entries;
+  if (manifest.ok()) {
+    std::set<std::string> names;
+    for (const auto& s : manifest->shards) {
+      listed.push_back(&s);
+      names.insert(s.file);
+    }
+    for (const auto& file : present) {
+      if (!names.count(file)) {
+        report.problems.push_back(
+            {StatusCode::kBadLayout,
+             (db_dir / file).string(),
+             0,
+             (db_dir / file).string() + ": shard file is not listed in " + manifest_path});
+      }
+    }
+  } else {
+    for (const auto& file : present) unlisted_entries.push_back({file, 0, 0, 0, ""});
+    for (const auto& e : unlisted_entries) listed.push_back(&e);
+  }
+
+  uint64_t total_views = 0;
+  for (const auto* s : listed) total_views += s->views;
+  Progress progress("validate",
+                    manifest.ok() ? total_views : listed.size(),
+                    options.show_progress,
+                    manifest.ok() ? "views" : "shards");
+  RenderIdMap seen;
+  for (const ManifestShard* entry : listed) {
+    const fs::path path = db_dir / entry->file;
+    const std::string file = path.string();
+    MappedFile mapped;
+    Status s = mapped.Open(path);
+    if (!s.ok()) {
+      report.Append(
+          FileProblem(file,
+                      s.code() == StatusCode::kNotFound
+                          ? Status(s.code(), file + ": listed in " + manifest_path + " but missing")
+                          : s));
+      continue;
+    }
+    const auto bytes = mapped.bytes();
+    if (manifest.ok()) {
+      auto mismatch = [&](StatusCode code, uint64_t offset, const std::string& what) {
+        report.problems.push_back({code, file, offset, file + ": " + what});
+      };
+      if (bytes.size() != entry->bytes) {
+        mismatch(StatusCode::kSizeMismatch,
+                 0,
+                 "file is " + std::to_string(bytes.size()) + " bytes, " + manifest_path +
+                     " lists " + std::to_string(entry->bytes));
+      }
+      if (options.verify_checksums) {
+        const std::string actual = ChecksumHex(Checksum(bytes.data(), bytes.size()));
+        if (actual != entry->xxh3) {
+          mismatch(StatusCode::kChecksumMismatch,
+                   0,
+                   "whole-file xxh3 is " + actual + ", " + manifest_path + " lists " + entry->xxh3);
+        }
+      }
+      if (bytes.size() >= kMinFileSize) {
+        const RawHeader h = ParseHeader(bytes);
+        if (h.num_views != entry->views) {
+          mismatch(StatusCode::kSizeMismatch,
+                   kOffNumViews,
+                   "header num_views is " + std::to_string(h.num_views) + ", " + manifest_path +
+                       " lists " + std::to_string(entry->views));
+        }
+        if (h.num_points != entry->points) {
+          mismatch(StatusCode::kSizeMismatch,
+                   kOffNumPoints,
+                   "header num_points is " + std::to_string(h.num_points) + ", " + manifest_path +
+                       " lists " + std::to_string(entry->points));
+        }
+      }
+    }
+    ValidationReport shard_report = ValidateBytes(bytes, file, options, &seen);
+    progress.Add(manifest.ok() ? shard_report.views : 1);
+    report.Append(std::move(shard_report));
+  }
+  progress.Finish();
+  return report;
+}
+
+ValidationReport ValidatePath(const fs::path& path, const ValidateOptions& options) {
+  std::error_code ec;
+  if (fs::is_directory(path, ec)) return ValidateDatabase(path, options);
+  if (!fs::exists(path, ec)) {
+    return FileProblem(
+        path.string(),
+        Status(StatusCode::kNotFound, path.string() + ": no such file or directory"));
+  }
+  return ValidateShardFile(path, options);
+}
+
+}  // namespace handdb
