@@ -1,0 +1,84 @@
+#include "query/chamfer.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <vector>
+
+namespace handdb {
+namespace {
+
+std::vector<PointQ> RandomPoints(size_t n, int range, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_int_distribution<int> u(-range, range);
+  std::vector<PointQ> pts(n);
+  for (auto& p : pts) p = {static_cast<int16_t>(u(rng)), static_cast<int16_t>(u(rng))};
+  return pts;
+}
+
+std::vector<Point2f> ToPx(std::span<const PointQ> pts) {
+  std::vector<Point2f> out;
+  for (const auto& p : pts) out.push_back({PointQToPx(p.x), PointQToPx(p.y)});
+  return out;
+}
+
+TEST(Chamfer, KdTreesMatchBruteForceForBothBackends) {
+  for (uint32_t seed = 0; seed < 5; ++seed) {
+    const auto q = RandomPoints(200 + seed * 50, 150 * 16, seed);
+    const auto y = RandomPoints(300, 150 * 16, seed + 100);
+    const ChamferTerms ref = ChamferBruteForce(q, y);
+    for (KdTreeBackend backend : {KdTreeBackend::kNanoflann, KdTreeBackend::kPcl}) {
+      const KdTree qt(q, backend);
+      const KdTree yt(y, backend);
+      const ChamferTerms got = Chamfer(q, qt, y, yt);
+      EXPECT_EQ(got.a, ref.a);
+      EXPECT_EQ(got.b, ref.b);
+    }
+    EXPECT_GT(ref.a, 0);
+    EXPECT_GT(ref.b, 0);
+  }
+}
+
+TEST(Chamfer, KnownValues) {
+  // Q = {(0,0)}, Y = {(3,4) px, (6,8) px}: A = 5, B = (5 + 10) / 2.
+  const std::vector<PointQ> q = {{0, 0}};
+  const std::vector<PointQ> y = {{48, 64}, {96, 128}};
+  const ChamferTerms t = ChamferBruteForce(q, y);
+  EXPECT_DOUBLE_EQ(t.a, 5.0);
+  EXPECT_DOUBLE_EQ(t.b, 7.5);
+  EXPECT_DOUBLE_EQ(t.total(), 12.5);
+}
+
+TEST(RotateAndQuantise, RoundTripsRolledViewPointsExactly) {
+  // A roll of canonical points (format/roll.h) rotated back lands on the same PointQ.
+  const auto y = RandomPoints(500, 166 * 16, 9);
+  for (int r = 0; r < 48; ++r) {
+    const float a = RollAngle(r, 48);
+    std::vector<Point2f> rolled;
+    RollPoints(y, a, &rolled);
+    const auto back = RotateAndQuantise(rolled, -a);
+    ASSERT_EQ(back.size(), y.size());
+    for (size_t i = 0; i < y.size(); ++i) {
+      ASSERT_EQ(back[i].x, y[i].x) << r;
+      ASSERT_EQ(back[i].y, y[i].y) << r;
+    }
+  }
+}
+
+TEST(RotateAndQuantise, RoundsAndClamps) {
+  const std::vector<Point2f> px = {{0.03f, -0.03f}, {1.0f / 32 + 1e-4f, 0}, {5000, -5000}};
+  const auto q = Quantise(px);
+  EXPECT_EQ(q[0].x, 0);
+  EXPECT_EQ(q[0].y, 0);
+  EXPECT_EQ(q[1].x, 1);
+  EXPECT_EQ(q[2].x, 32767);
+  EXPECT_EQ(q[2].y, -32768);
+  const auto r =
+      RotateAndQuantise(ToPx(std::vector<PointQ>{{160, 0}}), static_cast<float>(M_PI / 2));
+  EXPECT_EQ(r[0].x, 0);
+  EXPECT_EQ(r[0].y, 160);  // +x turns towards +y
+}
+
+}  // namespace
+}  // namespace handdb

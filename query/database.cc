@@ -1,0 +1,143 @@
+#include "query/database.h"
+
+#include <algorithm>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "format/json_schema.h"
+#include "format/shard_reader.h"
+
+namespace handdb {
+namespace {
+
+// Shape names from a shard's metadata JSON: an array of {id, name} under "shapes" (top level,
+// or inside "plan" / "config"). Missing or malformed tables give no names (never an error: names
+// are a convenience for display).
+std::vector<std::string> ShapeNamesFromMetadata(std::string_view metadata) {
+  std::vector<std::string> names;
+  const nlohmann::json doc = nlohmann::json::parse(metadata, nullptr, /*allow_exceptions=*/false);
+  if (!doc.is_object()) return names;
+  const nlohmann::json* shapes = nullptr;
+  for (const char* parent : {"", "plan", "config"}) {
+    const nlohmann::json& obj = *parent ? doc.value(parent, nlohmann::json()) : doc;
+    if (obj.is_object() && obj.contains("shapes") && obj["shapes"].is_array()) {
+      shapes = *parent ? &doc[parent]["shapes"] : &doc["shapes"];
+      break;
+    }
+  }
+  if (shapes == nullptr) return names;
+  for (size_t i = 0; i < shapes->size(); ++i) {
+    const nlohmann::json& s = (*shapes)[i];
+    if (!s.is_object() || !s.contains("name") || !s["name"].is_string()) continue;
+    size_t id = i;
+    if (s.contains("id") && s["id"].is_number_unsigned()) id = s["id"].get<size_t>();
+    if (id > 1000000) continue;
+    if (names.size() <= id) names.resize(id + 1);
+    names[id] = s["name"].get<std::string>();
+  }
+  return names;
+}
+
+}  // namespace
+
+Database::Database() = default;
+Database::~Database() = default;
+Database::Database(Database&&) noexcept = default;
+Database& Database::operator=(Database&&) noexcept = default;
+
+Database Database::FromMemory(std::vector<ViewLabel> labels,
+                              std::vector<std::vector<PointQ>> points,
+                              uint32_t num_rolls,
+                              std::vector<std::string> shape_names) {
+  THROW_CHECK_EQ(labels.size(), points.size());
+  THROW_CHECK_GE(num_rolls, 1u);
+  Database db;
+  db.num_rolls_ = num_rolls;
+  db.memory_labels_ = std::move(labels);
+  db.memory_points_ = std::move(points);
+  db.shape_names_ = std::move(shape_names);
+  db.views_.resize(db.memory_points_.size());
+  for (size_t i = 0; i < db.memory_points_.size(); ++i) {
+    db.views_[i] = {0, static_cast<uint32_t>(i), db.memory_points_[i]};
+    db.num_points_ += db.memory_points_[i].size();
+  }
+  db.size_bytes_ = db.num_points_ * sizeof(PointQ) + db.memory_labels_.size() * sizeof(ViewLabel);
+  return db;
+}
+
+Result<Database> Database::Open(const std::filesystem::path& dir, bool verify_checksums) {
+  std::error_code ec;
+  if (!std::filesystem::is_directory(dir, ec)) {
+    return Status(StatusCode::kNotFound, dir.string() + ": not a database directory");
+  }
+  const std::filesystem::path manifest_path = dir / "manifest.json";
+  Result<nlohmann::json> manifest = ReadJsonFile(manifest_path, "manifest.schema.json");
+  if (!manifest.ok()) return manifest.status();
+  const nlohmann::json& m = *manifest;
+  auto bad = [&](const std::string& what) {
+    return Status(StatusCode::kSchemaViolation, manifest_path.string() + ": " + what);
+  };
+  uint64_t rolls = 0;
+  for (const char* key : {"rolls", "num_rolls"}) {
+    if (m.contains(key) && m[key].is_number_unsigned()) rolls = m[key].get<uint64_t>();
+  }
+  if (rolls < 1 || rolls > 1u << 20) return bad("missing or invalid roll count");
+  if (!m.contains("shards") || !m["shards"].is_array()) return bad("missing shard list");
+
+  Database db;
+  db.path_ = dir;
+  db.num_rolls_ = static_cast<uint32_t>(rolls);
+  for (const nlohmann::json& entry : m["shards"]) {
+    std::string file;
+    uint64_t expected_views = UINT64_MAX;
+    if (entry.is_string()) {
+      file = entry.get<std::string>();
+    } else if (entry.is_object()) {
+      for (const char* key : {"file", "path", "name"}) {
+        if (entry.contains(key) && entry[key].is_string()) file = entry[key].get<std::string>();
+      }
+      if (entry.contains("num_views") && entry["num_views"].is_number_unsigned()) {
+        expected_views = entry["num_views"].get<uint64_t>();
+      }
+    }
+    if (file.empty() || file.find('/') != std::string::npos) {
+      return bad("shard entry without a plain file name: " + entry.dump());
+    }
+    Result<ShardReader> reader = ShardReader::Open(dir / file);
+    if (!reader.ok()) return reader.status();
+    if (verify_checksums) HANDDB_RETURN_IF_ERROR(reader->VerifyChecksums());
+    if (expected_views != UINT64_MAX && reader->num_views() != expected_views) {
+      return Status(StatusCode::kSizeMismatch,
+                    (dir / file).string() + ": has " + std::to_string(reader->num_views()) +
+                        " views, the manifest says " + std::to_string(expected_views));
+    }
+    const uint32_t shard_index = static_cast<uint32_t>(db.shards_.size());
+    auto owned = std::make_unique<ShardReader>(std::move(reader).value());
+    if (db.shape_names_.empty()) db.shape_names_ = ShapeNamesFromMetadata(owned->metadata_json());
+    for (size_t i = 0; i < owned->num_views(); ++i) {
+      db.views_.push_back({shard_index, static_cast<uint32_t>(i), owned->points(i)});
+      db.num_points_ += db.views_.back().points.size();
+    }
+    db.size_bytes_ += owned->header().file_size;
+    db.shards_.push_back(std::move(owned));
+  }
+  if (db.views_.size() >= kInvalidViewId) return bad("too many views");
+  return db;
+}
+
+std::span<const PointQ> Database::points(view_id_t v) const {
+  THROW_CHECK_LT(v, views_.size());
+  return views_[v].points;
+}
+
+ViewLabel Database::label(view_id_t v) const {
+  THROW_CHECK_LT(v, views_.size());
+  if (shards_.empty()) return memory_labels_[v];
+  return shards_[views_[v].shard]->label(views_[v].index);
+}
+
+std::string_view Database::shape_name(shape_id_t id) const {
+  return id < shape_names_.size() ? std::string_view(shape_names_[id]) : std::string_view();
+}
+
+}  // namespace handdb

@@ -1,0 +1,77 @@
+// Lower bounds of point-to-set distances from one exact Euclidean distance transform.
+//
+// A DistanceGrid holds, for a set Q of fixed-point points (PointQ, 1/16 px), the exact Euclidean
+// distance transform (OpenCV DIST_L2 + DIST_MASK_PRECISE, float) of Q rasterised to the nodes of a
+// square grid of step `cell_px` centred on the origin. It answers, for any point p,
+//
+//   LowerBound(p) = max(0, DT(n) - r_max - |p - n|)  <=  min_{q in Q} |p - q|
+//
+// where n is the grid node nearest to p and r_max the largest distance from a point of Q to its
+// rasterised node. Proof: d(p, Q) >= d(n, Q) - |p - n| (1-Lipschitz) and d(n, Q) >= DT(n) - r_max.
+// Points outside the grid get the exact distance to the grid's box, which bounds d(p, Q) because
+// the grid is sized to contain Q. Nearest-node lookup (not bilinear): it has the same worst-case
+// slack as bilinear interpolation and costs one load instead of four; |p - n| depends only on
+// p's position modulo the cell, so it comes from a small table.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "format/view.h"
+
+namespace handdb {
+
+struct DistanceGridOptions {
+  // Grid step in px: 1, 1/2, 1/4, 1/8 or 1/16 (a power-of-two fraction of a pixel, so that node
+  // indices come from integer shifts of PointQ coordinates).
+  float cell_px = 1.0f;
+  // The grid covers at least [-min_half_extent_px, +min_half_extent_px]^2 and grows to contain
+  // every point of the set. Normalised views lie within 192 * sqrt(3) / 2 = 166.3 px of the origin.
+  float min_half_extent_px = 170.0f;
+  bool Check() const;
+};
+
+class DistanceGrid {
+ public:
+  DistanceGrid() = default;
+  explicit DistanceGrid(const DistanceGridOptions& options);
+
+  // (Re)builds the grid for `points` (non-empty), reusing buffers.
+  void Build(std::span<const PointQ> points);
+
+  // Exact distance transform value (px) at grid node (ix, iy).
+  float NodeDistance(int ix, int iy) const { return dt_[static_cast<size_t>(iy) * size_ + ix]; }
+  // Node nearest to p (may be outside [0, size) for points off the grid).
+  int NodeIndex(int16_t coord) const { return (coord + half_extent_u_ + cell_u_ / 2) >> shift_; }
+  // The lower bound of d(p, Q) in px described above.
+  float LowerBound(PointQ p) const;
+  // Sum of LowerBound over points (float accumulation; see MeanLowerBoundMargin()).
+  double SumLowerBounds(std::span<const PointQ> points) const;
+  // True if every point with |x|, |y| <= max_abs (PointQ units) is on the grid's fast path.
+  bool Covers(int max_abs) const { return max_abs <= fast_limit_; }
+  // SumLowerBounds for points known to satisfy Covers(); no bounds checks.
+  double SumLowerBoundsFast(std::span<const PointQ> points) const;
+
+  int size() const { return size_; }
+  float cell_px() const { return options_.cell_px; }
+  float half_extent_px() const { return static_cast<float>(half_extent_u_) / kPointScale; }
+  float r_max_px() const { return r_max_px_; }
+  // Upper bound on the float rounding error of mean = SumLowerBounds*(...) / n over n points:
+  // subtract it from the mean to keep the bound valid.
+  static double MeanLowerBoundMargin(size_t n, double mean);
+
+ private:
+  DistanceGridOptions options_;
+  int shift_ = 4;          // log2(cell in PointQ units)
+  int cell_u_ = 16;        // cell in PointQ units
+  int half_extent_u_ = 0;  // grid half extent in PointQ units, a multiple of cell_u_
+  int size_ = 0;           // nodes per side = 2 * half_extent_u_ / cell_u_ + 1
+  int fast_limit_ = -1;    // |coord| <= this -> node index in range
+  float r_max_px_ = 0;
+  std::vector<float> dt_;            // DT per node (px), row-major (y rows)
+  std::vector<float> offset_table_;  // r_max + |p - n| in px, by (x mod cell, y mod cell)
+  std::vector<uint8_t> seeds_;
+};
+
+}  // namespace handdb

@@ -1,0 +1,108 @@
+#include "query/distance_transform.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <random>
+#include <vector>
+
+namespace handdb {
+namespace {
+
+std::vector<PointQ> RandomPoints(size_t n, int range, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_int_distribution<int> u(-range, range);
+  std::vector<PointQ> pts(n);
+  for (auto& p : pts) p = {static_cast<int16_t>(u(rng)), static_cast<int16_t>(u(rng))};
+  return pts;
+}
+
+double ExactDistancePx(std::span<const PointQ> set, PointQ p) {
+  double best = std::numeric_limits<double>::infinity();
+  for (const auto& q : set) {
+    const double dx = p.x - q.x;
+    const double dy = p.y - q.y;
+    best = std::min(best, std::sqrt(dx * dx + dy * dy));
+  }
+  return best / 16.0;
+}
+
+TEST(DistanceGridOptions, Check) {
+  EXPECT_TRUE(DistanceGridOptions{}.Check());
+  EXPECT_TRUE((DistanceGridOptions{0.25f, 170}.Check()));
+  EXPECT_FALSE((DistanceGridOptions{0.3f, 170}.Check()));
+  EXPECT_FALSE((DistanceGridOptions{2.0f, 170}.Check()));
+  EXPECT_FALSE((DistanceGridOptions{1.0f, -1}.Check()));
+}
+
+TEST(DistanceGrid, NodeValuesAreTheExactEuclideanTransform) {
+  // Points exactly on nodes: the DT at every node equals the exact distance to the set.
+  std::vector<PointQ> pts;
+  std::mt19937 rng(3);
+  std::uniform_int_distribution<int> u(-100, 100);
+  for (int i = 0; i < 40; ++i)
+    pts.push_back({static_cast<int16_t>(u(rng) * 16), static_cast<int16_t>(u(rng) * 16)});
+  DistanceGrid grid(DistanceGridOptions{1.0f, 110});
+  grid.Build(pts);
+  EXPECT_EQ(grid.r_max_px(), 0.0f);
+  for (int iy = 0; iy < grid.size(); iy += 7) {
+    for (int ix = 0; ix < grid.size(); ix += 5) {
+      const PointQ node{static_cast<int16_t>((ix - grid.size() / 2) * 16),
+                        static_cast<int16_t>((iy - grid.size() / 2) * 16)};
+      ASSERT_NEAR(grid.NodeDistance(ix, iy), ExactDistancePx(pts, node), 1e-3) << ix << "," << iy;
+    }
+  }
+}
+
+class LowerBound : public ::testing::TestWithParam<float> {};
+
+TEST_P(LowerBound, NeverExceedsTheExactDistanceAndIsTight) {
+  const auto set = RandomPoints(600, 150 * 16, 1);
+  DistanceGrid grid(DistanceGridOptions{GetParam(), 170});
+  grid.Build(set);
+  EXPECT_GT(grid.r_max_px(), 0.0f);
+  EXPECT_LE(grid.r_max_px(), GetParam() * 0.7072f);
+  // Points everywhere, including far outside the grid (the box fallback).
+  const auto probes = RandomPoints(20000, 2040 * 16, 2);
+  const auto near = RandomPoints(20000, 170 * 16, 3);
+  double sum_gap = 0;
+  for (const auto* ps : {&probes, &near}) {
+    for (const PointQ& p : *ps) {
+      const double exact = ExactDistancePx(set, p);
+      const double lb = grid.LowerBound(p);
+      ASSERT_LE(lb, exact + 1e-5) << p.x << "," << p.y;
+      if (ps == &near) sum_gap += exact - lb;
+    }
+  }
+  // Tightness: the mean slack is below the worst case (sqrt(2) cells).
+  EXPECT_LT(sum_gap / near.size(), 1.4143 * GetParam());
+}
+
+TEST_P(LowerBound, FastSumEqualsPerPointSum) {
+  const auto set = RandomPoints(500, 120 * 16, 4);
+  DistanceGrid grid(DistanceGridOptions{GetParam(), 170});
+  grid.Build(set);
+  const auto pts = RandomPoints(999, 160 * 16, 5);
+  ASSERT_TRUE(grid.Covers(160 * 16));
+  double per_point = 0;
+  for (const auto& p : pts) per_point += grid.LowerBound(p);
+  const double fast = grid.SumLowerBoundsFast(pts);
+  const double mean = fast / pts.size();
+  EXPECT_NEAR(mean, per_point / pts.size(), DistanceGrid::MeanLowerBoundMargin(pts.size(), mean));
+  EXPECT_EQ(grid.SumLowerBounds(pts), per_point);
+}
+
+INSTANTIATE_TEST_SUITE_P(Cells, LowerBound, ::testing::Values(1.0f, 0.5f, 0.25f));
+
+TEST(DistanceGrid, GrowsToContainFarPoints) {
+  const std::vector<PointQ> set = {{0, 0}, {static_cast<int16_t>(400 * 16), 0}};
+  DistanceGrid grid(DistanceGridOptions{1.0f, 170});
+  grid.Build(set);
+  EXPECT_GE(grid.half_extent_px(), 400.0f);
+  EXPECT_EQ(grid.LowerBound({static_cast<int16_t>(400 * 16), 0}), 0.0f);
+  EXPECT_FALSE(grid.Covers(401 * 16));
+}
+
+}  // namespace
+}  // namespace handdb

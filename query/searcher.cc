@@ -1,0 +1,350 @@
+#include "query/searcher.h"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <exception>
+#include <limits>
+#include <mutex>
+#include <thread>
+
+#include "query/chamfer.h"
+#include "query/distance_transform.h"
+
+namespace handdb {
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+// Relative slack on abandonment thresholds so float rounding can never drop a pair that ties
+// the k-th best (abandoning is only ever allowed for pairs strictly worse than it).
+constexpr double kAbandonSlack = 1e-12;
+
+double Seconds(std::chrono::steady_clock::time_point since) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+
+struct Scored {
+  double distance = 0;
+  double a = 0;
+  double b = 0;
+  double lower_bound = 0;
+  view_id_t view = 0;
+  roll_id_t roll = 0;
+};
+
+// The total order of results: distance, then view id, then roll.
+bool Before(const Scored& x, const Scored& y) {
+  if (x.distance != y.distance) return x.distance < y.distance;
+  if (x.view != y.view) return x.view < y.view;
+  return x.roll < y.roll;
+}
+
+// Shared top-k under a mutex; threshold() is the k-th best distance (+inf until k are known),
+// readable without the lock.
+class TopK {
+ public:
+  explicit TopK(size_t k) : k_(k) { items_.reserve(k + 1); }
+
+  void Insert(const Scored& s) {
+    if (s.distance > threshold_.load(std::memory_order_relaxed)) return;
+    std::lock_guard<std::mutex> lock(mu_);
+    if (items_.size() == k_ && !Before(s, items_.back())) return;
+    items_.insert(std::upper_bound(items_.begin(), items_.end(), s, Before), s);
+    if (items_.size() > k_) items_.pop_back();
+    if (items_.size() == k_) threshold_.store(items_.back().distance, std::memory_order_relaxed);
+  }
+  double threshold() const { return threshold_.load(std::memory_order_relaxed); }
+  std::vector<Scored> items() const { return items_; }
+
+ private:
+  size_t k_;
+  std::mutex mu_;
+  std::vector<Scored> items_;
+  std::atomic<double> threshold_{kInf};
+};
+
+// Runs fn(i, worker) for i in [0, n) on `threads` workers taking indices in order from a shared
+// counter; fn returns false to stop every worker (used when the rest is known to be pruned).
+// An exception in a worker is rethrown in the caller.
+template <class Fn>
+void ParallelFor(int threads, size_t n, Fn&& fn) {
+  std::atomic<size_t> next{0};
+  std::atomic<bool> stop{false};
+  std::exception_ptr error;
+  std::mutex error_mu;
+  auto work = [&](int worker) {
+    try {
+      while (!stop.load(std::memory_order_relaxed)) {
+        const size_t i = next.fetch_add(1, std::memory_order_relaxed);
+        if (i >= n) break;
+        if (!fn(i, worker)) stop.store(true, std::memory_order_relaxed);
+      }
+    } catch (...) {
+      std::lock_guard<std::mutex> lock(error_mu);
+      if (!error) error = std::current_exception();
+      stop.store(true);
+    }
+  };
+  const int workers =
+      static_cast<int>(std::min<size_t>(std::max(threads, 1), std::max<size_t>(n, 1)));
+  std::vector<std::thread> pool;
+  pool.reserve(workers - 1);
+  for (int w = 1; w < workers; ++w) pool.emplace_back(work, w);
+  work(0);
+  for (auto& t : pool) t.join();
+  if (error) std::rethrow_exception(error);
+}
+
+// Largest float <= x (a lower bound stays a lower bound when stored as float).
+float FloatBelow(double x) {
+  float f = static_cast<float>(x);
+  if (static_cast<double>(f) > x) f = std::nextafter(f, -std::numeric_limits<float>::infinity());
+  return f;
+}
+
+// Per-query state shared by the workers.
+class QueryContext {
+ public:
+  QueryContext(const Database& db, std::span<const Point2f> query, const SearchOptions& options)
+      : db_(db),
+        options_(options),
+        query_(query),
+        rolled_(db.num_rolls()),
+        query_trees_(db.num_rolls()),
+        view_trees_(db.num_views()),
+        view_tree_once_(new std::once_flag[db.num_views()]) {}
+
+  // The query rotated by -angle(r) and quantised, and a kd-tree over it.
+  void PrepareRoll(roll_id_t r) {
+    rolled_[r] = RotateAndQuantise(query_, -RollAngle(r, db_.num_rolls()));
+    query_trees_[r] = std::make_unique<KdTree>(rolled_[r], options_.kdtree);
+  }
+  std::span<const PointQ> rolled(roll_id_t r) const { return rolled_[r]; }
+
+  const KdTree& ViewTree(view_id_t v) {
+    std::call_once(view_tree_once_[v], [&] {
+      view_trees_[v] = std::make_unique<KdTree>(db_.points(v), options_.kdtree);
+      num_view_trees_.fetch_add(1, std::memory_order_relaxed);
+    });
+    return *view_trees_[v];
+  }
+
+  // Exact D_c of (v, r); returns false (abandoned) once it provably exceeds `threshold`.
+  bool Score(view_id_t v, roll_id_t r, double threshold, Scored* out) {
+    const std::span<const PointQ> view = db_.points(v);
+    const std::span<const PointQ> q = rolled_[r];
+    const double nv = static_cast<double>(view.size());
+    const double nq = static_cast<double>(q.size());
+    bool stopped = false;
+    const double sum_b =
+        query_trees_[r]->SumNearestDistances(view, threshold * nv * (1 + kAbandonSlack), &stopped);
+    if (stopped) return false;
+    const double b = sum_b / nv;
+    const double limit_a =
+        threshold == kInf ? kInf : (threshold - b) * nq * (1 + kAbandonSlack) + kAbandonSlack;
+    if (limit_a < 0) return false;
+    const double sum_a = ViewTree(v).SumNearestDistances(q, limit_a, &stopped);
+    if (stopped) return false;
+    out->a = sum_a / nq;
+    out->b = b;
+    out->distance = out->a + out->b;
+    out->view = v;
+    out->roll = r;
+    return true;
+  }
+
+  uint64_t num_view_trees() const { return num_view_trees_.load(); }
+
+ private:
+  const Database& db_;
+  const SearchOptions& options_;
+  std::span<const Point2f> query_;
+  std::vector<std::vector<PointQ>> rolled_;
+  std::vector<std::unique_ptr<KdTree>> query_trees_;
+  std::vector<std::unique_ptr<KdTree>> view_trees_;
+  std::unique_ptr<std::once_flag[]> view_tree_once_;
+  std::atomic<uint64_t> num_view_trees_{0};
+};
+
+}  // namespace
+
+bool SearchOptions::Check() const {
+  CHECK_OPTION_GT(top_k, 0);
+  CHECK_OPTION(num_threads == -1 || num_threads >= 1);
+  CHECK_OPTION((DistanceGridOptions{dt_cell_px, 170.0f}.Check()));
+  return true;
+}
+
+int ResolveThreadCount(int num_threads) {
+  if (num_threads >= 1) return num_threads;
+  return std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+}
+
+Searcher::Searcher(std::shared_ptr<const Database> db) : db_(std::move(db)) {
+  THROW_CHECK(db_ != nullptr);
+  max_abs_.resize(db_->num_views());
+  for (view_id_t v = 0; v < db_->num_views(); ++v) {
+    int32_t m = 0;
+    for (const PointQ& p : db_->points(v)) {
+      m = std::max({m, std::abs(static_cast<int32_t>(p.x)), std::abs(static_cast<int32_t>(p.y))});
+    }
+    max_abs_[v] = m;
+  }
+}
+
+Searcher::~Searcher() = default;
+
+Result<std::unique_ptr<Searcher>> Searcher::Open(const std::filesystem::path& dir) {
+  Result<Database> db = Database::Open(dir);
+  if (!db.ok()) return db.status();
+  return std::make_unique<Searcher>(std::make_shared<const Database>(std::move(db).value()));
+}
+
+Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
+                                            const SearchOptions& options,
+                                            SearchStats* stats) const {
+  const auto start = std::chrono::steady_clock::now();
+  if (!options.Check()) {
+    return Status(StatusCode::kInvalidArgument, "invalid search options (see the line above)");
+  }
+  if (query_px.empty()) {
+    return Status(StatusCode::kInvalidArgument, "the query has no edge points");
+  }
+  for (const Point2f& p : query_px) {
+    if (!std::isfinite(p.x) || !std::isfinite(p.y) || std::fabs(p.x) > 2000.0f ||
+        std::fabs(p.y) > 2000.0f) {
+      return Status(StatusCode::kInvalidArgument,
+                    "query point (" + std::to_string(p.x) + ", " + std::to_string(p.y) +
+                        ") is not finite or outside +-2000 px of the normalised frame");
+    }
+  }
+
+  const Database& db = *db_;
+  const size_t num_views = db.num_views();
+  const uint32_t num_rolls = db.num_rolls();
+  const int threads = ResolveThreadCount(options.num_threads);
+  const size_t k = static_cast<size_t>(options.top_k);
+  SearchStats local;
+  local.virtual_views = db.num_virtual_views();
+  local.query_points = query_px.size();
+
+  QueryContext ctx(db, query_px, options);
+  TopK top(k);
+  std::atomic<uint64_t> refined{0};
+  std::atomic<uint64_t> abandoned{0};
+
+  if (options.brute_force) {
+    ParallelFor(threads, num_rolls, [&](size_t r, int) {
+      ctx.PrepareRoll(static_cast<roll_id_t>(r));
+      return true;
+    });
+    local.seconds_bounds = Seconds(start);
+    const auto refine_start = std::chrono::steady_clock::now();
+    ParallelFor(threads, num_views, [&](size_t v, int) {
+      if (db.points(static_cast<view_id_t>(v)).empty()) return true;
+      for (roll_id_t r = 0; r < num_rolls; ++r) {
+        Scored s;
+        ctx.Score(static_cast<view_id_t>(v), r, kInf, &s);
+        top.Insert(s);
+      }
+      refined.fetch_add(num_rolls, std::memory_order_relaxed);
+      return true;
+    });
+    local.seconds_refine = Seconds(refine_start);
+  } else {
+    // Step 1: lower bounds, roll-major (one distance transform per roll, reused for every view).
+    const size_t n = num_views * num_rolls;
+    std::vector<float> bound(n);  // index r * num_views + v
+    const DistanceGridOptions grid_options{options.dt_cell_px, 170.0f};
+    std::vector<DistanceGrid> grids(threads, DistanceGrid(grid_options));
+    ParallelFor(threads, num_rolls, [&](size_t ri, int worker) {
+      const roll_id_t r = static_cast<roll_id_t>(ri);
+      ctx.PrepareRoll(r);
+      DistanceGrid& grid = grids[worker];
+      grid.Build(ctx.rolled(r));
+      float* out = bound.data() + ri * num_views;
+      for (view_id_t v = 0; v < num_views; ++v) {
+        const std::span<const PointQ> pts = db.points(v);
+        if (pts.empty()) {
+          out[v] = std::numeric_limits<float>::infinity();
+          continue;
+        }
+        const double sum =
+            grid.Covers(max_abs_[v]) ? grid.SumLowerBoundsFast(pts) : grid.SumLowerBounds(pts);
+        const double mean = sum / static_cast<double>(pts.size());
+        out[v] =
+            FloatBelow(std::max(0.0, mean - DistanceGrid::MeanLowerBoundMargin(pts.size(), mean)));
+      }
+      return true;
+    });
+    grids.clear();
+    local.bounded = n;
+    local.seconds_bounds = Seconds(start);
+    const auto refine_start = std::chrono::steady_clock::now();
+
+    // Step 2: visit pairs in increasing bound. First the k smallest bounds give a threshold,
+    // then only pairs whose bound is <= it are sorted and visited.
+    auto by_bound = [&](uint32_t x, uint32_t y) {
+      return bound[x] != bound[y] ? bound[x] < bound[y] : x < y;
+    };
+    auto visit = [&](std::span<const uint32_t> order) {
+      ParallelFor(threads, order.size(), [&](size_t i, int) {
+        const uint32_t idx = order[i];
+        const double threshold = top.threshold();
+        if (bound[idx] > threshold) return false;  // every later pair has a larger bound
+        const view_id_t v = idx % num_views;
+        const roll_id_t r = static_cast<roll_id_t>(idx / num_views);
+        refined.fetch_add(1, std::memory_order_relaxed);
+        Scored s;
+        if (ctx.Score(v, r, threshold, &s)) {
+          s.lower_bound = bound[idx];
+          top.Insert(s);
+        } else {
+          abandoned.fetch_add(1, std::memory_order_relaxed);
+        }
+        return true;
+      });
+    };
+    std::vector<uint32_t> ids;
+    ids.reserve(n);
+    for (uint32_t i = 0; i < n; ++i) {
+      if (std::isfinite(bound[i])) ids.push_back(i);
+    }
+    const size_t first = std::min(k, ids.size());
+    std::nth_element(ids.begin(), ids.begin() + first, ids.end(), by_bound);
+    std::sort(ids.begin(), ids.begin() + first, by_bound);
+    visit(std::span<const uint32_t>(ids.data(), first));
+    const double t0 = top.threshold();
+    std::vector<uint32_t> rest;
+    for (size_t i = first; i < ids.size(); ++i) {
+      if (bound[ids[i]] <= t0) rest.push_back(ids[i]);
+    }
+    std::sort(rest.begin(), rest.end(), by_bound);
+    visit(rest);
+    local.seconds_refine = Seconds(refine_start);
+  }
+
+  std::vector<Match> matches;
+  for (const Scored& s : top.items()) {
+    Match m;
+    m.view_id = s.view;
+    m.roll = s.roll;
+    m.roll_angle = RollAngle(s.roll, num_rolls);
+    m.distance = s.distance;
+    m.a = s.a;
+    m.b = s.b;
+    m.lower_bound = s.lower_bound;
+    m.label = RollLabel(db.label(s.view), m.roll_angle);
+    m.shape_name = std::string(db.shape_name(m.label.shape_id));
+    matches.push_back(std::move(m));
+  }
+  local.refined = refined.load();
+  local.abandoned = abandoned.load();
+  local.view_trees = ctx.num_view_trees();
+  local.seconds_total = Seconds(start);
+  if (stats != nullptr) *stats = local;
+  return matches;
+}
+
+}  // namespace handdb

@@ -1,0 +1,89 @@
+// Exact top-k chamfer search over a database of virtual views (DESIGN.md section 7, docs/query.md).
+//
+// Distance: D_c = A + B of query/chamfer.h, exact on the 1/16 px grid. Pruned search:
+//  1. For each roll r, rotate the query into the canonical frame (Q_r) and build one exact
+//     Euclidean distance transform of it (query/distance_transform.h). For every canonical view,
+//     one lookup per point gives L(v, r) <= B(v, r) <= D_c(v, r): a proven lower bound.
+//  2. Visit (v, r) in increasing L; compute the exact B (kd-tree over Q_r) and A (kd-tree over
+//     Y_v, built lazily per view and cached for the query) only while L <= the current k-th best
+//     D_c, abandoning a pair as soon as its partial sum exceeds that threshold.
+// The result is exactly the top-k of brute force under the total order (D_c, view id, roll),
+// identical for any thread count and either kd-tree backend.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "format/roll.h"
+#include "format/status.h"
+#include "format/view.h"
+#include "query/database.h"
+#include "query/kdtree.h"
+
+namespace handdb {
+
+struct SearchOptions {
+  int top_k = 10;            // number of matches returned
+  int num_threads = -1;      // -1: all cores
+  bool brute_force = false;  // D_c for every (view, roll), no pruning (the reference)
+  KdTreeBackend kdtree = KdTreeBackend::kNanoflann;
+  float dt_cell_px = 1.0f;  // distance-transform grid step: 1, 1/2, 1/4, 1/8 or 1/16 px
+  bool Check() const;
+};
+
+struct Match {
+  view_id_t view_id = kInvalidViewId;
+  roll_id_t roll = 0;
+  float roll_angle = 0;    // radians, 2*pi*roll/R
+  double distance = 0;     // D_c = a + b, px
+  double a = 0;            // query -> view term, px
+  double b = 0;            // view -> query term, px
+  double lower_bound = 0;  // the distance-transform bound L(v, r) used for pruning (0 in
+                           // brute force)
+  ViewLabel label;         // rolled: camera_roll += angle, keypoints rotated (RollLabel)
+  std::string shape_name;  // from the database's shape table, "" if unknown
+};
+
+struct SearchStats {
+  uint64_t virtual_views = 0;  // (view, roll) pairs in the database
+  uint64_t bounded = 0;        // pairs whose lower bound was computed
+  uint64_t refined = 0;        // pairs whose exact D_c was started
+  uint64_t abandoned = 0;      // of those, stopped early above the k-th best
+  uint64_t view_trees = 0;     // kd-trees built over view points
+  uint64_t query_points = 0;
+  double seconds_bounds = 0;  // step 1 (rotations, distance transforms, lower bounds)
+  double seconds_refine = 0;  // step 2
+  double seconds_total = 0;
+};
+
+class Searcher {
+ public:
+  // The database is shared (a Searcher is cheap; many may search one Database).
+  explicit Searcher(std::shared_ptr<const Database> db);
+  ~Searcher();
+  Searcher(const Searcher&) = delete;
+  Searcher& operator=(const Searcher&) = delete;
+
+  // Opens a database directory (Database::Open) and wraps it.
+  static Result<std::unique_ptr<Searcher>> Open(const std::filesystem::path& dir);
+
+  // Top-k matches for a query edge point set in the normalised frame (px), best first.
+  // kInvalidArgument for an empty query or bad options. Const: safe from many threads.
+  Result<std::vector<Match>> Search(std::span<const Point2f> query_px,
+                                    const SearchOptions& options,
+                                    SearchStats* stats = nullptr) const;
+
+  const Database& database() const { return *db_; }
+
+ private:
+  std::shared_ptr<const Database> db_;
+  std::vector<int32_t> max_abs_;  // per view: max |x|, |y| of its points (PointQ units)
+};
+
+// Number of worker threads for a num_threads option (-1: hardware concurrency, at least 1).
+int ResolveThreadCount(int num_threads);
+
+}  // namespace handdb

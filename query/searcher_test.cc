@@ -1,0 +1,233 @@
+#include "query/searcher.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include "query/search_testing.h"
+
+namespace handdb {
+namespace {
+
+using testing::RolledView;
+using testing::SyntheticDatabase;
+
+constexpr uint32_t kViews = 36;
+constexpr uint32_t kRolls = 16;
+constexpr size_t kPoints = 120;
+
+std::shared_ptr<const Database> TestDatabase() {
+  static const auto db = std::make_shared<const Database>(
+      SyntheticDatabase(kViews, kPoints, kRolls, /*views_per_shape=*/6));
+  return db;
+}
+
+SearchOptions Options(int k = 5, int threads = 2) {
+  SearchOptions o;
+  o.top_k = k;
+  o.num_threads = threads;
+  return o;
+}
+
+std::vector<Point2f> Transform(std::vector<Point2f> pts,
+                               float angle,
+                               float dx,
+                               float dy,
+                               double keep_fraction,
+                               uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<Point2f> out;
+  const float c = std::cos(angle);
+  const float s = std::sin(angle);
+  for (const auto& p : pts) {
+    if (u(rng) > keep_fraction) continue;
+    out.push_back({c * p.x - s * p.y + dx, s * p.x + c * p.y + dy});
+  }
+  return out;
+}
+
+void ExpectSameResults(const std::vector<Match>& a, const std::vector<Match>& b) {
+  ASSERT_EQ(a.size(), b.size());
+  for (size_t i = 0; i < a.size(); ++i) {
+    EXPECT_EQ(a[i].view_id, b[i].view_id) << "rank " << i;
+    EXPECT_EQ(a[i].roll, b[i].roll) << "rank " << i;
+    EXPECT_EQ(a[i].distance, b[i].distance) << "rank " << i;
+    EXPECT_EQ(a[i].a, b[i].a) << "rank " << i;
+    EXPECT_EQ(a[i].b, b[i].b) << "rank " << i;
+  }
+}
+
+TEST(SearchOptions, Check) {
+  EXPECT_TRUE(SearchOptions{}.Check());
+  SearchOptions o;
+  o.top_k = 0;
+  EXPECT_FALSE(o.Check());
+  o = {};
+  o.num_threads = 0;
+  EXPECT_FALSE(o.Check());
+  o = {};
+  o.dt_cell_px = 0.3f;
+  EXPECT_FALSE(o.Check());
+}
+
+TEST(Searcher, ViewQueriedWithItsOwnEdgesIsRankOneAtDistanceZero) {
+  const Searcher searcher(TestDatabase());
+  for (view_id_t v : {0u, 7u, 35u}) {
+    for (roll_id_t r : {0u, 1u, 5u, 12u}) {
+      SearchStats stats;
+      auto res = searcher.Search(RolledView(*TestDatabase(), v, r), Options(), &stats);
+      ASSERT_TRUE(res.ok()) << res.status().ToString();
+      ASSERT_FALSE(res->empty());
+      EXPECT_EQ((*res)[0].view_id, v);
+      EXPECT_EQ((*res)[0].roll, r);
+      EXPECT_EQ((*res)[0].distance, 0.0);
+      EXPECT_GT((*res)[1].distance, 0.0);
+      // Pruning did its job: far fewer exact evaluations than virtual views.
+      EXPECT_LT(stats.refined, stats.virtual_views / 2);
+      // The label is the rolled one.
+      const ViewLabel canonical = TestDatabase()->label(v);
+      EXPECT_NEAR((*res)[0].label.camera_roll,
+                  std::remainder(RollAngle(r, kRolls), static_cast<float>(2 * M_PI)),
+                  1e-5);
+      EXPECT_EQ((*res)[0].label.joint_angles, canonical.joint_angles);
+      EXPECT_EQ((*res)[0].shape_name, "shape" + std::to_string(canonical.shape_id));
+    }
+  }
+}
+
+TEST(Searcher, SmallRotationsShiftsAndDroppedPointsKeepTopOne) {
+  const Searcher searcher(TestDatabase());
+  const float step = static_cast<float>(2 * M_PI / kRolls);
+  uint32_t seed = 0;
+  for (view_id_t v : {3u, 11u, 20u, 29u}) {
+    for (roll_id_t r : {0u, 9u}) {
+      const auto base = RolledView(*TestDatabase(), v, r);
+      const std::vector<std::vector<Point2f>> variants = {
+          Transform(base, 0.15f * step, 0, 0, 1.0, ++seed),        // small rotation
+          Transform(base, 0, 2.0f, -1.5f, 1.0, ++seed),            // shift
+          Transform(base, 0, 0, 0, 0.7, ++seed),                   // 30% of the points dropped
+          Transform(base, -0.1f * step, -1.0f, 1.0f, 0.8, ++seed)  // all three
+      };
+      for (const auto& q : variants) {
+        auto res = searcher.Search(q, Options(3));
+        ASSERT_TRUE(res.ok());
+        EXPECT_EQ((*res)[0].view_id, v);
+        EXPECT_EQ((*res)[0].roll, r);
+        EXPECT_GT((*res)[0].distance, 0.0);
+      }
+    }
+  }
+}
+
+// >= 50 random queries: pruned == brute force (views, order, distances), for both backends and
+// any thread count.
+TEST(Searcher, PrunedEqualsBruteForce) {
+  const Searcher searcher(TestDatabase());
+  std::mt19937 rng(42);
+  std::uniform_int_distribution<uint32_t> view(0, kViews - 1);
+  std::uniform_int_distribution<uint32_t> roll(0, kRolls - 1);
+  std::uniform_real_distribution<float> u(-1, 1);
+  for (int i = 0; i < 60; ++i) {
+    std::vector<Point2f> q;
+    if (i % 4 == 3) {
+      // A shape unlike any view: an unrelated synthetic set.
+      RollPoints(testing::SyntheticEdgeSet(1000 + i, 100), 0.0f, &q);
+    } else {
+      q = Transform(RolledView(*TestDatabase(), view(rng), roll(rng)),
+                    0.3f * u(rng),
+                    4 * u(rng),
+                    4 * u(rng),
+                    0.5 + 0.5 * (u(rng) + 1) / 2,
+                    i);
+    }
+    SearchOptions pruned = Options(1 + i % 8, 1 + i % 3);
+    pruned.kdtree = i % 2 ? KdTreeBackend::kPcl : KdTreeBackend::kNanoflann;
+    pruned.dt_cell_px = i % 5 == 0 ? 0.5f : 1.0f;
+    SearchOptions brute = pruned;
+    brute.brute_force = true;
+    brute.num_threads = 2;
+    brute.kdtree = KdTreeBackend::kNanoflann;
+    auto a = searcher.Search(q, pruned);
+    auto b = searcher.Search(q, brute);
+    ASSERT_TRUE(a.ok() && b.ok());
+    ExpectSameResults(*a, *b);
+    for (const Match& m : *a) {
+      EXPECT_LE(m.lower_bound, m.b + 1e-9);
+      EXPECT_DOUBLE_EQ(m.distance, m.a + m.b);
+    }
+  }
+}
+
+TEST(Searcher, BackendsAndThreadCountsGiveIdenticalResults) {
+  const Searcher searcher(TestDatabase());
+  const auto q = Transform(RolledView(*TestDatabase(), 17, 3), 0.05f, 1, 1, 0.9, 7);
+  SearchOptions base = Options(10, 1);
+  auto ref = searcher.Search(q, base);
+  ASSERT_TRUE(ref.ok());
+  for (int threads : {1, 2, 4}) {
+    for (KdTreeBackend backend : {KdTreeBackend::kNanoflann, KdTreeBackend::kPcl}) {
+      SearchOptions o = base;
+      o.num_threads = threads;
+      o.kdtree = backend;
+      auto got = searcher.Search(q, o);
+      ASSERT_TRUE(got.ok());
+      ExpectSameResults(*ref, *got);
+    }
+  }
+}
+
+TEST(Searcher, TopKLargerThanTheDatabaseReturnsEverything) {
+  const auto db = std::make_shared<const Database>(SyntheticDatabase(3, 50, 4));
+  const Searcher searcher(db);
+  auto res = searcher.Search(RolledView(*db, 1, 2), Options(100));
+  ASSERT_TRUE(res.ok());
+  EXPECT_EQ(res->size(), 12u);
+  for (size_t i = 1; i < res->size(); ++i) EXPECT_LE((*res)[i - 1].distance, (*res)[i].distance);
+}
+
+TEST(Searcher, ManyThreadsQueryOneSearcher) {
+  const Searcher searcher(TestDatabase());
+  std::vector<std::vector<Match>> got(4);
+  std::vector<std::thread> threads;
+  for (int t = 0; t < 4; ++t) {
+    threads.emplace_back([&, t] {
+      got[t] = *searcher.Search(RolledView(*TestDatabase(), 5 + t, t), Options(4, 1));
+    });
+  }
+  for (auto& t : threads) t.join();
+  for (int t = 0; t < 4; ++t) {
+    EXPECT_EQ(got[t][0].view_id, static_cast<view_id_t>(5 + t));
+    EXPECT_EQ(got[t][0].distance, 0.0);
+  }
+}
+
+TEST(Searcher, BadInputs) {
+  const Searcher searcher(TestDatabase());
+  const std::vector<Point2f> empty;
+  auto res = searcher.Search(empty, Options());
+  ASSERT_FALSE(res.ok());
+  EXPECT_EQ(res.status().code(), StatusCode::kInvalidArgument);
+  const std::vector<Point2f> nan = {{0, 0}, {std::nanf(""), 1}};
+  res = searcher.Search(nan, Options());
+  ASSERT_FALSE(res.ok());
+  EXPECT_EQ(res.status().code(), StatusCode::kInvalidArgument);
+  const std::vector<Point2f> far = {{0, 0}, {1e6f, 1}};
+  EXPECT_FALSE(searcher.Search(far, Options()).ok());
+  SearchOptions bad = Options();
+  bad.top_k = -3;
+  res = searcher.Search(RolledView(*TestDatabase(), 0, 0), bad);
+  ASSERT_FALSE(res.ok());
+  EXPECT_EQ(res.status().code(), StatusCode::kInvalidArgument);
+}
+
+TEST(Searcher, MissingDatabaseDirectory) {
+  const auto res = Searcher::Open("/nonexistent/handdb-db");
+  ASSERT_FALSE(res.ok());
+  EXPECT_EQ(res.status().code(), StatusCode::kNotFound);
+}
+
+}  // namespace
+}  // namespace handdb
