@@ -9,5 +9,7 @@ constexpr int kExitError = 1;
 constexpr int kExitUsage = 2;
 
 int RunVersion(int argc, char** argv);
+int RunPlan(int argc, char** argv);    // cli/generate_commands.cc
+int RunRender(int argc, char** argv);  // cli/generate_commands.cc
 
 }  // namespace handdb::cli

@@ -22,6 +22,8 @@ struct Command {
 const std::vector<Command>& Commands() {
   static const std::vector<Command> kCommands = {
       {"version", RunVersion, "print the handdb version"},
+      {"plan", RunPlan, "turn a generation config into a render plan (shapes x view directions, units)"},
+      {"render", RunRender, "render a plan's units with parallel Blender workers (resumable)"},
   };
   return kCommands;
 }
