@@ -136,3 +136,22 @@ def test_fibonacci_directions_are_unit_and_spread():
     d = np.array(testplan.fibonacci_directions(86))
     assert np.allclose(np.linalg.norm(d, axis=1), 1.0)
     assert abs(d.mean(axis=0)).max() < 0.02
+
+
+def test_render_entry_point_rejects_a_bad_plan_before_starting(tmp_path, small_plan):
+    """render.py's run() validates the plan (schema + semantics) before it needs bpy."""
+    import argparse
+
+    import render
+
+    if not os.path.exists(os.path.join(planlib.SCHEMA_DIR, "render_plan.schema.json")):
+        pytest.skip("render_plan.schema.json not present")
+    small_plan["units"][0]["renders"][0]["joints"][3] = 7.0  # outside the schema's joint range
+    p = write(tmp_path, small_plan)
+    args = argparse.Namespace(plan=p, unit=0, out=str(tmp_path), frames_per_process=0, timing=False)
+    with pytest.raises(RenderError, match=r"/units/0/renders/0/joints/3"):
+        render.run(args)
+    args.unit = 1
+    with pytest.raises(RenderError, match=r"frames-per-process"):
+        render.run(argparse.Namespace(**dict(vars(args), frames_per_process=-1)))
+    assert not os.path.exists(tmp_path / "units")
