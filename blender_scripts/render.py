@@ -6,9 +6,8 @@
 Per render item: units/uNNNNN/rNNNNNN.exr (multilayer float EXR: IndexMA = link id, Depth) and
 rNNNNNN.json (sidecar), each written to a temp name and renamed; items with both files are
 skipped; units/uNNNNN/DONE is written last. Prints `rendered <render_id>` per finished item.
-With --frames-per-process N the script re-executes Blender (same pid, fresh memory) after every
-N renders until the unit is complete, capping leaks in long units.
-Exit 0: unit complete. Exit 1: `handdb-render: <problem>` on stderr. Exit 2: bad usage.
+Exit 0: unit complete. Exit 3: stopped after --frames-per-process renders, items left (run
+again). Exit 1: `handdb-render: <problem>` on stderr. Exit 2: bad usage.
 """
 
 import argparse
@@ -23,7 +22,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from handdb_blender import plan as planlib  # noqa: E402
 from handdb_blender.errors import RenderError  # noqa: E402
 
-RESTART = "restart"  # run() result: N renders done, items left -> re-exec Blender
+EXIT_INCOMPLETE = 3
 
 
 def parse_args(argv):
@@ -34,7 +33,7 @@ def parse_args(argv):
     p.add_argument("--unit", required=True, type=int, help="unit id to render")
     p.add_argument("--out", required=True, help="run directory (units/uNNNNN/ is created inside)")
     p.add_argument("--frames-per-process", type=int, default=0,
-                   help="re-execute Blender after every N renders (fresh process, same pid; 0: never)")
+                   help="render at most N items, then exit 3 if items are left (0: no limit)")
     p.add_argument("--timing", action="store_true", help="print a timing line (setup/update/render) at the end")
     return p.parse_args(argv)
 
@@ -130,9 +129,7 @@ def run(args) -> int:
         print(f"timing setup_s={t_setup:.3f} update_s={t_update:.3f} render_s={t_render:.3f} renders={count}",
               flush=True)
     if planlib.pending_items(out_dir, unit):
-        if args.frames_per_process and count > 0:
-            return RESTART
-        raise RenderError(f"{udir}: items still missing after rendering")
+        return EXIT_INCOMPLETE
     planlib.write_json_atomic(done, {"unit": unit["id"], "renders": len(unit["renders"]),
                                      "blender_version": blender_version, "script_version": planlib.SCRIPT_VERSION})
     return 0
@@ -146,12 +143,6 @@ def main() -> None:
         os._exit(e.code if isinstance(e.code, int) else 2)
     try:
         code = run(args)
-        if code == RESTART:
-            import bpy
-
-            sys.stdout.flush()
-            sys.stderr.flush()
-            os.execv(bpy.app.binary_path, [bpy.app.binary_path] + sys.argv[1:])
     except RenderError as e:
         print(f"handdb-render: {e}", file=sys.stderr, flush=True)
         code = 1

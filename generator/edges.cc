@@ -26,7 +26,7 @@ JointPairs DefaultJointPairs() {
 
 bool EdgeOptions::Check() const {
   CHECK_OPTION(std::isfinite(depth_jump));
-  CHECK_OPTION_GT(depth_jump, 0.0f);
+  CHECK_OPTION_GT(depth_jump, 0.0);
   return true;
 }
 

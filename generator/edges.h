@@ -54,7 +54,7 @@ struct EdgeOptions {
   bool occlusion_edges = true;
   // Depth difference (scene units of the Depth pass, metres for the shipped hand) above which a
   // joint-pair border is an occlusion edge.
-  float depth_jump = 0.005f;
+  double depth_jump = 0.005;
   bool Check() const;
 };
 

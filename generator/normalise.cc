@@ -98,8 +98,26 @@ Result<Normalisation> ComputeNormalisation(std::span<const EdgePixel> contour) {
   norm.end_b = best_b;
   norm.diameter = std::sqrt(static_cast<double>(best));
   norm.scale = static_cast<double>(kNormalisedDiameter) / norm.diameter;
-  norm.centre_x = 0.5 * (best_a.col + best_b.col) + 0.5;
-  norm.centre_y = 0.5 * (best_a.row + best_b.row) + 0.5;
+  // Centre: the area centroid of the convex hull. Like the diameter it is rotation-equivariant
+  // and computable from any point set that contains the silhouette's extreme points (a query's
+  // edge points too), but it moves continuously with the shape: the diameter's midpoint jumps
+  // when two nearly equal diameters swap (measured: docs/conversion.md).
+  double area2 = 0, cx = 0, cy = 0;
+  for (size_t i = 0; i < hull.size() && hull.size() >= 3; ++i) {
+    const EdgePixel& p = hull[i];
+    const EdgePixel& q = hull[(i + 1) % hull.size()];
+    const double cross = static_cast<double>(p.col) * q.row - static_cast<double>(q.col) * p.row;
+    area2 += cross;
+    cx += (p.col + q.col) * cross;
+    cy += (p.row + q.row) * cross;
+  }
+  if (area2 != 0) {
+    norm.centre_x = cx / (3.0 * area2) + 0.5;
+    norm.centre_y = cy / (3.0 * area2) + 0.5;
+  } else {  // collinear contour: the hull is a segment
+    norm.centre_x = 0.5 * (best_a.col + best_b.col) + 0.5;
+    norm.centre_y = 0.5 * (best_a.row + best_b.row) + 0.5;
+  }
   return norm;
 }
 

@@ -1,8 +1,9 @@
 // The normalised frame shards store (docs/conventions.md, docs/conversion.md): translate so the
-// midpoint of the silhouette's diameter is the origin, scale so the diameter is exactly
-// kNormalisedDiameter (192 px), quantise to PointQ (1/16 px). The diameter is the largest
-// distance between two contour points (the silhouette edge pixel centres), found with a convex
-// hull and rotating calipers in O(n log n), in exact integer arithmetic.
+// area centroid of the silhouette's convex hull is the origin, scale so the silhouette's diameter
+// is exactly kNormalisedDiameter (192 px), quantise to PointQ (1/16 px). The diameter is the
+// largest distance between two contour points (the silhouette edge pixel centres), found with a
+// convex hull and rotating calipers in O(n log n), in exact integer arithmetic. Both need only the
+// contour's extreme points, so a query's edge pixels normalise the same way.
 #pragma once
 
 #include <array>
@@ -21,7 +22,7 @@ struct Normalisation {
   double centre_y = 0;
   double diameter = 0;  // rendered px
   double scale = 0;     // normalised px per rendered px = kNormalisedDiameter / diameter
-  EdgePixel end_a{};    // the diameter's end points (pixels)
+  EdgePixel end_a{};    // the diameter's end points (pixels); the centre is the hull's centroid
   EdgePixel end_b{};
 };
 
