@@ -49,6 +49,13 @@ void AppendCommonDirectives(const SlurmGenerateLayout& layout,
   for (const auto& arg : options.sbatch_args) s << "#SBATCH " << arg << "\n";
 }
 
+// Words as a bash array body: 'a' 'b c'.
+std::string QuoteWords(const std::vector<std::string>& words) {
+  std::string out;
+  for (const auto& w : words) out += (out.empty() ? "" : " ") + ShellQuote(w);
+  return out;
+}
+
 void AppendSetup(const SlurmOptions& options, std::ostringstream& s) {
   if (options.setup.empty()) return;
   s << "# Site setup (handdb generate --slurm-setup):\n" << options.setup;
@@ -156,6 +163,8 @@ std::string GenerateArrayScript(const SlurmGenerateLayout& layout, const SlurmOp
   s << "DB_DIR=" << ShellQuote(layout.db_dir.string()) << "\n";
   s << "LOG_DIR=" << ShellQuote(layout.log_dir().string()) << "\n";
   s << "FAILED_DIR=" << ShellQuote(layout.failed_dir().string()) << "\n";
+  s << "RENDER_ARGS=(" << QuoteWords(layout.render_args) << ")\n";
+  s << "CONVERT_ARGS=(" << QuoteWords(layout.convert_args) << ")\n";
   s << R"SH(unit=$(( ${1:-0} + SLURM_ARRAY_TASK_ID ))
 name=$(printf 'u%05d' "$unit")
 task="${SLURM_ARRAY_JOB_ID}_${SLURM_ARRAY_TASK_ID}"
@@ -170,9 +179,9 @@ fail() {
 trap 'fail "killed by SIGTERM (time limit reached or job cancelled)"' TERM
 )SH";
   AppendSetup(options, s);
-  s << R"SH("$HANDDB" unit render "$RUN_DIR/plan.json" --unit "$unit" --out "$RUN_DIR" --db "$DB_DIR" --quiet ||
+  s << R"SH("$HANDDB" unit render "$RUN_DIR/plan.json" --unit "$unit" --out "$RUN_DIR" --quiet "${RENDER_ARGS[@]}" ||
   fail "exit code $? from handdb unit render"
-"$HANDDB" unit convert "$RUN_DIR" --unit "$unit" --out "$DB_DIR" --quiet ||
+"$HANDDB" unit convert "$RUN_DIR" --unit "$unit" --out "$DB_DIR" --quiet "${CONVERT_ARGS[@]}" ||
   fail "exit code $? from handdb unit convert"
 rm -f "$FAILED_DIR/$name"
 echo "=== unit $unit: done at $(date -u +%Y-%m-%dT%H:%M:%SZ)"
@@ -194,10 +203,11 @@ std::string GenerateFinalScript(const SlurmGenerateLayout& layout, const SlurmOp
   s << "HANDDB=" << ShellQuote(layout.handdb.string()) << "\n";
   s << "RUN_DIR=" << ShellQuote(layout.run_dir.string()) << "\n";
   s << "DB_DIR=" << ShellQuote(layout.db_dir.string()) << "\n";
+  s << "CONVERT_ARGS=(" << QuoteWords(layout.convert_args) << ")\n";
   s << R"SH(echo "=== finalize: Slurm job $SLURM_JOB_ID on $(hostname) at $(date -u +%Y-%m-%dT%H:%M:%SZ)"
 )SH";
   AppendSetup(options, s);
-  s << R"SH("$HANDDB" unit finalize "$RUN_DIR" --out "$DB_DIR" --quiet
+  s << R"SH("$HANDDB" unit finalize "$RUN_DIR" --out "$DB_DIR" --quiet "${CONVERT_ARGS[@]}"
 rc=$?
 echo "=== finalize: exit code $rc at $(date -u +%Y-%m-%dT%H:%M:%SZ)"
 exit $rc
@@ -403,6 +413,7 @@ Status WriteSubmissionRecord(const std::filesystem::path& path, const SlurmSubmi
   nlohmann::json j;
   j["format"] = "handdb-slurm-jobs";
   j["version"] = 1;
+  j["db_dir"] = sub.db_dir;
   j["array_job_ids"] = sub.array_job_ids;
   j["chunk_bases"] = sub.chunk_bases;
   j["final_job_id"] = sub.final_job_id;
@@ -421,6 +432,7 @@ Result<SlurmSubmission> ReadSubmissionRecord(const std::filesystem::path& path) 
                     path.string() + ": not a handdb Slurm job record (format field)");
     }
     SlurmSubmission sub;
+    sub.db_dir = j.at("db_dir").get<std::string>();
     sub.array_job_ids = j.at("array_job_ids").get<std::vector<std::string>>();
     sub.chunk_bases = j.at("chunk_bases").get<std::vector<uint32_t>>();
     sub.final_job_id = j.at("final_job_id").get<std::string>();
@@ -448,6 +460,7 @@ Result<SlurmSubmission> SubmitGenerateJobs(const SlurmGenerateLayout& layout,
       WriteFileAtomic(layout.final_script(), GenerateFinalScript(layout, options)));
 
   SlurmSubmission sub;
+  sub.db_dir = layout.db_dir.string();
   sub.units = units;
   std::sort(sub.units.begin(), sub.units.end());
   sub.units.erase(std::unique(sub.units.begin(), sub.units.end()), sub.units.end());

@@ -72,6 +72,11 @@ struct SlurmGenerateLayout {
   std::filesystem::path run_dir;    // RUN_DIR: plan.json, units/
   std::filesystem::path db_dir;     // DB_DIR: shards, manifest
   std::filesystem::path slurm_dir;  // scripts, logs, failure markers, jobs.json
+  // Extra arguments, passed verbatim: to `handdb unit render` (e.g. --blender PATH) and to
+  // `handdb unit convert` / `unit finalize` (edge options, --skip-bad), so every task converts
+  // exactly as a local `handdb generate` with the same options would.
+  std::vector<std::string> render_args;
+  std::vector<std::string> convert_args;
 
   std::filesystem::path array_script() const { return slurm_dir / "generate-array.sbatch"; }
   std::filesystem::path final_script() const { return slurm_dir / "generate-final.sbatch"; }
@@ -140,6 +145,7 @@ bool IsFinishedJobState(const std::string& state);
 // A previous or new submission, recorded in slurm/jobs.json so a re-run can tell whether jobs
 // are still running and a report can name their Slurm ids.
 struct SlurmSubmission {
+  std::string db_dir;                                     // the database the jobs build
   std::vector<std::string> array_job_ids;                 // one per chunk
   std::vector<uint32_t> chunk_bases;                      // parallel to array_job_ids
   std::string final_job_id;                               // empty in a dry run

@@ -229,6 +229,44 @@ TEST(Slurm, ArrayScriptRecordsFailureAndClearsItOnSuccess) {
   EXPECT_NE(log2.find("=== unit 7: done"), std::string::npos);
 }
 
+// The per-task commands get the render and convert arguments as separate words, spaces kept.
+TEST(Slurm, ArrayScriptPassesArgumentsVerbatim) {
+  TempDir tmp;
+  const fs::path echo_args = tmp.path() / "echo-args";
+  ASSERT_TRUE(WriteFileAtomic(echo_args, "#!/bin/sh\nprintf '[%s]' \"$@\"; echo\n").ok());
+  fs::permissions(echo_args, fs::perms::owner_all);
+  auto layout = LayoutIn(tmp.path(), echo_args);
+  layout.render_args = {"--blender", "/opt/my blender/blender"};
+  layout.convert_args = {"--occlusion-edges", "off", "--skip-bad"};
+  ASSERT_TRUE(SubmitGenerateJobs(layout, SlurmOptions{}, {3}, true).ok());
+  auto r = RunCommand({"env",
+                       "SLURM_ARRAY_JOB_ID=5",
+                       "SLURM_ARRAY_TASK_ID=3",
+                       "bash",
+                       layout.array_script().string(),
+                       "0"});
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->exit_code, 0);
+  const std::string log = Slurp(layout.UnitLog(3));
+  const std::string run_dir = layout.run_dir.string();
+  EXPECT_NE(log.find("[unit][render][" + run_dir + "/plan.json][--unit][3][--out][" + run_dir +
+                     "][--quiet][--blender][/opt/my blender/blender]\n"),
+            std::string::npos)
+      << log;
+  EXPECT_NE(log.find("[unit][convert][" + run_dir + "][--unit][3][--out][" +
+                     layout.db_dir.string() + "][--quiet][--occlusion-edges][off][--skip-bad]\n"),
+            std::string::npos)
+      << log;
+  // The final job passes the convert arguments too.
+  r = RunCommand({"env", "SLURM_JOB_ID=6", "bash", layout.final_script().string()});
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->exit_code, 0);
+  EXPECT_NE(r->out.find("[unit][finalize][" + run_dir + "][--out][" + layout.db_dir.string() +
+                        "][--quiet][--occlusion-edges][off][--skip-bad]\n"),
+            std::string::npos)
+      << r->out;
+}
+
 TEST(Slurm, DryRunWritesScriptsAndCommandsWithoutSubmitting) {
   TempDir tmp;
   SlurmOptions options;
@@ -287,6 +325,7 @@ TEST(Slurm, SubmissionRecordRoundTrip) {
   sub.array_job_ids = {"12", "13"};
   sub.chunk_bases = {0, 1001};
   sub.final_job_id = "14";
+  sub.db_dir = "/shared/db";
   sub.units = {1, 2, 1003};
   sub.sbatch_commands = {{"sbatch", "--parsable", "x"}};
   ASSERT_TRUE(WriteSubmissionRecord(tmp.path() / "jobs.json", sub).ok());
@@ -295,6 +334,7 @@ TEST(Slurm, SubmissionRecordRoundTrip) {
   EXPECT_EQ(back->array_job_ids, sub.array_job_ids);
   EXPECT_EQ(back->chunk_bases, sub.chunk_bases);
   EXPECT_EQ(back->final_job_id, "14");
+  EXPECT_EQ(back->db_dir, "/shared/db");
   EXPECT_EQ(back->units, sub.units);
   ASSERT_TRUE(WriteFileAtomic(tmp.path() / "bad.json", "{\"format\": \"x\"}").ok());
   auto bad = ReadSubmissionRecord(tmp.path() / "bad.json");
