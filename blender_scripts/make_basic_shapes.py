@@ -35,7 +35,7 @@ def ab(f, a):
 TH_FIST = (45, 5, 45, 30)      # thumb over the curled fingers
 TH_PALM = (55, 15, 60, 50)     # thumb folded across the palm (asl-4, B)
 TH_OUT = (-15, 10, 0, 0)       # thumb out to the side
-TH_UP = (20, -5, -15, -10)     # thumb straight up, along the fingers (thumbs-up)
+TH_UP = (35, -10, -15, -10)    # thumb straight up, along the fingers (thumbs-up)
 
 S = {}
 S["flat"] = shape((0, 0, 0, 0), ab(STRAIGHT, -5), ab(STRAIGHT, 0), ab(STRAIGHT, -5), ab(STRAIGHT, -8))
