@@ -11,5 +11,12 @@ constexpr int kExitUsage = 2;
 int RunVersion(int argc, char** argv);
 int RunPlan(int argc, char** argv);    // cli/generate_commands.cc
 int RunRender(int argc, char** argv);  // cli/generate_commands.cc
+int RunConvert(int argc, char** argv);   // cli/convert_commands.cc
+int RunGenerate(int argc, char** argv);  // cli/convert_commands.cc
+int RunShow(int argc, char** argv);      // cli/convert_commands.cc
+int RunInfo(int argc, char** argv);      // cli/format_commands.cc
+int RunValidate(int argc, char** argv);  // cli/format_commands.cc
+int RunTestset(int argc, char** argv);   // cli/evaluate_commands.cc
+int RunEvaluate(int argc, char** argv);  // cli/evaluate_commands.cc
 
 }  // namespace handdb::cli

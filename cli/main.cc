@@ -24,6 +24,13 @@ const std::vector<Command>& Commands() {
       {"version", RunVersion, "print the handdb version"},
       {"plan", RunPlan, "turn a generation config into a render plan (shapes x view directions, units)"},
       {"render", RunRender, "render a plan's units with parallel Blender workers (resumable)"},
+      {"convert", RunConvert, "convert a render dir into a database: shards + manifest (resumable)"},
+      {"generate", RunGenerate, "config -> plan -> render -> convert -> validate, one command (resumable)"},
+      {"show", RunShow, "draw a stored view's edges (any roll, optional keypoints) as a PNG"},
+      {"info", RunInfo, "print a shard's header, sections and metadata, or a database summary"},
+      {"validate", RunValidate, "check shards or databases completely (exit 1 on any problem)"},
+      {"testset", RunTestset, "plan and render a held-out test set with ground truth (labels + photos)"},
+      {"evaluate", RunEvaluate, "score a database on a test set: Table 1, success@(d,n), keypoint error, q/s"},
   };
   return kCommands;
 }

@@ -77,8 +77,9 @@ class ShardReader {
   uint64_t point_offset(size_t i) const;           // index into all_points()
 
   // Sequential streaming mode: calls fn for every view in file order, advising the kernel that
-  // the views and points are read sequentially (MADV_SEQUENTIAL + read-ahead windows), so a scan
-  // of a shard larger than the page cache streams at disk speed. Stops at fn's first error.
+  // the views and points are read sequentially (MADV_SEQUENTIAL: aggressive read-ahead, pages
+  // dropped behind), so a scan of a shard larger than the page cache streams at disk speed.
+  // Stops at fn's first error.
   Status ScanViews(const ViewCallback& fn, const ScanOptions& options = {}) const;
 
   // The whole file (the mapping or the caller's memory).

@@ -487,7 +487,7 @@ ValidationReport ValidateDatabase(const fs::path& db_dir, const ValidateOptions&
       }
     }
     ValidationReport shard_report = ValidateBytes(bytes, file, options, &seen);
-    progress.Add(manifest.ok() ? shard_report.views : 1);
+    progress.Add(manifest.ok() ? entry->views : 1);
     report.Append(std::move(shard_report));
   }
   progress.Finish();
