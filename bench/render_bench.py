@@ -14,6 +14,7 @@ script), so start-up cost per render = bare start / unit size.
 import argparse
 import json
 import os
+import resource
 import shutil
 import subprocess
 import sys
@@ -64,6 +65,7 @@ def main():
         json.dump(plan, f)
 
     start_s = bare_start(args.blender)
+    ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     queue = [u["id"] for u in plan["units"]]
     running = {}
     per_unit = []
@@ -89,6 +91,8 @@ def main():
             per_unit.append(t)
         time.sleep(0.02)
     total_s = time.perf_counter() - t0
+    ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu_s = (ru1.ru_utime - ru0.ru_utime) + (ru1.ru_stime - ru0.ru_stime)
     renders = sum(int(t["renders"]) for t in per_unit)
     cpu_sum = {k: sum(t[k] for t in per_unit) for k in ("setup_s", "update_s", "render_s", "wall_s")}
     # Start-up = process wall time not spent in our script's setup, update and render loop.
@@ -105,6 +109,10 @@ def main():
             "scene_update": round(1e3 * cpu_sum["update_s"] / renders, 2),
             "cycles_render_and_write": round(1e3 * cpu_sum["render_s"] / renders, 2),
         },
+        "cpu_s": round(cpu_s, 2),
+        "cpu_ms_per_render": round(1e3 * cpu_s / renders, 2),
+        # What J busy cores would give if nothing else ran: renders / (CPU time / J).
+        "cpu_bound_renders_per_s": round(renders / (cpu_s / args.jobs), 1),
         "load_average": os.getloadavg()[0],
     }
     if not args.out:
@@ -119,6 +127,8 @@ def main():
     pr = result["per_render_ms"]
     print(f"  per render (process time, summed over jobs): start-up {pr['blender_start']:.1f} ms, scene setup "
           f"{pr['scene_setup']:.1f} ms, update {pr['scene_update']:.1f} ms, Cycles+EXR {pr['cycles_render_and_write']:.1f} ms")
+    print(f"  CPU time {cpu_s:.1f} s = {1e3 * cpu_s / renders:.1f} ms/render -> {result['cpu_bound_renders_per_s']:.0f} "
+          f"renders/s if {args.jobs} cores were free (wall-clock above is what this run got)")
     print(f"  load average at the end: {result['load_average']:.2f} (other work on the machine slows this)")
 
 

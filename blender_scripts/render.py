@@ -6,8 +6,9 @@
 Per render item: units/uNNNNN/rNNNNNN.exr (multilayer float EXR: IndexMA = link id, Depth) and
 rNNNNNN.json (sidecar), each written to a temp name and renamed; items with both files are
 skipped; units/uNNNNN/DONE is written last. Prints `rendered <render_id>` per finished item.
-Exit 0: unit complete. Exit 3: stopped after --frames-per-process renders, items left (run
-again). Exit 1: `handdb-render: <problem>` on stderr. Exit 2: bad usage.
+With --frames-per-process N the script re-executes Blender (same pid, fresh memory) after every
+N renders until the unit is complete, capping leaks in long units.
+Exit 0: unit complete. Exit 1: `handdb-render: <problem>` on stderr. Exit 2: bad usage.
 """
 
 import argparse
@@ -22,7 +23,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from handdb_blender import plan as planlib  # noqa: E402
 from handdb_blender.errors import RenderError  # noqa: E402
 
-EXIT_INCOMPLETE = 3
+RESTART = "restart"  # run() result: N renders done, items left -> re-exec Blender
 
 
 def parse_args(argv):
@@ -33,7 +34,7 @@ def parse_args(argv):
     p.add_argument("--unit", required=True, type=int, help="unit id to render")
     p.add_argument("--out", required=True, help="run directory (units/uNNNNN/ is created inside)")
     p.add_argument("--frames-per-process", type=int, default=0,
-                   help="render at most N items, then exit 3 if items are left (0: no limit)")
+                   help="re-execute Blender after every N renders (fresh process, same pid; 0: never)")
     p.add_argument("--timing", action="store_true", help="print a timing line (setup/update/render) at the end")
     return p.parse_args(argv)
 
@@ -129,7 +130,9 @@ def run(args) -> int:
         print(f"timing setup_s={t_setup:.3f} update_s={t_update:.3f} render_s={t_render:.3f} renders={count}",
               flush=True)
     if planlib.pending_items(out_dir, unit):
-        return EXIT_INCOMPLETE
+        if args.frames_per_process and count > 0:
+            return RESTART
+        raise RenderError(f"{udir}: items still missing after rendering")
     planlib.write_json_atomic(done, {"unit": unit["id"], "renders": len(unit["renders"]),
                                      "blender_version": blender_version, "script_version": planlib.SCRIPT_VERSION})
     return 0
@@ -143,6 +146,12 @@ def main() -> None:
         os._exit(e.code if isinstance(e.code, int) else 2)
     try:
         code = run(args)
+        if code == RESTART:
+            import bpy
+
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os.execv(bpy.app.binary_path, [bpy.app.binary_path] + sys.argv[1:])
     except RenderError as e:
         print(f"handdb-render: {e}", file=sys.stderr, flush=True)
         code = 1

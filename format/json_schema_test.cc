@@ -143,7 +143,15 @@ TEST(JsonSchema, UnknownEmbeddedSchemaIsAProgrammingError) {
 TEST(JsonSchema, EveryEmbeddedSchemaLoads) {
   // Each shipped schema parses and uses only supported keywords (validation of some document
   // forces the load; the result itself does not matter here).
-  for (const char* name : {"manifest.schema.json"}) {
+  for (const char* name : {"manifest.schema.json",
+                           "hand_model.schema.json",
+                           "shapes.schema.json",
+                           "render_sidecar.schema.json",
+                           "config.schema.json",
+                           "render_plan.schema.json",
+                           "testset_config.schema.json",
+                           "testset_plan.schema.json",
+                           "testset.schema.json"}) {
     ASSERT_FALSE(EmbeddedSchema(name).empty()) << name;
     EXPECT_NO_THROW((void)ValidateJson(json::object(), name, name)) << name;
   }

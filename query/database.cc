@@ -4,7 +4,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-#include "format/json_schema.h"
+#include "format/manifest.h"
 #include "format/shard_reader.h"
 
 namespace handdb {
@@ -70,46 +70,26 @@ Result<Database> Database::Open(const std::filesystem::path& dir, bool verify_ch
   if (!std::filesystem::is_directory(dir, ec)) {
     return Status(StatusCode::kNotFound, dir.string() + ": not a database directory");
   }
-  const std::filesystem::path manifest_path = dir / "manifest.json";
-  Result<nlohmann::json> manifest = ReadJsonFile(manifest_path, "manifest.schema.json");
+  Result<Manifest> manifest = ReadManifest(dir);
   if (!manifest.ok()) return manifest.status();
-  const nlohmann::json& m = *manifest;
-  auto bad = [&](const std::string& what) {
-    return Status(StatusCode::kSchemaViolation, manifest_path.string() + ": " + what);
-  };
-  uint64_t rolls = 0;
-  for (const char* key : {"rolls", "num_rolls"}) {
-    if (m.contains(key) && m[key].is_number_unsigned()) rolls = m[key].get<uint64_t>();
-  }
-  if (rolls < 1 || rolls > 1u << 20) return bad("missing or invalid roll count");
-  if (!m.contains("shards") || !m["shards"].is_array()) return bad("missing shard list");
-
   Database db;
   db.path_ = dir;
-  db.num_rolls_ = static_cast<uint32_t>(rolls);
-  for (const nlohmann::json& entry : m["shards"]) {
-    std::string file;
-    uint64_t expected_views = UINT64_MAX;
-    if (entry.is_string()) {
-      file = entry.get<std::string>();
-    } else if (entry.is_object()) {
-      for (const char* key : {"file", "path", "name"}) {
-        if (entry.contains(key) && entry[key].is_string()) file = entry[key].get<std::string>();
-      }
-      if (entry.contains("num_views") && entry["num_views"].is_number_unsigned()) {
-        expected_views = entry["num_views"].get<uint64_t>();
-      }
-    }
-    if (file.empty() || file.find('/') != std::string::npos) {
-      return bad("shard entry without a plain file name: " + entry.dump());
-    }
-    Result<ShardReader> reader = ShardReader::Open(dir / file);
+  db.num_rolls_ = manifest->rolls;
+  db.shape_names_ = ShapeNamesFromMetadata(manifest->metadata.dump());
+  for (const ManifestShard& entry : manifest->shards) {
+    const std::filesystem::path path = dir / entry.file;
+    Result<ShardReader> reader = ShardReader::Open(path);
     if (!reader.ok()) return reader.status();
     if (verify_checksums) HANDDB_RETURN_IF_ERROR(reader->VerifyChecksums());
-    if (expected_views != UINT64_MAX && reader->num_views() != expected_views) {
+    const ShardHeaderInfo& header = reader->header();
+    if (reader->num_views() != entry.views || header.num_points != entry.points ||
+        header.file_size != entry.bytes) {
       return Status(StatusCode::kSizeMismatch,
-                    (dir / file).string() + ": has " + std::to_string(reader->num_views()) +
-                        " views, the manifest says " + std::to_string(expected_views));
+                    path.string() + ": has " + std::to_string(reader->num_views()) + " views, " +
+                        std::to_string(header.num_points) + " points, " +
+                        std::to_string(header.file_size) + " bytes; the manifest says " +
+                        std::to_string(entry.views) + ", " + std::to_string(entry.points) + ", " +
+                        std::to_string(entry.bytes));
     }
     const uint32_t shard_index = static_cast<uint32_t>(db.shards_.size());
     auto owned = std::make_unique<ShardReader>(std::move(reader).value());
@@ -118,10 +98,12 @@ Result<Database> Database::Open(const std::filesystem::path& dir, bool verify_ch
       db.views_.push_back({shard_index, static_cast<uint32_t>(i), owned->points(i)});
       db.num_points_ += db.views_.back().points.size();
     }
-    db.size_bytes_ += owned->header().file_size;
+    db.size_bytes_ += header.file_size;
     db.shards_.push_back(std::move(owned));
   }
-  if (db.views_.size() >= kInvalidViewId) return bad("too many views");
+  if (db.views_.size() >= kInvalidViewId) {
+    return Status(StatusCode::kOutOfRange, dir.string() + ": too many views");
+  }
   return db;
 }
 

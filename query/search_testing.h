@@ -91,6 +91,92 @@ inline Database SyntheticDatabase(uint32_t num_views,
   return Database::FromMemory(std::move(labels), std::move(points), num_rolls, std::move(names));
 }
 
+// A hand-like edge set for (shape, direction) of a shapes x directions grid, normalised like the
+// database (diameter of the point set 192 px, centred on the diameter's midpoint): a palm
+// outline and five fingers (two sides and a tip each) whose lengths depend on the shape's "curl"
+// and whose projection depends on the direction (foreshortening and in-plane turn), so
+// neighbouring directions of one shape look alike, as in a rendered database. About n points.
+inline std::vector<PointQ> SyntheticHandEdges(uint32_t shape,
+                                              uint32_t direction,
+                                              uint32_t num_directions,
+                                              size_t n) {
+  std::mt19937 shape_rng(shape * 131u + 7u);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  struct Seg {
+    double x0, y0, x1, y1;
+  };
+  std::vector<Seg> segs;
+  // Palm: an octagon-ish outline.
+  const int palm_sides = 10;
+  const double pw = 40, ph = 46;
+  for (int k = 0; k < palm_sides; ++k) {
+    const double t0 = 2 * M_PI * k / palm_sides, t1 = 2 * M_PI * (k + 1) / palm_sides;
+    segs.push_back({pw * std::cos(t0), ph * std::sin(t0), pw * std::cos(t1), ph * std::sin(t1)});
+  }
+  // Fingers: thumb on the side, four fanned on top (y up = negative y).
+  const double base_angle[5] = {-2.5, -1.95, -1.66, -1.40, -1.15};
+  const double base_len[5] = {55, 70, 78, 72, 58};
+  for (int f = 0; f < 5; ++f) {
+    const double curl = u(shape_rng);
+    const double spread = 0.25 * (u(shape_rng) - 0.5);
+    const double len = base_len[f] * (1.0 - 0.75 * curl);
+    const double a = base_angle[f] + spread;
+    const double bx = 0.9 * pw * std::cos(a), by = 0.9 * ph * std::sin(a);
+    const double dx = std::cos(a), dy = std::sin(a);
+    const double w = f == 0 ? 9 : 7.5;
+    const double nx = -dy * w, ny = dx * w;
+    const double tx = bx + dx * len, ty = by + dy * len;
+    segs.push_back({bx + nx, by + ny, tx + nx, ty + ny});
+    segs.push_back({bx - nx, by - ny, tx - nx, ty - ny});
+    segs.push_back({tx + nx, ty + ny, tx - nx, ty - ny});
+    if (curl > 0.4) segs.push_back({bx + nx, by + ny, bx - nx, by - ny});  // a crease
+  }
+  // Direction: Fibonacci sphere point -> foreshortening along x and an in-plane turn.
+  const double golden = M_PI * (3.0 - std::sqrt(5.0));
+  const double z = 1.0 - 2.0 * (direction + 0.5) / num_directions;
+  const double phi = golden * direction;
+  const double squash = 0.35 + 0.65 * std::fabs(z);
+  const double c = std::cos(phi), s = std::sin(phi);
+  auto project = [&](double x, double y) {
+    x *= squash;
+    return std::pair<double, double>(c * x - s * y, s * x + c * y);
+  };
+  double total = 0;
+  for (const Seg& g : segs) total += std::hypot(g.x1 - g.x0, g.y1 - g.y0);
+  std::vector<std::pair<double, double>> pts;
+  for (const Seg& g : segs) {
+    const double len = std::hypot(g.x1 - g.x0, g.y1 - g.y0);
+    const int m = std::max(1, static_cast<int>(std::lround(len / total * static_cast<double>(n))));
+    for (int j = 0; j < m; ++j) {
+      const double t = (j + 0.5) / m;
+      pts.push_back(project(g.x0 + t * (g.x1 - g.x0), g.y0 + t * (g.y1 - g.y0)));
+    }
+  }
+  // Normalise: diameter 192, centre at its midpoint.
+  double best = -1;
+  size_t ia = 0, ib = 0;
+  for (size_t i = 0; i < pts.size(); ++i) {
+    for (size_t j = i + 1; j < pts.size(); ++j) {
+      const double d = std::hypot(pts[i].first - pts[j].first, pts[i].second - pts[j].second);
+      if (d > best) {
+        best = d;
+        ia = i;
+        ib = j;
+      }
+    }
+  }
+  const double scale = kNormalisedDiameter / best;
+  const double cx = 0.5 * (pts[ia].first + pts[ib].first);
+  const double cy = 0.5 * (pts[ia].second + pts[ib].second);
+  std::vector<PointQ> out;
+  out.reserve(pts.size());
+  for (const auto& [x, y] : pts) {
+    out.push_back({static_cast<int16_t>(std::lround((x - cx) * scale * kPointScale)),
+                   static_cast<int16_t>(std::lround((y - cy) * scale * kPointScale))});
+  }
+  return out;
+}
+
 // The points of virtual view (v, r) in px: canonical points rolled (format/roll.h).
 inline std::vector<Point2f> RolledView(const Database& db, view_id_t v, roll_id_t r) {
   std::vector<Point2f> out;

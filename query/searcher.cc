@@ -103,6 +103,13 @@ float FloatBelow(double x) {
   return f;
 }
 
+// The largest partial sum over n terms that can still give known + sum / n <= threshold, with
+// slack so rounding never abandons a pair that ties the threshold; negative: already above.
+double Limit(double threshold, double known, double n) {
+  if (threshold == kInf) return kInf;
+  return (threshold - known) * n * (1 + kAbandonSlack) + kAbandonSlack;
+}
+
 // Per-query state shared by the workers.
 class QueryContext {
  public:
@@ -112,8 +119,7 @@ class QueryContext {
         query_(query),
         rolled_(db.num_rolls()),
         query_trees_(db.num_rolls()),
-        view_trees_(db.num_views()),
-        view_tree_once_(new std::once_flag[db.num_views()]) {}
+        caches_(ResolveThreadCount(options.num_threads)) {}
 
   // The query rotated by -angle(r) and quantised, and a kd-tree over it.
   void PrepareRoll(roll_id_t r) {
@@ -122,32 +128,45 @@ class QueryContext {
   }
   std::span<const PointQ> rolled(roll_id_t r) const { return rolled_[r]; }
 
-  const KdTree& ViewTree(view_id_t v) {
-    std::call_once(view_tree_once_[v], [&] {
-      view_trees_[v] = std::make_unique<KdTree>(db_.points(v), options_.kdtree);
-      num_view_trees_.fetch_add(1, std::memory_order_relaxed);
-    });
-    return *view_trees_[v];
+  // The kd-tree over view v's points from worker `worker`'s cache. Pairs are visited in
+  // increasing bound and the rolls of one view have similar bounds, so a small per-worker LRU
+  // cache catches the reuse while memory stays bounded (a tree over 600 points is ~10 KB;
+  // caching every refined view cost ~1x the database size on the paper-size benchmark).
+  const KdTree& ViewTree(view_id_t v, int worker) {
+    auto& cache = caches_[worker];
+    for (size_t i = 0; i < cache.size(); ++i) {
+      if (cache[i].first == v) {
+        std::rotate(cache.begin(), cache.begin() + i, cache.begin() + i + 1);
+        return *cache.front().second;
+      }
+    }
+    if (cache.size() == kTreeCacheSize) cache.pop_back();
+    cache.emplace(cache.begin(), v, std::make_unique<KdTree>(db_.points(v), options_.kdtree));
+    num_view_trees_.fetch_add(1, std::memory_order_relaxed);
+    return *cache.front().second;
   }
 
   // Exact D_c of (v, r); returns false (abandoned) once it provably exceeds `threshold`.
-  bool Score(view_id_t v, roll_id_t r, double threshold, Scored* out) {
+  // `lower_bound` <= B(v, r) (0 if unknown): A goes first, abandoned as soon as
+  // lower_bound + partial A exceeds the threshold, then B, abandoned once A + partial B does.
+  bool Score(
+      view_id_t v, roll_id_t r, double threshold, double lower_bound, int worker, Scored* out) {
     const std::span<const PointQ> view = db_.points(v);
     const std::span<const PointQ> q = rolled_[r];
     const double nv = static_cast<double>(view.size());
     const double nq = static_cast<double>(q.size());
     bool stopped = false;
-    const double sum_b =
-        query_trees_[r]->SumNearestDistances(view, threshold * nv * (1 + kAbandonSlack), &stopped);
-    if (stopped) return false;
-    const double b = sum_b / nv;
-    const double limit_a =
-        threshold == kInf ? kInf : (threshold - b) * nq * (1 + kAbandonSlack) + kAbandonSlack;
+    const double limit_a = Limit(threshold, lower_bound, nq);
     if (limit_a < 0) return false;
-    const double sum_a = ViewTree(v).SumNearestDistances(q, limit_a, &stopped);
+    const double sum_a = ViewTree(v, worker).SumNearestDistances(q, limit_a, &stopped);
     if (stopped) return false;
-    out->a = sum_a / nq;
-    out->b = b;
+    const double a = sum_a / nq;
+    const double limit_b = Limit(threshold, a, nv);
+    if (limit_b < 0) return false;
+    const double sum_b = query_trees_[r]->SumNearestDistances(view, limit_b, &stopped);
+    if (stopped) return false;
+    out->a = a;
+    out->b = sum_b / nv;
     out->distance = out->a + out->b;
     out->view = v;
     out->roll = r;
@@ -162,8 +181,8 @@ class QueryContext {
   std::span<const Point2f> query_;
   std::vector<std::vector<PointQ>> rolled_;
   std::vector<std::unique_ptr<KdTree>> query_trees_;
-  std::vector<std::unique_ptr<KdTree>> view_trees_;
-  std::unique_ptr<std::once_flag[]> view_tree_once_;
+  static constexpr size_t kTreeCacheSize = 8;
+  std::vector<std::vector<std::pair<view_id_t, std::unique_ptr<KdTree>>>> caches_;
   std::atomic<uint64_t> num_view_trees_{0};
 };
 
@@ -241,11 +260,11 @@ Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
     });
     local.seconds_bounds = Seconds(start);
     const auto refine_start = std::chrono::steady_clock::now();
-    ParallelFor(threads, num_views, [&](size_t v, int) {
+    ParallelFor(threads, num_views, [&](size_t v, int worker) {
       if (db.points(static_cast<view_id_t>(v)).empty()) return true;
       for (roll_id_t r = 0; r < num_rolls; ++r) {
         Scored s;
-        ctx.Score(static_cast<view_id_t>(v), r, kInf, &s);
+        ctx.Score(static_cast<view_id_t>(v), r, kInf, 0.0, worker, &s);
         top.Insert(s);
       }
       refined.fetch_add(num_rolls, std::memory_order_relaxed);
@@ -289,7 +308,7 @@ Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
       return bound[x] != bound[y] ? bound[x] < bound[y] : x < y;
     };
     auto visit = [&](std::span<const uint32_t> order) {
-      ParallelFor(threads, order.size(), [&](size_t i, int) {
+      ParallelFor(threads, order.size(), [&](size_t i, int worker) {
         const uint32_t idx = order[i];
         const double threshold = top.threshold();
         if (bound[idx] > threshold) return false;  // every later pair has a larger bound
@@ -297,7 +316,7 @@ Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
         const roll_id_t r = static_cast<roll_id_t>(idx / num_views);
         refined.fetch_add(1, std::memory_order_relaxed);
         Scored s;
-        if (ctx.Score(v, r, threshold, &s)) {
+        if (ctx.Score(v, r, threshold, bound[idx], worker, &s)) {
           s.lower_bound = bound[idx];
           top.Insert(s);
         } else {
@@ -306,19 +325,27 @@ Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
         return true;
       });
     };
-    std::vector<uint32_t> ids;
-    ids.reserve(n);
+    // The k smallest bounds with a bounded max-heap (no N-sized index array).
+    std::vector<uint32_t> first;
+    first.reserve(k + 1);
     for (uint32_t i = 0; i < n; ++i) {
-      if (std::isfinite(bound[i])) ids.push_back(i);
+      if (!std::isfinite(bound[i])) continue;
+      if (first.size() < k) {
+        first.push_back(i);
+        std::push_heap(first.begin(), first.end(), by_bound);
+      } else if (by_bound(i, first.front())) {
+        std::pop_heap(first.begin(), first.end(), by_bound);
+        first.back() = i;
+        std::push_heap(first.begin(), first.end(), by_bound);
+      }
     }
-    const size_t first = std::min(k, ids.size());
-    std::nth_element(ids.begin(), ids.begin() + first, ids.end(), by_bound);
-    std::sort(ids.begin(), ids.begin() + first, by_bound);
-    visit(std::span<const uint32_t>(ids.data(), first));
+    std::sort(first.begin(), first.end(), by_bound);
+    visit(first);
     const double t0 = top.threshold();
     std::vector<uint32_t> rest;
-    for (size_t i = first; i < ids.size(); ++i) {
-      if (bound[ids[i]] <= t0) rest.push_back(ids[i]);
+    const uint32_t last_first = first.empty() ? 0 : first.back();
+    for (uint32_t i = 0; i < n; ++i) {
+      if (bound[i] <= t0 && (first.empty() || by_bound(last_first, i))) rest.push_back(i);
     }
     std::sort(rest.begin(), rest.end(), by_bound);
     visit(rest);

@@ -1,0 +1,157 @@
+// `handdb evaluate DB TESTSET`: runs every test view of a held-out test set (generator/testset.h,
+// schemas/testset.schema.json) through the real search and scores the matches with the rules of
+// query/eval_metrics.h (docs/evaluation.md):
+//  - the paper's Table 1: how many test views have their highest-ranking correct match at rank 1,
+//    2-4, 5-16, 17-64, 65-256, 257-1024, > 1024;
+//  - success@(d, n) for n = 1, 10, 100 over a grid of joint distances d;
+//  - root-relative 3D keypoint error (hand sizes) of the top-1 match and of the best of the top 10;
+//  - queries per second.
+// Ranks are exact: each query is first searched for the top `first_k` (the timed search); when a
+// criterion has no correct match among them, the query is searched again for the top `max_rank`,
+// which the pruned search also returns exactly, so a rank is either exact or "> max_rank".
+//
+// This library knows nothing of images: the caller turns a test view into query edge points (the
+// CLI uses the converter for clean label renders and the photo path for photos).
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "format/roll.h"
+#include "format/status.h"
+#include "query/eval_metrics.h"
+#include "query/searcher.h"
+
+namespace handdb {
+
+// One held-out test view's ground truth.
+struct TestView {
+  uint32_t id = 0;
+  bool basic = false;  // a named basic shape
+  std::string shape_name;
+  PoseForEval truth;            // joints, view direction, camera roll, normalised keypoints
+  std::filesystem::path label;  // label EXR (absolute)
+  std::filesystem::path photo;  // photo PNG (absolute; empty if none)
+};
+
+struct TestSet {
+  std::filesystem::path dir;
+  std::string name;
+  uint64_t seed = 0;
+  std::string hand_model_sha256;
+  HandAxes axes;
+  bool clutter = false;
+  std::vector<TestView> views;
+};
+
+// Reads DIR/testset.json (or the JSON file itself), schema-checked; errors name the file.
+Result<TestSet> ReadTestSet(const std::filesystem::path& dir_or_file);
+
+enum class QueryInput { kClean, kPhoto };
+const char* QueryInputName(QueryInput input);
+
+// Turns a test view into query edge points in the normalised frame (px). An error (e.g. no hand
+// found in a photo) is recorded for that view, which then counts as having no correct match.
+using QueryPointsFn = std::function<Result<std::vector<Point2f>>(const TestView&)>;
+
+struct EvaluationOptions {
+  CorrectnessOptions correctness;                        // the main criterion (Table 1)
+  std::vector<double> d_grid_deg = {5, 10, 15, 20, 30};  // success@(d, n) for each d
+  std::vector<int64_t> success_n = {1, 10, 100};
+  int first_k = 100;                  // depth of the timed search
+  int64_t max_rank = kMaxBinnedRank;  // exact ranks up to this (Table 1 needs 1024)
+  int num_threads = -1;               // search threads
+  int max_views = 0;                  // evaluate only the first N test views (0: all)
+  bool progress = true;
+  bool Check() const;
+};
+
+// A criterion's name and its rules; `basic_only` criteria skip PCA-sampled test views.
+struct Criterion {
+  std::string name;
+  CorrectnessOptions options;
+  bool basic_only = false;
+};
+// The criteria an evaluation scores: [0] the main one, then "same-shape" (basic views, the paper's
+// rule), then one per d of the grid ("d=15").
+std::vector<Criterion> MakeCriteria(const EvaluationOptions& options);
+
+struct MatchBrief {
+  view_id_t view_id = kInvalidViewId;
+  roll_id_t roll = 0;
+  double distance = 0;
+  std::string shape_name;
+  CorrectnessDetail detail;  // against the main criterion
+};
+
+struct ViewOutcome {
+  uint32_t test_id = 0;
+  bool basic = false;
+  std::string shape_name;
+  std::string error;           // query could not be made (empty: fine)
+  std::vector<int64_t> ranks;  // per criterion; kNoCorrectMatch = none within max_rank;
+                               // -1 = criterion does not apply to this view
+  double top1_keypoint_error = std::numeric_limits<double>::quiet_NaN();
+  double best10_keypoint_error = std::numeric_limits<double>::quiet_NaN();
+  std::optional<MatchBrief> top1;
+  double input_seconds = 0;   // image -> query points
+  double search_seconds = 0;  // the timed top-first_k search
+  bool deep_search = false;   // a second search for the rank was needed
+  size_t num_query_points = 0;
+  std::vector<Point2f> query_points;  // for example sheets
+};
+
+struct SuccessCell {
+  std::string criterion;
+  double d_deg = 0;
+  int64_t n = 0;
+  double rate = 0;  // over the views the criterion applies to
+  int64_t views = 0;
+};
+
+struct EvaluationReport {
+  std::string database;
+  uint64_t database_views = 0;
+  uint32_t database_rolls = 0;
+  uint64_t database_virtual_views = 0;
+  std::string testset;
+  uint64_t testset_seed = 0;
+  QueryInput input = QueryInput::kClean;
+  EvaluationOptions options;
+  std::vector<Criterion> criteria;
+  std::vector<ViewOutcome> views;
+  std::vector<RankTable> tables;  // per criterion (views the criterion applies to)
+  std::vector<SuccessCell> success;
+  Summary top1_keypoint_error;
+  Summary best10_keypoint_error;
+  int64_t failed_inputs = 0;  // views whose query could not be made
+  int64_t deep_searches = 0;
+  double search_seconds = 0;  // sum of timed searches
+  double input_seconds = 0;
+  double wall_seconds = 0;
+  double queries_per_second = 0;             // timed searches only
+  double end_to_end_queries_per_second = 0;  // input + timed search
+  int threads = 0;
+};
+
+Result<EvaluationReport> Evaluate(const Searcher& searcher,
+                                  const TestSet& testset,
+                                  QueryInput input,
+                                  const QueryPointsFn& query_points,
+                                  const EvaluationOptions& options);
+
+nlohmann::json ReportToJson(const EvaluationReport& report);
+std::string ReportToText(const EvaluationReport& report);
+
+// rank_histogram.png, keypoint_error_cdf.png, successes.png, failures.png in `dir`.
+Status WriteReportPlots(const EvaluationReport& report,
+                        const Searcher& searcher,
+                        const TestSet& testset,
+                        const std::filesystem::path& dir);
+
+}  // namespace handdb
