@@ -473,10 +473,14 @@ SkippedView MakeSkipped(const RunContext& ctx,
 
 }  // namespace
 
-Result<ConvertSummary> ConvertRenderDir(const fs::path& render_dir,
-                                        const fs::path& db_dir,
-                                        const ConvertOptions& options,
-                                        std::vector<SkippedView>* bad) {
+namespace {
+
+// ConvertRenderDir, or with `complete` only the check which shards would be kept.
+Result<ConvertSummary> ConvertOrCheck(const fs::path& render_dir,
+                                      const fs::path& db_dir,
+                                      const ConvertOptions& options,
+                                      std::vector<SkippedView>* bad,
+                                      std::vector<bool>* complete) {
   THROW_CHECK(options.Check());
   const auto start = std::chrono::steady_clock::now();
   const int threads = options.num_threads > 0
@@ -515,9 +519,21 @@ Result<ConvertSummary> ConvertRenderDir(const fs::path& render_dir,
   OIIO::attribute("exr_threads", -1);
 
   std::vector<UnitState> units(ctx.plan.units.size());
+  std::vector<bool> selected(units.size(), options.units.empty());
+  for (uint32_t id : options.units) {
+    if (id >= units.size()) {
+      return Status(StatusCode::kOutOfRange,
+                    plan_path.string() + ": no unit " + std::to_string(id) + " (the plan has " +
+                        std::to_string(units.size()) + ")");
+    }
+    selected[id] = true;
+  }
   for (size_t u = 0; u < units.size(); ++u) {
     UnitState& st = units[u];
     st.unit = &ctx.plan.units[u];
+    st.shard_path = db_dir / ShardFileName(st.unit->id);
+    st.key = ConversionKey(ctx, st.unit->id, options.edges);
+    if (!selected[u] || complete != nullptr) continue;
     const fs::path unit_dir = render_dir / "units" / UnitDirName(st.unit->id);
     std::error_code ec;
     if (!fs::exists(unit_dir / "DONE", ec)) {
@@ -526,15 +542,22 @@ Result<ConvertSummary> ConvertRenderDir(const fs::path& render_dir,
                         ": render unit is incomplete (no DONE marker); render it "
                         "first (handdb render)");
     }
-    st.shard_path = db_dir / ShardFileName(st.unit->id);
-    st.key = ConversionKey(ctx, st.unit->id, options.edges);
   }
 
   // Shards already done on an earlier run.
   HANDDB_RETURN_IF_ERROR(ParallelFor(units.size(), threads, options.cancel, [&](size_t u) {
-    units[u].kept = KeepExistingShard(&units[u], options.skip_bad);
+    if (selected[u]) units[u].kept = KeepExistingShard(&units[u], options.skip_bad);
     return Status::Ok();
   }));
+  if (complete != nullptr) {
+    complete->assign(units.size(), false);
+    for (size_t u = 0; u < units.size(); ++u) (*complete)[u] = units[u].kept;
+    return ConvertSummary{};
+  }
+  // Units outside options.units are left as they are.
+  for (size_t u = 0; u < units.size(); ++u) {
+    if (!selected[u]) units[u].kept = true;
+  }
 
   // Checking pass: convert every view of the units to (re)write, keep results in memory up to
   // the budget, collect every bad view.
@@ -678,9 +701,12 @@ Result<ConvertSummary> ConvertRenderDir(const fs::path& render_dir,
       {"labels", label_names},
       {"shapes", shapes}};
   ConvertSummary summary;
-  summary.units_total = static_cast<uint32_t>(units.size());
+  summary.units_total =
+      static_cast<uint32_t>(options.units.empty() ? units.size() : options.units.size());
   summary.rolls = manifest.rolls;
-  for (UnitState& st : units) {
+  for (size_t u = 0; u < units.size(); ++u) {
+    if (!selected[u]) continue;
+    UnitState& st = units[u];
     manifest.shards.push_back(st.manifest_shard);
     (st.kept ? summary.shards_kept : summary.shards_written)++;
     summary.views += st.manifest_shard.views;
@@ -692,9 +718,28 @@ Result<ConvertSummary> ConvertRenderDir(const fs::path& render_dir,
     }
   }
   manifest.UpdateTotals();
-  HANDDB_RETURN_IF_ERROR(WriteManifest(db_dir, manifest));
+  // The manifest lists every shard: only a run over all units writes it.
+  if (options.units.empty()) HANDDB_RETURN_IF_ERROR(WriteManifest(db_dir, manifest));
   summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return summary;
+}
+
+}  // namespace
+
+Result<ConvertSummary> ConvertRenderDir(const fs::path& render_dir,
+                                        const fs::path& db_dir,
+                                        const ConvertOptions& options,
+                                        std::vector<SkippedView>* bad) {
+  return ConvertOrCheck(render_dir, db_dir, options, bad, nullptr);
+}
+
+Result<std::vector<bool>> FindCompleteShards(const fs::path& render_dir,
+                                             const fs::path& db_dir,
+                                             const ConvertOptions& options) {
+  std::vector<bool> complete;
+  auto checked = ConvertOrCheck(render_dir, db_dir, options, nullptr, &complete);
+  if (!checked.ok()) return checked.status();
+  return complete;
 }
 
 }  // namespace handdb

@@ -75,6 +75,9 @@ struct ConvertOptions {
   // many bytes; units beyond it are converted again when written (same result, more time).
   uint64_t memory_budget_bytes = uint64_t{2} << 30;
   const std::atomic<bool>* cancel = nullptr;  // optional: stop early with kCancelled
+  // Convert only these units (empty: all); the others are neither checked nor touched, and no
+  // manifest is written (the per-unit step of a Slurm array task, `handdb unit convert`).
+  std::vector<uint32_t> units;
   bool Check() const;
 };
 
@@ -105,6 +108,13 @@ Result<ConvertSummary> ConvertRenderDir(const std::filesystem::path& render_dir,
                                         const std::filesystem::path& db_dir,
                                         const ConvertOptions& options,
                                         std::vector<SkippedView>* bad = nullptr);
+
+// Per unit of RENDER_DIR's plan: whether DB_DIR already holds its complete shard, i.e. one that
+// ConvertRenderDir with these options would keep (present, intact, same inputs and options).
+// Renders need not be complete. This is what `handdb generate --slurm` resubmits from.
+Result<std::vector<bool>> FindCompleteShards(const std::filesystem::path& render_dir,
+                                             const std::filesystem::path& db_dir,
+                                             const ConvertOptions& options);
 
 // "shard-00007.hdb"
 std::string ShardFileName(uint32_t unit_id);

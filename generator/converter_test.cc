@@ -408,6 +408,45 @@ TEST_F(ConvertDir, IncompleteUnitIsAnError) {
   EXPECT_FALSE(fs::exists(root_ / "db" / "manifest.json"));
 }
 
+// The Slurm path (handdb unit convert / finalize): units converted one at a time, then a whole
+// run writes the manifest; the result equals one whole run byte for byte.
+TEST_F(ConvertDir, OneUnitAtATimeEqualsTheWholeRun) {
+  const fs::path db = root_ / "db";
+  fs::remove(UnitDir(2) / "DONE");
+  auto none = FindCompleteShards(run_, db, Options(1));
+  ASSERT_TRUE(none.ok()) << none.status().ToString();  // renders need not be complete
+  EXPECT_EQ(*none, (std::vector<bool>{false, false, false}));
+  for (uint32_t u : {1u, 0u}) {
+    ConvertOptions one = Options(1);
+    one.units = {u};
+    auto s = ConvertRenderDir(run_, db, one);
+    ASSERT_TRUE(s.ok()) << s.status().ToString();
+    EXPECT_EQ(s->units_total, 1u);
+    EXPECT_EQ(s->shards_written, 1u);
+    EXPECT_EQ(s->views, plan_.units[u].renders.size());
+  }
+  EXPECT_FALSE(fs::exists(db / "manifest.json"));
+  EXPECT_EQ(*FindCompleteShards(run_, db, Options(1)), (std::vector<bool>{true, true, false}));
+  ConvertOptions other_edges = Options(1);
+  other_edges.edges.occlusion_edges = false;  // shards made with other options do not count
+  EXPECT_EQ(*FindCompleteShards(run_, db, other_edges), (std::vector<bool>{false, false, false}));
+
+  ConvertOptions bad_unit = Options(1);
+  bad_unit.units = {3};
+  EXPECT_EQ(ConvertRenderDir(run_, db, bad_unit).status().code(), StatusCode::kOutOfRange);
+  ConvertOptions unit2 = Options(1);
+  unit2.units = {2};
+  EXPECT_EQ(ConvertRenderDir(run_, db, unit2).status().code(), StatusCode::kNotFound);
+  ASSERT_TRUE(WriteFileAtomic(UnitDir(2) / "DONE", "").ok());
+  ASSERT_TRUE(ConvertRenderDir(run_, db, unit2).ok());
+
+  auto final_run = ConvertRenderDir(run_, db, Options(2));
+  ASSERT_TRUE(final_run.ok()) << final_run.status().ToString();
+  EXPECT_EQ(final_run->shards_kept, 3u);
+  ASSERT_TRUE(ConvertRenderDir(run_, root_ / "whole", Options(2)).ok());
+  EXPECT_EQ(ReadDir(db), ReadDir(root_ / "whole"));
+}
+
 TEST(ConvertOptions, Check) {
   ConvertOptions ok;
   EXPECT_TRUE(ok.Check());
