@@ -14,6 +14,7 @@ int RunRender(int argc, char** argv);  // cli/generate_commands.cc
 int RunConvert(int argc, char** argv);   // cli/convert_commands.cc
 int RunGenerate(int argc, char** argv);  // cli/convert_commands.cc
 int RunShow(int argc, char** argv);      // cli/convert_commands.cc
+int RunUnit(int argc, char** argv);      // cli/slurm_commands.cc
 int RunInfo(int argc, char** argv);      // cli/format_commands.cc
 int RunValidate(int argc, char** argv);  // cli/format_commands.cc
 int RunTestset(int argc, char** argv);   // cli/evaluate_commands.cc

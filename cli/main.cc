@@ -26,6 +26,7 @@ const std::vector<Command>& Commands() {
       {"render", RunRender, "render a plan's units with parallel Blender workers (resumable)"},
       {"convert", RunConvert, "convert a render dir into a database: shards + manifest (resumable)"},
       {"generate", RunGenerate, "config -> plan -> render -> convert -> validate, one command (resumable)"},
+      {"unit", RunUnit, "one unit's render/convert, finalize, status: the Slurm array tasks' work"},
       {"show", RunShow, "draw a stored view's edges (any roll, optional keypoints) as a PNG"},
       {"info", RunInfo, "print a shard's header, sections and metadata, or a database summary"},
       {"validate", RunValidate, "check shards or databases completely (exit 1 on any problem)"},
