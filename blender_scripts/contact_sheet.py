@@ -9,7 +9,6 @@ and colour-maps the label images (one hue per finger, darker towards the tip, sh
 
 import argparse
 import json
-import math
 import os
 import shutil
 import subprocess

@@ -8,10 +8,9 @@ Per render only the pose bones and the camera change (persistent data keeps the 
 
 from __future__ import annotations
 
-import math
 import os
 import warnings
-from typing import Dict, List, Sequence
+from typing import Sequence
 
 import bpy
 import mathutils

@@ -1,7 +1,6 @@
 """The committed hand model and basic shapes: schema-valid and consistent with conventions."""
 
 import json
-import math
 
 import jsonschema
 import numpy as np
