@@ -135,6 +135,8 @@ int RunRender(int argc, char** argv) {
               {"seconds", std::round(s.seconds * 1000) / 1000}};
     std::printf("%s\n", j.dump(2).c_str());
   } else if (!quiet) {
+    char rate_text[48] = "";
+    if (rate > 0) std::snprintf(rate_text, sizeof(rate_text), " (%.1f renders/s)", rate);
     std::fprintf(
         stderr,
         "render: %u units (%u rendered, %u already done, %u retries), %llu/%llu renders in "
@@ -146,10 +148,7 @@ int RunRender(int argc, char** argv) {
         static_cast<unsigned long long>(s.renders_done),
         static_cast<unsigned long long>(s.renders_total),
         s.seconds,
-        rate > 0 ? (" (" + std::to_string(static_cast<int>(rate * 10) / 10.0).substr(0, 5) +
-                    " renders/s)")
-                       .c_str()
-                 : "");
+        rate_text);
   }
   return kExitOk;
 }
