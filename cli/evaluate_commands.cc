@@ -1,0 +1,304 @@
+// `handdb testset` and `handdb evaluate` (issue 6, docs/evaluation.md): render held-out test views
+// with ground truth, and score a database's retrieval on them (the paper's Table 1,
+// success@(d, n), keypoint error, queries per second).
+#include <signal.h>
+
+#include <CLI/CLI.hpp>
+#include <atomic>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "cli/commands.h"
+#include "format/atomic_file.h"
+#include "format/json_schema.h"
+#include "format/manifest.h"
+#include "generator/converter.h"
+#include "generator/exr_io.h"
+#include "generator/testset.h"
+#include "query/evaluate.h"
+#include "query/searcher.h"
+
+namespace handdb::cli {
+namespace {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+constexpr int kExitInterrupted = 130;
+
+int Parse(CLI::App& app, int argc, char** argv) {
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e) == 0 ? kExitOk : kExitUsage;
+  }
+  return -1;
+}
+
+int Fail(const char* cmd, const Status& status) {
+  std::fprintf(stderr, "handdb %s: %s\n", cmd, status.message().c_str());
+  return status.code() == StatusCode::kCancelled ? kExitInterrupted : kExitError;
+}
+
+std::atomic<bool> g_cancel{false};
+void OnSignal(int) { g_cancel = true; }
+
+// SIGINT/SIGTERM set g_cancel for the scope's lifetime.
+class CancelOnSignal {
+ public:
+  CancelOnSignal() {
+    g_cancel = false;
+    struct sigaction sa {};
+    sa.sa_handler = OnSignal;
+    sigemptyset(&sa.sa_mask);
+    sigaction(SIGINT, &sa, &old_int_);
+    sigaction(SIGTERM, &sa, &old_term_);
+  }
+  ~CancelOnSignal() {
+    sigaction(SIGINT, &old_int_, nullptr);
+    sigaction(SIGTERM, &old_term_, nullptr);
+  }
+  CancelOnSignal(const CancelOnSignal&) = delete;
+  CancelOnSignal& operator=(const CancelOnSignal&) = delete;
+
+ private:
+  struct sigaction old_int_ {};
+  struct sigaction old_term_ {};
+};
+
+// The generation seed and hand-model hash a database records, if it does (searched in the
+// manifest's metadata where the converter puts the plan's config).
+const json* FindKey(const json& j, const std::string& key, int depth = 0) {
+  if (!j.is_object() || depth > 3) return nullptr;
+  if (auto it = j.find(key); it != j.end()) return &*it;
+  for (const auto& [k, v] : j.items()) {
+    if (const json* found = FindKey(v, key, depth + 1)) return found;
+  }
+  return nullptr;
+}
+
+}  // namespace
+
+int RunTestset(int argc, char** argv) {
+  CLI::App app(
+      "Plan and render a held-out test set (schemas/testset_config.schema.json): hand shapes "
+      "sampled in the PCA shape space plus a share of basic shapes, view directions uniform on "
+      "the sphere, random camera rolls. Each view is rendered as a label EXR + sidecar (clean "
+      "input) and a photo-like PNG (skin material, lights, plain or --clutter background); "
+      "DIR/testset.json holds the ground truth and is written last. Resumable.",
+      "handdb testset");
+  std::string config_path;
+  std::string out;
+  bool clutter = false;
+  bool no_photos = false;
+  bool quiet = false;
+  bool as_json = false;
+  int threads = -1;
+  TestSetRenderOptions options;
+  options.jobs = 2;
+  std::string blender;
+  app.add_option("config", config_path, "test-set config JSON (e.g. configs/testset-demo.json)")
+      ->required();
+  app.add_option("--out", out, "test-set directory")->required();
+  app.add_flag("--clutter", clutter, "photos on a procedurally textured background");
+  app.add_flag("--no-photos", no_photos, "label renders only (clean input)");
+  app.add_option("-j,--jobs", options.jobs, "parallel Blender processes")
+      ->check(CLI::Range(1, 256))
+      ->capture_default_str();
+  app.add_option("--threads", threads, "threads for the ground-truth conversion (-1: all cores)");
+  app.add_option("--blender", blender, "Blender executable (default: $HANDDB_BLENDER, else PATH)");
+  app.add_flag("-q,--quiet", quiet, "no progress");
+  app.add_flag("--json", as_json, "print a JSON summary on stdout");
+  if (int rc = Parse(app, argc, argv); rc >= 0) return rc;
+
+  auto config = ReadJsonFile(config_path, "testset_config.schema.json");
+  if (!config.ok()) return Fail("testset", config.status());
+  auto plan = MakeTestSetPlan(*config, config_path, clutter);
+  if (!plan.ok()) return Fail("testset", plan.status());
+  std::error_code ec;
+  fs::create_directories(out, ec);
+  if (ec) return Fail("testset", Status(StatusCode::kIoError, out + ": " + ec.message()));
+  const fs::path plan_path = fs::path(out) / "testset_plan.json";
+  if (fs::exists(plan_path)) {
+    auto existing = ReadJsonFile(plan_path, "");
+    if (!existing.ok()) return Fail("testset", existing.status());
+    if (*existing != *plan) {
+      return Fail("testset",
+                  Status(StatusCode::kInvalidArgument,
+                         plan_path.string() +
+                             ": holds a different test-set plan (other config or --clutter); use "
+                             "a new --out directory"));
+    }
+  } else {
+    Status s = WriteJsonFileAtomic(plan_path, *plan);
+    if (!s.ok()) return Fail("testset", s);
+  }
+
+  CancelOnSignal signals;
+  options.blender = blender;
+  options.photos = !no_photos;
+  options.progress = !quiet;
+  options.cancel = &g_cancel;
+  auto rendered = RenderTestSet(out, options);
+  if (!rendered.ok()) return Fail("testset", rendered.status());
+  Status truth = WriteTestSetGroundTruth(out, threads, !quiet);
+  if (!truth.ok()) return Fail("testset", truth);
+  const size_t count = plan->at("items").size();
+  if (as_json) {
+    json j = {{"out", out},
+              {"views", count},
+              {"units", rendered->units_total},
+              {"units_rendered", rendered->units_rendered},
+              {"units_skipped", rendered->units_skipped},
+              {"photos", !no_photos},
+              {"clutter", plan->at("photo").at("clutter")},
+              {"render_seconds", rendered->seconds}};
+    std::printf("%s\n", j.dump(2).c_str());
+  } else if (!quiet) {
+    std::fprintf(stderr,
+                 "testset: %zu views in %u units (%u rendered, %u already done) in %.1f s; "
+                 "ground truth %s\n",
+                 count,
+                 rendered->units_total,
+                 rendered->units_rendered,
+                 rendered->units_skipped,
+                 rendered->seconds,
+                 (fs::path(out) / "testset.json").c_str());
+  }
+  return kExitOk;
+}
+
+int RunEvaluate(int argc, char** argv) {
+  CLI::App app(
+      "Score a database on a held-out test set: the paper's Table 1 (rank of the highest-ranking "
+      "correct match in 1, 2-4, 5-16, 17-64, 65-256, 257-1024, >1024), success@(d, n) for n = 1, "
+      "10, 100, root-relative 3D keypoint error of the top-1 match and the best of the top 10, "
+      "and queries per second. A match is correct when its joint vector is within d of the truth, "
+      "its view direction within 30 deg and its roll within 30 deg (docs/evaluation.md).",
+      "handdb evaluate");
+  std::string db_dir;
+  std::string testset_path;
+  std::string input = "clean";
+  std::string json_out;
+  std::string plots_dir;
+  std::string distance = "rms";
+  std::string roll_compare = "aligned";
+  EvaluationOptions options;
+  bool quiet = false;
+  app.add_option("db", db_dir, "database directory (manifest.json + shards)")->required();
+  app.add_option("testset", testset_path, "test-set directory (or its testset.json)")->required();
+  app.add_option("--input", input, "query from the clean label render or the photo")
+      ->check(CLI::IsMember({"clean", "photo"}))
+      ->capture_default_str();
+  app.add_option("--json", json_out, "write the full report (schemas/evaluation.schema.json)");
+  app.add_option("--plots", plots_dir, "write PNG plots and example sheets into this directory");
+  app.add_option("--threads", options.num_threads, "search threads (-1: all cores)")
+      ->capture_default_str();
+  app.add_option(
+         "--d", options.correctness.max_joint_distance_deg, "joint distance threshold d (deg)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  app.add_option("--distance", distance, "joint distance: rms, max or mean of the 20 differences")
+      ->check(CLI::IsMember({"rms", "max", "mean"}))
+      ->capture_default_str();
+  app.add_option(
+         "--max-direction", options.correctness.max_direction_deg, "view direction threshold (deg)")
+      ->check(CLI::Range(0.0, 180.0))
+      ->capture_default_str();
+  app.add_option("--max-roll", options.correctness.max_roll_deg, "roll threshold (deg)")
+      ->check(CLI::Range(0.0, 180.0))
+      ->capture_default_str();
+  app.add_option("--roll-compare", roll_compare, "aligned (cameras) or label (camera_roll values)")
+      ->check(CLI::IsMember({"aligned", "label"}))
+      ->capture_default_str();
+  app.add_flag(
+      "--same-shape",
+      options.correctness.same_shape,
+      "main criterion: basic-shape test views need the same basic shape (the paper's rule)");
+  app.add_option("--first-k", options.first_k, "depth of the timed search")
+      ->check(CLI::Range(10, 100000))
+      ->capture_default_str();
+  app.add_option("--max-rank", options.max_rank, "exact ranks up to this depth")
+      ->check(CLI::Range(10, 1000000))
+      ->capture_default_str();
+  app.add_option("--limit", options.max_views, "evaluate only the first N test views")
+      ->check(CLI::NonNegativeNumber);
+  app.add_flag("-q,--quiet", quiet, "no progress, no text report");
+  if (int rc = Parse(app, argc, argv); rc >= 0) return rc;
+  options.correctness.joint_distance = *ParseJointDistanceKind(distance);
+  options.correctness.roll_compare =
+      roll_compare == "aligned" ? RollCompare::kAligned : RollCompare::kLabel;
+  options.progress = !quiet;
+  if (options.max_rank < options.first_k) {
+    std::fprintf(stderr, "handdb evaluate: --max-rank must be at least --first-k\n");
+    return kExitUsage;
+  }
+
+  auto testset = ReadTestSet(testset_path);
+  if (!testset.ok()) return Fail("evaluate", testset.status());
+  auto searcher = Searcher::Open(db_dir);
+  if (!searcher.ok()) return Fail("evaluate", searcher.status());
+  if (auto manifest = ReadManifest(db_dir); manifest.ok()) {
+    const json* seed = FindKey(manifest->metadata, "seed");
+    if (seed != nullptr && seed->is_number_unsigned() && seed->get<uint64_t>() == testset->seed) {
+      std::fprintf(stderr,
+                   "handdb evaluate: warning: the test set and the database share seed %llu\n",
+                   static_cast<unsigned long long>(testset->seed));
+    }
+    const json* sha = FindKey(manifest->metadata, "hand_model_sha256");
+    if (sha != nullptr && sha->is_string() &&
+        sha->get<std::string>() != testset->hand_model_sha256) {
+      std::fprintf(stderr,
+                   "handdb evaluate: warning: the test set was rendered with another hand model "
+                   "(sha256 %s) than the database (%s)\n",
+                   testset->hand_model_sha256.c_str(),
+                   sha->get<std::string>().c_str());
+    }
+  }
+
+  const QueryInput query_input = input == "clean" ? QueryInput::kClean : QueryInput::kPhoto;
+  QueryPointsFn points_fn;
+  if (query_input == QueryInput::kClean) {
+    // The label render through the database's own conversion (edges, normalisation).
+    points_fn = [](const TestView& view) -> Result<std::vector<Point2f>> {
+      auto image = ReadLabelExr(view.label, ExrReadOptions{});
+      if (!image.ok()) return image.status();
+      fs::path sidecar_path = view.label;
+      sidecar_path.replace_extension(".json");
+      auto sidecar = ReadSidecar(sidecar_path);
+      if (!sidecar.ok()) return sidecar.status();
+      auto converted = ConvertView(*image, *sidecar, ViewConversionOptions{}, view.label.string());
+      if (!converted.ok()) return converted.status();
+      std::vector<Point2f> points;
+      points.reserve(converted->points.size());
+      for (const PointQ& p : converted->points)
+        points.push_back({PointQToPx(p.x), PointQToPx(p.y)});
+      return points;
+    };
+  } else {
+    return Fail("evaluate",
+                Status(StatusCode::kInvalidArgument,
+                       "--input photo: the photo query path is not available yet"));
+  }
+
+  auto report = Evaluate(**searcher, *testset, query_input, points_fn, options);
+  if (!report.ok()) return Fail("evaluate", report.status());
+  if (!quiet) std::printf("%s", ReportToText(*report).c_str());
+  if (!json_out.empty()) {
+    const json doc = ReportToJson(*report);
+    Status s = ValidateJson(doc, "evaluation.schema.json", json_out);
+    if (s.ok()) s = WriteJsonFileAtomic(json_out, doc);
+    if (!s.ok()) return Fail("evaluate", s);
+  }
+  if (!plots_dir.empty()) {
+    Status s = WriteReportPlots(*report, **searcher, *testset, plots_dir);
+    if (!s.ok()) return Fail("evaluate", s);
+  }
+  return kExitOk;
+}
+
+}  // namespace handdb::cli
