@@ -111,17 +111,26 @@ struct Worker {
   pid_t pid = -1;
 };
 
+// Reaps one of our workers that has exited, if any (never another child of this process, so
+// callers that run their own subprocesses concurrently keep their exit statuses).
+pid_t ReapOne(const std::map<pid_t, Worker>& running, int* status) {
+  for (const auto& [pid, w] : running) {
+    const pid_t r = ::waitpid(pid, status, WNOHANG);
+    if (r == pid) return pid;
+  }
+  return 0;
+}
+
 void KillWorkers(std::map<pid_t, Worker>* running) {
   for (const auto& [pid, w] : *running) ::kill(-pid, SIGTERM);
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(5);
   while (!running->empty()) {
     int status = 0;
-    const pid_t pid = ::waitpid(-1, &status, WNOHANG);
+    const pid_t pid = ReapOne(*running, &status);
     if (pid > 0) {
       running->erase(pid);
       continue;
     }
-    if (pid < 0 && errno != EINTR) break;
     if (std::chrono::steady_clock::now() > deadline) {
       for (const auto& [p, w] : *running) ::kill(-p, SIGKILL);
       for (const auto& [p, w] : *running) ::waitpid(p, &status, 0);
@@ -365,16 +374,16 @@ Result<RenderSummary> RenderPlan(const fs::path& plan_path,
       running.emplace(w.pid, w);
     }
     int status = 0;
-    const pid_t pid = ::waitpid(-1, &status, WNOHANG);
+    const pid_t pid = ReapOne(running, &status);
     if (pid > 0) {
       auto it = running.find(pid);
-      if (it == running.end()) continue;  // not ours
       Worker w = it->second;
       running.erase(it);
       const fs::path unit_dir = out_dir / "units" / UnitDirName(w.unit);
       const bool done = fs::exists(unit_dir / "DONE", ec);
       if (WIFEXITED(status) && WEXITSTATUS(status) == 0 && done) {
         ++summary.units_rendered;
+        if (options.on_unit_done) options.on_unit_done(w.unit);
         continue;
       }
       if (cancelled()) continue;  // a worker hit by the same Ctrl-C: reported as cancelled above

@@ -14,6 +14,7 @@
 #include <atomic>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -31,6 +32,9 @@ struct RenderOptions {
   bool progress = true;               // progress bar on stderr
   bool handle_signals = true;         // install SIGINT/SIGTERM handlers for the run
   const std::atomic<bool>* cancel = nullptr;  // optional external cancel flag
+  // Called on the driver's thread as each unit completes in this run (e.g. to convert it while
+  // the others render). Not called for units skipped as already DONE.
+  std::function<void(uint32_t unit)> on_unit_done;
   bool Check() const;
 };
 

@@ -8,6 +8,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdlib>
 #include <fstream>
@@ -129,6 +130,17 @@ TEST_F(RenderDriverTest, RendersEveryUnitAndResumes) {
   ASSERT_TRUE(one.ok());
   EXPECT_EQ(one->units_rendered, 1u);
   EXPECT_EQ(Spawns(), 4);
+}
+
+TEST_F(RenderDriverTest, ReportsEachCompletedUnit) {
+  std::vector<uint32_t> done;
+  options_.on_unit_done = [&](uint32_t unit) {
+    EXPECT_TRUE(fs::exists(dir_ / "run/units" / UnitDirName(unit) / "DONE"));
+    done.push_back(unit);
+  };
+  ASSERT_TRUE(RenderPlan(dir_ / "plan.json", dir_ / "run", options_).ok());
+  std::sort(done.begin(), done.end());
+  EXPECT_EQ(done, (std::vector<uint32_t>{0, 1, 2}));
 }
 
 TEST_F(RenderDriverTest, SelectedUnitsOnly) {
