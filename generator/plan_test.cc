@@ -52,7 +52,11 @@ TEST(Plan, BuildsUnitsShapeMajor) {
   EXPECT_EQ(plan->hand_model_sha256.size(), 64u);
   EXPECT_EQ(plan->resolution, 256);
   EXPECT_GT(plan->ortho_scale, 0);
-  EXPECT_NEAR((*doc)["sampling"]["views"]["covering_radius_deg"].get<double>(), 0, 90);
+  // 20 Fibonacci directions: between the area bound acos(1 - 2/20) = 25.8 deg and 1.5x that.
+  const double cover = (*doc)["sampling"]["views"]["covering_radius_deg"].get<double>();
+  EXPECT_EQ(cover, summary.covering_radius_deg);
+  EXPECT_GT(cover, 25.8);
+  EXPECT_LT(cover, 1.5 * 25.8);
   // Per-render seeds differ and seed 0 is an ordinary seed.
   EXPECT_NE(plan->units[0].renders[0].seed, plan->units[0].renders[1].seed);
   EXPECT_NE(plan->units[0].renders[0].seed, 0u);
