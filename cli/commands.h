@@ -19,5 +19,6 @@ int RunInfo(int argc, char** argv);      // cli/format_commands.cc
 int RunValidate(int argc, char** argv);  // cli/format_commands.cc
 int RunTestset(int argc, char** argv);   // cli/evaluate_commands.cc
 int RunEvaluate(int argc, char** argv);  // cli/evaluate_commands.cc
+int RunQuery(int argc, char** argv);     // cli/query_commands.cc
 
 }  // namespace handdb::cli

@@ -30,6 +30,7 @@ const std::vector<Command>& Commands() {
       {"show", RunShow, "draw a stored view's edges (any roll, optional keypoints) as a PNG"},
       {"info", RunInfo, "print a shard's header, sections and metadata, or a database summary"},
       {"validate", RunValidate, "check shards or databases completely (exit 1 on any problem)"},
+      {"query", RunQuery, "top-k database views for a photo, edge image or label EXR (exact chamfer)"},
       {"testset", RunTestset, "plan and render a held-out test set with ground truth (labels + photos)"},
       {"evaluate", RunEvaluate, "score a database on a test set: Table 1, success@(d,n), keypoint error, q/s"},
   };

@@ -1,0 +1,316 @@
+// `handdb query DB IMAGE` (issue 5): the top-k database views for a picture of a hand.
+#include <CLI/CLI.hpp>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "cli/commands.h"
+#include "format/json_schema.h"
+#include "format/roll.h"
+#include "handdb_version.h"
+#include "query/image_edges.h"
+#include "query/searcher.h"
+#include "query/sheet.h"
+
+namespace handdb::cli {
+namespace {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+constexpr double kDeg = 180.0 / M_PI;
+
+int Fail(const Status& status) {
+  std::fprintf(stderr, "handdb query: %s\n", status.message().c_str());
+  return kExitError;
+}
+
+// "a,b,c,..." -> exactly n integers.
+bool ParseInts(const std::string& text, size_t n, std::vector<int>* out) {
+  out->clear();
+  size_t pos = 0;
+  while (pos <= text.size()) {
+    const size_t comma = text.find(',', pos);
+    const std::string item =
+        text.substr(pos, comma == std::string::npos ? std::string::npos : comma - pos);
+    try {
+      size_t used = 0;
+      out->push_back(std::stoi(item, &used));
+      if (used != item.size()) return false;
+    } catch (const std::exception&) {
+      return false;
+    }
+    if (comma == std::string::npos) break;
+    pos = comma + 1;
+  }
+  return out->size() == n;
+}
+
+double Deg0To360(double rad) {
+  double d = std::fmod(rad * kDeg, 360.0);
+  if (d < 0) d += 360.0;
+  return d >= 360.0 ? 0.0 : d;
+}
+
+json MatchJson(const Match& m, int rank) {
+  const ViewLabel& l = m.label;
+  json kps = json::array();
+  for (const auto& k : l.keypoints) kps.push_back({k[0], k[1], k[2]});
+  return {{"rank", rank},
+          {"view_id", m.view_id},
+          {"roll", m.roll},
+          {"roll_deg", Deg0To360(m.roll_angle)},
+          {"distance", m.distance},
+          {"a", m.a},
+          {"b", m.b},
+          {"render_id", l.render_id},
+          {"shape_id", l.shape_id},
+          {"shape_name", m.shape_name},
+          {"dir_id", l.dir_id},
+          {"joint_angles", l.joint_angles},
+          {"view_direction", l.view_direction},
+          {"view_theta", l.view_theta},
+          {"view_phi", l.view_phi},
+          {"view_theta_deg", l.view_theta * kDeg},
+          {"view_phi_deg", l.view_phi * kDeg},
+          {"camera_roll", l.camera_roll},
+          {"keypoints", kps}};
+}
+
+void PrintTable(const std::vector<Match>& matches,
+                const QueryEdges& q,
+                const SearchStats& st,
+                const Database& db) {
+  std::printf("query: %zu edge points (%s, %dx%d, hand diameter %.1f px)%s\n",
+              q.points.size(),
+              std::string(QueryInputKindName(q.kind)).c_str(),
+              q.width,
+              q.height,
+              q.diameter_px,
+              q.touches_border ? "  [warning: the hand touches the image border]" : "");
+  std::printf(
+      "database: %zu views x %u rolls = %llu virtual views; exact D_c for %llu (%.2f%%), "
+      "%.1f ms\n\n",
+      db.num_views(),
+      db.num_rolls(),
+      static_cast<unsigned long long>(st.virtual_views),
+      static_cast<unsigned long long>(st.refined),
+      st.virtual_views
+          ? 100.0 * static_cast<double>(st.refined) / static_cast<double>(st.virtual_views)
+          : 0.0,
+      st.seconds_total * 1e3);
+  // Key joint angles: the flexion of each finger's base joint (thumb CMC, index..pinky MCP).
+  std::printf("%4s  %8s  %-16s  %7s %7s  %6s  %29s\n",
+              "rank",
+              "D_c",
+              "shape",
+              "theta",
+              "phi",
+              "roll",
+              "base flexion T/I/M/R/P (deg)");
+  int rank = 1;
+  for (const Match& m : matches) {
+    const ViewLabel& l = m.label;
+    const std::string shape =
+        m.shape_name.empty() ? "#" + std::to_string(l.shape_id) : m.shape_name;
+    std::printf("%4d  %8.3f  %-16.16s  %7.1f %7.1f  %6.1f  %5.0f %5.0f %5.0f %5.0f %5.0f\n",
+                rank++,
+                m.distance,
+                shape.c_str(),
+                l.view_theta * kDeg,
+                l.view_phi * kDeg,
+                Deg0To360(m.roll_angle),
+                l.joint_angles[0] * kDeg,
+                l.joint_angles[4] * kDeg,
+                l.joint_angles[8] * kDeg,
+                l.joint_angles[12] * kDeg,
+                l.joint_angles[16] * kDeg);
+  }
+}
+
+}  // namespace
+
+int RunQuery(int argc, char** argv) {
+  CLI::App app{
+      "Finds the database views most similar to a picture of a hand: exact top-k by the undirected "
+      "chamfer distance D_c over every (view, roll), pruned with distance-transform lower bounds "
+      "(docs/query.md). IMAGE is a photo (PNG/JPEG: skin-colour segmentation, or --mask), an "
+      "edge image (non-zero pixels are edges) or a Blender label EXR.",
+      "handdb query"};
+  std::string db_dir, image, sheet, mask, roi, input = "auto", kdtree = "nanoflann", skin, canny;
+  int top = 10;
+  int threads = -1;
+  bool as_json = false, brute = false, verify = false;
+  float dt_cell = 1.0f;
+  app.add_option("DB", db_dir, "database directory (manifest.json + shards)")->required();
+  app.add_option("IMAGE", image, "query image: photo, edge image or label EXR")->required();
+  app.add_option("--top", top, "number of matches")
+      ->check(CLI::Range(1, 100000))
+      ->capture_default_str();
+  app.add_flag("--json", as_json, "print the result as JSON (schemas/query_result.schema.json)");
+  app.add_option("--sheet", sheet, "write a contact sheet PNG: input, its edges, the top matches");
+  app.add_option("--threads", threads, "worker threads (-1: all cores)")->capture_default_str();
+  app.add_flag(
+      "--bruteforce", brute, "exact D_c for every (view, roll), no pruning (the reference)");
+  app.add_option("--kdtree", kdtree, "kd-tree backend")
+      ->check(CLI::IsMember({"nanoflann", "pcl"}))
+      ->capture_default_str();
+  app.add_option("--dt-cell", dt_cell, "distance-transform grid step in px (1, 0.5, 0.25, ...)")
+      ->capture_default_str();
+  app.add_option("--input",
+                 input,
+                 "kind of IMAGE (auto: .exr -> labels, binary image -> edges, else photo)")
+      ->check(CLI::IsMember({"auto", "photo", "edges", "labels"}))
+      ->capture_default_str();
+  app.add_option("--mask", mask, "photo: hand mask image, non-zero = hand (replaces skin colour)");
+  app.add_option("--roi", roi, "photo: x,y,w,h rectangle that contains the hand");
+  app.add_option("--skin",
+                 skin,
+                 "photo: skin box Ymin,Ymax,Crmin,Crmax,Cbmin,Cbmax (YCrCb, 0..255; default "
+                 "40,255,133,173,77,127)");
+  app.add_option("--canny", canny, "photo: Canny thresholds low,high (default 40,120)");
+  app.add_flag("--verify", verify, "hash every shard section before searching");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e) == 0 ? kExitOk : kExitUsage;
+  }
+  if (threads == 0 || threads < -1) {
+    std::fprintf(stderr, "handdb query: --threads must be -1 or >= 1\n");
+    return kExitUsage;
+  }
+
+  ImageEdgeOptions edge_options;
+  edge_options.kind = *ParseQueryInputKind(input);
+  edge_options.mask = mask;
+  if (!roi.empty()) {
+    auto r = ParsePixelRect(roi);
+    if (!r.ok()) {
+      std::fprintf(stderr, "handdb query: --roi: %s\n", r.status().message().c_str());
+      return kExitUsage;
+    }
+    edge_options.roi = *r;
+  }
+  std::vector<int> v;
+  if (!skin.empty()) {
+    if (!ParseInts(skin, 6, &v)) {
+      std::fprintf(stderr,
+                   "handdb query: --skin needs six integers Ymin,Ymax,Crmin,Crmax,Cbmin,Cbmax\n");
+      return kExitUsage;
+    }
+    edge_options.skin = {v[0], v[1], v[2], v[3], v[4], v[5]};
+  }
+  if (!canny.empty()) {
+    if (!ParseInts(canny, 2, &v)) {
+      std::fprintf(stderr, "handdb query: --canny needs two integers low,high\n");
+      return kExitUsage;
+    }
+    edge_options.canny_low = v[0];
+    edge_options.canny_high = v[1];
+  }
+  if (!edge_options.Check()) {
+    std::fprintf(stderr, "handdb query: invalid photo options (see above)\n");
+    return kExitUsage;
+  }
+  SearchOptions search;
+  search.top_k = top;
+  search.num_threads = threads;
+  search.brute_force = brute;
+  search.kdtree = *ParseKdTreeBackend(kdtree);
+  search.dt_cell_px = dt_cell;
+  if (!search.Check()) {
+    std::fprintf(stderr, "handdb query: invalid search options (see above)\n");
+    return kExitUsage;
+  }
+
+  // Open the database first: a broken database is reported before any image work.
+  auto db = Database::Open(db_dir, verify);
+  if (!db.ok()) return Fail(db.status());
+  if (db->num_views() == 0)
+    return Fail(Status(StatusCode::kNotFound, db_dir + ": the database has no views"));
+  auto shared_db = std::make_shared<const Database>(std::move(db).value());
+  const Searcher searcher(shared_db);
+
+  auto query = LoadQueryEdges(image, edge_options);
+  if (!query.ok()) return Fail(query.status());
+  SearchStats stats;
+  auto matches = searcher.Search(query->points_px(), search, &stats);
+  if (!matches.ok()) return Fail(matches.status());
+
+  if (!sheet.empty()) {
+    std::vector<SheetTile> tiles;
+    int rank = 1;
+    for (const Match& m : *matches) {
+      SheetTile t;
+      char caption[128];
+      std::snprintf(caption,
+                    sizeof(caption),
+                    "#%d  D=%.2f  %s  r=%.0f",
+                    rank++,
+                    m.distance,
+                    m.shape_name.empty() ? ("shape " + std::to_string(m.label.shape_id)).c_str()
+                                         : m.shape_name.c_str(),
+                    Deg0To360(m.roll_angle));
+      t.caption = caption;
+      std::vector<Point2f> rolled;
+      RollPoints(shared_db->points(m.view_id), m.roll_angle, &rolled);
+      for (const Point2f& p : rolled) {
+        t.points.push_back({static_cast<int16_t>(std::lround(p.x * kPointScale)),
+                            static_cast<int16_t>(std::lround(p.y * kPointScale))});
+      }
+      tiles.push_back(std::move(t));
+    }
+    const Status st = WriteContactSheet(sheet, image, *query, tiles, ContactSheetOptions{});
+    if (!st.ok()) return Fail(st);
+  }
+
+  if (as_json) {
+    json matches_json = json::array();
+    int rank = 1;
+    for (const Match& m : *matches) matches_json.push_back(MatchJson(m, rank++));
+    json doc = {{"format", "handdb-query-result"},
+                {"version", 1},
+                {"tool_version", HANDDB_VERSION},
+                {"database", db_dir},
+                {"image", image},
+                {"input_kind", std::string(QueryInputKindName(query->kind))},
+                {"query",
+                 {{"edge_points", query->points.size()},
+                  {"width", query->width},
+                  {"height", query->height},
+                  {"hand_pixels", query->hand_pixels},
+                  {"touches_border", query->touches_border},
+                  {"diameter_px", query->diameter_px},
+                  {"centre_px", {query->centre_x, query->centre_y}},
+                  {"scale", query->scale}}},
+                {"options",
+                 {{"top_k", top},
+                  {"threads", ResolveThreadCount(threads)},
+                  {"brute_force", brute},
+                  {"kdtree", kdtree},
+                  {"dt_cell_px", dt_cell}}},
+                {"stats",
+                 {{"virtual_views", stats.virtual_views},
+                  {"canonical_views", shared_db->num_views()},
+                  {"rolls", shared_db->num_rolls()},
+                  {"refined", stats.refined},
+                  {"abandoned", stats.abandoned},
+                  {"view_kdtrees", stats.view_trees},
+                  {"seconds", stats.seconds_total},
+                  {"seconds_bounds", stats.seconds_bounds},
+                  {"seconds_refine", stats.seconds_refine}}},
+                {"matches", matches_json}};
+    const Status valid = ValidateJson(doc, "query_result.schema.json", "query result");
+    if (!valid.ok()) return Fail(valid);  // a bug, but never print JSON that breaks the schema
+    std::printf("%s\n", doc.dump(2).c_str());
+  } else {
+    PrintTable(*matches, *query, stats, *shared_db);
+    if (!sheet.empty()) std::printf("\ncontact sheet: %s\n", sheet.c_str());
+  }
+  return kExitOk;
+}
+
+}  // namespace handdb::cli
