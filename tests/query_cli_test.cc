@@ -1,0 +1,208 @@
+// `handdb query` end to end (issue 5): a database written with ShardWriter + WriteManifest, an
+// edge image and a photo-like image of one of its views, the table / --json / --sheet outputs,
+// brute force == pruned through the CLI, and the one-line errors with exit codes.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <sstream>
+#include <string>
+
+#include "format/json_schema.h"
+#include "format/manifest.h"
+#include "format/roll.h"
+#include "format/shard_writer.h"
+#include "query/search_testing.h"
+
+namespace handdb {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct CliRun {
+  int code = -1;
+  std::string out;
+  std::string err;
+};
+
+CliRun Handdb(const std::string& args) {
+  static int n = 0;
+  const fs::path out = fs::temp_directory_path() /
+                       ("handdb-qcli-out-" + std::to_string(getpid()) + "-" + std::to_string(n));
+  const fs::path err = fs::temp_directory_path() /
+                       ("handdb-qcli-err-" + std::to_string(getpid()) + "-" + std::to_string(n++));
+  const std::string cmd =
+      std::string(HANDDB_BINARY) + " query " + args + " >" + out.string() + " 2>" + err.string();
+  const int status = std::system(cmd.c_str());
+  CliRun r;
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  std::ifstream fo(out), fe(err);
+  std::stringstream so, se;
+  so << fo.rdbuf();
+  se << fe.rdbuf();
+  r.out = so.str();
+  r.err = se.str();
+  fs::remove(out);
+  fs::remove(err);
+  return r;
+}
+
+class QueryCli : public ::testing::Test {
+ protected:
+  static constexpr uint32_t kViews = 24;
+  static constexpr uint32_t kRolls = 12;
+
+  static void SetUpTestSuite() {
+    dir_ = new fs::path(fs::temp_directory_path() / ("handdb-qcli-" + std::to_string(getpid())));
+    fs::create_directories(*dir_ / "db");
+    Manifest manifest;
+    manifest.tool_version = "query_cli_test";
+    manifest.rolls = kRolls;
+    manifest.metadata["shapes"] = {{{"id", 0}, {"name", "alpha"}}, {{"id", 1}, {"name", "beta"}}};
+    for (uint32_t s = 0; s < 2; ++s) {
+      ShardWriter w;
+      const fs::path shard = *dir_ / "db" / ("shard-0000" + std::to_string(s) + ".hdb");
+      ASSERT_TRUE(w.Open(shard, ShardWriterOptions{}).ok());
+      for (uint32_t i = 0; i < kViews / 2; ++i) {
+        const uint32_t v = s * (kViews / 2) + i;
+        ASSERT_TRUE(
+            w.AddView(testing::SyntheticViewLabel(v, kViews / 2), testing::SyntheticEdgeSet(v, 300))
+                .ok());
+      }
+      auto summary = w.Finish();
+      ASSERT_TRUE(summary.ok());
+      manifest.AddShard(*summary);
+    }
+    ASSERT_TRUE(WriteManifest(*dir_ / "db", manifest).ok());
+  }
+  static void TearDownTestSuite() {
+    if (std::getenv("HANDDB_KEEP_TEST_DIR") == nullptr) fs::remove_all(*dir_);
+    delete dir_;
+  }
+
+  // View v rolled by r, drawn at 1.5 source px per normalised px into a w x h image.
+  static cv::Mat Draw(uint32_t v, uint32_t r, bool photo) {
+    const auto pts = testing::SyntheticEdgeSet(v, 300);
+    std::vector<Point2f> rolled;
+    RollPoints(pts, RollAngle(r, kRolls), &rolled);
+    cv::Mat edges = cv::Mat::zeros(420, 440, CV_8U);
+    std::vector<cv::Point> poly;
+    for (const auto& p : rolled) {
+      const int x = static_cast<int>(std::lround(220 + 1.5 * p.x));
+      const int y = static_cast<int>(std::lround(210 + 1.5 * p.y));
+      edges.at<uint8_t>(y, x) = 255;
+    }
+    if (!photo) return edges;
+    // A skin-coloured blob (the convex hull of the points) with the strokes drawn darker.
+    std::vector<cv::Point> all;
+    cv::findNonZero(edges, all);
+    std::vector<cv::Point> hull;
+    cv::convexHull(all, hull);
+    cv::Mat img(edges.size(), CV_8UC3, cv::Scalar(150, 110, 80));
+    cv::fillConvexPoly(img, hull, cv::Scalar(120, 150, 210));
+    // Strokes 3 px wide, as a photographed crease or finger border would be.
+    cv::Mat thick;
+    cv::dilate(edges, thick, cv::Mat::ones(3, 3, CV_8U));
+    img.setTo(cv::Scalar(70, 95, 150), thick);
+    return img;
+  }
+
+  static fs::path* dir_;
+};
+fs::path* QueryCli::dir_ = nullptr;
+
+TEST_F(QueryCli, EdgeImageJsonTableSheetAndBruteForce) {
+  const fs::path img = *dir_ / "q.png";
+  ASSERT_TRUE(cv::imwrite(img.string(), Draw(9, 4, false)));
+  const std::string db = (*dir_ / "db").string();
+
+  CliRun json_run = Handdb(db + " " + img.string() + " --json --top 5 --threads 2");
+  ASSERT_EQ(json_run.code, 0) << json_run.err;
+  const auto doc = nlohmann::json::parse(json_run.out);
+  EXPECT_TRUE(ValidateJson(doc, "query_result.schema.json", "output").ok());
+  EXPECT_EQ(doc["input_kind"], "edges");
+  ASSERT_EQ(doc["matches"].size(), 5u);
+  EXPECT_EQ(doc["matches"][0]["view_id"], 9);
+  EXPECT_EQ(doc["matches"][0]["roll"], 4);
+  EXPECT_EQ(doc["matches"][0]["shape_name"], "alpha");
+  EXPECT_EQ(doc["matches"][0]["joint_angles"].size(), 20u);
+  EXPECT_EQ(doc["matches"][0]["keypoints"].size(), 21u);
+
+  CliRun brute =
+      Handdb(db + " " + img.string() + " --json --top 5 --bruteforce --kdtree pcl --threads 1");
+  ASSERT_EQ(brute.code, 0) << brute.err;
+  const auto bdoc = nlohmann::json::parse(brute.out);
+  for (size_t i = 0; i < 5; ++i) {
+    EXPECT_EQ(bdoc["matches"][i]["view_id"], doc["matches"][i]["view_id"]);
+    EXPECT_EQ(bdoc["matches"][i]["roll"], doc["matches"][i]["roll"]);
+    EXPECT_EQ(bdoc["matches"][i]["distance"], doc["matches"][i]["distance"]);
+  }
+
+  const fs::path sheet = *dir_ / "sheet.png";
+  CliRun table = Handdb(db + " " + img.string() + " --top 3 --sheet " + sheet.string());
+  ASSERT_EQ(table.code, 0) << table.err;
+  EXPECT_NE(table.out.find("rank"), std::string::npos);
+  EXPECT_NE(table.out.find("alpha"), std::string::npos);
+  EXPECT_FALSE(cv::imread(sheet.string()).empty());
+}
+
+TEST_F(QueryCli, PhotoFindsTheView) {
+  const fs::path img = *dir_ / "photo.png";
+  ASSERT_TRUE(cv::imwrite(img.string(), Draw(17, 2, true)));
+  CliRun r = Handdb((*dir_ / "db").string() + " " + img.string() + " --json --top 3");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto doc = nlohmann::json::parse(r.out);
+  EXPECT_EQ(doc["input_kind"], "photo");
+  EXPECT_EQ(doc["matches"][0]["view_id"], 17);
+  EXPECT_EQ(doc["matches"][0]["roll"], 2);
+}
+
+TEST_F(QueryCli, ErrorsAreOneLineWithExitCodes) {
+  const std::string db = (*dir_ / "db").string();
+  auto one_line = [](const CliRun& r) {
+    return r.err.rfind("handdb query: ", 0) == 0 && r.err.find('\n') == r.err.size() - 1;
+  };
+  {
+    std::ofstream f(*dir_ / "garbage.jpg");
+    f << "not a jpeg";
+  }
+  CliRun r = Handdb(db + " " + (*dir_ / "garbage.jpg").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_TRUE(one_line(r)) << r.err;
+  EXPECT_NE(r.err.find("garbage.jpg"), std::string::npos);
+
+  ASSERT_TRUE(cv::imwrite((*dir_ / "blue.png").string(),
+                          cv::Mat(80, 90, CV_8UC3, cv::Scalar(200, 60, 20))));
+  r = Handdb(db + " " + (*dir_ / "blue.png").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_TRUE(one_line(r)) << r.err;
+  EXPECT_NE(r.err.find("no hand"), std::string::npos);
+
+  r = Handdb((*dir_ / "nodb").string() + " " + (*dir_ / "blue.png").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_TRUE(one_line(r)) << r.err;
+
+  // A database whose shard is truncated fails its open checks.
+  fs::copy(*dir_ / "db", *dir_ / "bad", fs::copy_options::recursive);
+  fs::resize_file(*dir_ / "bad" / "shard-00001.hdb", 1000);
+  ASSERT_TRUE(cv::imwrite((*dir_ / "e.png").string(), Draw(3, 0, false)));
+  r = Handdb((*dir_ / "bad").string() + " " + (*dir_ / "e.png").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_TRUE(one_line(r)) << r.err;
+  EXPECT_NE(r.err.find("shard-00001.hdb"), std::string::npos);
+
+  EXPECT_EQ(Handdb(db + " " + (*dir_ / "e.png").string() + " --top 0").code, 2);
+  EXPECT_EQ(Handdb(db + " " + (*dir_ / "e.png").string() + " --roi 1,2,3").code, 2);
+  EXPECT_EQ(Handdb(db).code, 2);
+  EXPECT_EQ(Handdb("--help").code, 0);
+}
+
+}  // namespace
+}  // namespace handdb
