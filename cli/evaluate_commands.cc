@@ -20,6 +20,7 @@
 #include "generator/exr_io.h"
 #include "generator/testset.h"
 #include "query/evaluate.h"
+#include "query/image_edges.h"
 #include "query/searcher.h"
 
 namespace handdb::cli {
@@ -280,9 +281,19 @@ int RunEvaluate(int argc, char** argv) {
       return points;
     };
   } else {
-    return Fail("evaluate",
-                Status(StatusCode::kInvalidArgument,
-                       "--input photo: the photo query path is not available yet"));
+    // The photo through the real-image path: skin segmentation, Canny, the same normalisation.
+    points_fn = [](const TestView& view) -> Result<std::vector<Point2f>> {
+      if (view.photo.empty()) {
+        return Status(StatusCode::kNotFound,
+                      "test view " + std::to_string(view.id) +
+                          ": no photo (the test set was made with --no-photos)");
+      }
+      ImageEdgeOptions image_options;
+      image_options.kind = QueryInputKind::kPhoto;
+      auto edges = LoadQueryEdges(view.photo, image_options);
+      if (!edges.ok()) return edges.status();
+      return edges->points_px();
+    };
   }
 
   auto report = Evaluate(**searcher, *testset, query_input, points_fn, options);
