@@ -1,0 +1,382 @@
+// `handdb convert`, `handdb generate` and `handdb show` (issue 4).
+#include <CLI/CLI.hpp>
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "cli/commands.h"
+#include "cli/slurm_commands.h"
+#include "format/atomic_file.h"
+#include "format/json_schema.h"
+#include "format/roll.h"
+#include "format/validator.h"
+#include "format/view.h"
+#include "generator/converter.h"
+#include "generator/plan.h"
+#include "generator/render_driver.h"
+#include "query/database.h"
+
+namespace handdb::cli {
+namespace {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+// Parses argv with CLI11; returns -1 to continue, else the exit code (help: 0, bad usage: 2).
+int Parse(CLI::App& app, int argc, char** argv) {
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e) == 0 ? kExitOk : kExitUsage;
+  }
+  return -1;
+}
+
+int Fail(const char* cmd, const Status& status) {
+  std::fprintf(stderr, "handdb %s: %s\n", cmd, status.message().c_str());
+  return kExitError;
+}
+
+struct EdgeFlags {
+  std::string occlusion = "on";
+  double depth_jump = EdgeOptions{}.depth_jump;
+  void Add(CLI::App& app) {
+    app.add_option("--occlusion-edges",
+                   occlusion,
+                   "keep joint-pair borders across a depth jump as occlusion edges (on|off)")
+        ->check(CLI::IsMember({"on", "off"}))
+        ->capture_default_str();
+    app.add_option("--depth-jump",
+                   depth_jump,
+                   "depth difference (scene units, metres) that makes a joint-pair border an "
+                   "occlusion edge")
+        ->check(CLI::PositiveNumber)
+        ->capture_default_str();
+  }
+  EdgeOptions Get() const {
+    EdgeOptions e;
+    e.occlusion_edges = occlusion == "on";
+    e.depth_jump = depth_jump;
+    return e;
+  }
+};
+
+json SummaryJson(const ConvertSummary& s, const fs::path& db_dir) {
+  json skipped = json::array();
+  for (const auto& v : s.skipped) {
+    skipped.push_back({{"render_id", v.render_id}, {"file", v.file}, {"reason", v.reason}});
+  }
+  return {{"db", db_dir.string()},
+          {"units", s.units_total},
+          {"shards_written", s.shards_written},
+          {"shards_kept", s.shards_kept},
+          {"views", s.views},
+          {"virtual_views", s.views * s.rolls},
+          {"points", s.points},
+          {"bytes", s.bytes},
+          {"skipped", skipped},
+          {"seconds", s.seconds}};
+}
+
+void PrintSummary(const char* cmd, const ConvertSummary& s, const fs::path& db_dir) {
+  std::printf(
+      "%s: %llu canonical views (%llu virtual) in %u shards (%u written, %u kept), %llu points, "
+      "%.1f MB, %zu skipped, %.1f s\n",
+      db_dir.string().c_str(),
+      static_cast<unsigned long long>(s.views),
+      static_cast<unsigned long long>(s.views * s.rolls),
+      s.units_total,
+      s.shards_written,
+      s.shards_kept,
+      static_cast<unsigned long long>(s.points),
+      static_cast<double>(s.bytes) / 1e6,
+      s.skipped.size(),
+      s.seconds);
+  (void)cmd;
+}
+
+// Prints the bad views (one line each, at most `limit`) of a failed conversion.
+void PrintBad(const char* cmd, const fs::path& render_dir, const std::vector<SkippedView>& bad) {
+  constexpr size_t kLimit = 20;
+  for (size_t i = 0; i < bad.size() && i < kLimit; ++i) {
+    std::fprintf(stderr,
+                 "handdb %s: %s: %s\n",
+                 cmd,
+                 (render_dir / bad[i].file).string().c_str(),
+                 bad[i].reason.c_str());
+  }
+  if (bad.size() > kLimit) {
+    std::fprintf(stderr, "handdb %s: ... and %zu more bad views\n", cmd, bad.size() - kLimit);
+  }
+}
+
+}  // namespace
+
+int RunConvert(int argc, char** argv) {
+  CLI::App app(
+      "Convert a render directory (plan.json + units/) into a database: one shard per "
+      "render unit plus manifest.json. Bad inputs stop the run before anything is "
+      "written, unless --skip-bad. Rerunning keeps shards that are already complete.",
+      "handdb convert");
+  fs::path render_dir, db_dir;
+  ConvertOptions options;
+  EdgeFlags edges;
+  bool quiet = false, as_json = false;
+  app.add_option("RENDER_DIR", render_dir, "render directory (plan.json, units/)")->required();
+  app.add_option("--out,-o", db_dir, "database directory to write")->required();
+  app.add_option("--threads,-j", options.num_threads, "worker threads (default: all cores)")
+      ->check(CLI::PositiveNumber);
+  app.add_flag("--skip-bad",
+               options.skip_bad,
+               "leave bad views out (recorded in the manifest's 'skipped') instead of failing");
+  edges.Add(app);
+  app.add_flag("--quiet,-q", quiet, "no progress display");
+  app.add_flag("--json", as_json, "print the summary as JSON on stdout");
+  if (int rc = Parse(app, argc, argv); rc >= 0) return rc;
+  options.edges = edges.Get();
+  options.progress = !quiet;
+  std::vector<SkippedView> bad;
+  auto summary = ConvertRenderDir(render_dir, db_dir, options, &bad);
+  if (!summary.ok()) {
+    if (!bad.empty() && !options.skip_bad) PrintBad("convert", render_dir, bad);
+    return Fail("convert", summary.status());
+  }
+  if (as_json) {
+    std::printf("%s\n", SummaryJson(*summary, db_dir).dump(2).c_str());
+  } else {
+    PrintSummary("convert", *summary, db_dir);
+  }
+  return kExitOk;
+}
+
+int RunGenerate(int argc, char** argv) {
+  CLI::App app(
+      "Build a database from a generation config: plan -> render (Blender) -> convert -> "
+      "validate. Resumable: rerun the same command after an interruption.",
+      "handdb generate");
+  fs::path config_path, db_dir, work_dir, blender;
+  int jobs = 0;
+  ConvertOptions convert;
+  EdgeFlags edges;
+  bool quiet = false, as_json = false;
+  app.add_option("CONFIG", config_path, "generation config (schemas/config.schema.json)")
+      ->required()
+      ->check(CLI::ExistingFile);
+  app.add_option("--out,-o", db_dir, "database directory to write")->required();
+  app.add_option("--work", work_dir, "render directory (default: DB_DIR/render)");
+  app.add_option("--jobs,-j",
+                 jobs,
+                 "parallel Blender processes and convert threads (default: "
+                 "all cores)")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--blender", blender, "Blender executable (default: $HANDDB_BLENDER or PATH)");
+  app.add_flag("--skip-bad", convert.skip_bad, "leave bad views out instead of failing");
+  edges.Add(app);
+  app.add_flag("--quiet,-q", quiet, "no progress display");
+  app.add_flag("--json", as_json, "print the summary as JSON on stdout");
+  SlurmFlags slurm;  // --slurm and its options (cli/slurm_commands.h)
+  slurm.Add(app);
+  if (int rc = Parse(app, argc, argv); rc >= 0) return rc;
+  if (jobs <= 0) jobs = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  if (work_dir.empty()) work_dir = db_dir / "render";
+  auto stage = [&](const char* what) {
+    if (!quiet) std::fprintf(stderr, "handdb generate: %s\n", what);
+  };
+
+  // 1. Plan. An existing plan must be the one this config makes (else the work dir belongs to
+  // another database).
+  stage("[1/4] plan");
+  std::error_code ec;
+  fs::create_directories(work_dir, ec);
+  if (ec)
+    return Fail("generate", Status(StatusCode::kIoError, work_dir.string() + ": " + ec.message()));
+  const fs::path plan_path = work_dir / "plan.json";
+  {
+    auto config = ReadJsonFile(config_path, "config.schema.json");
+    if (!config.ok()) return Fail("generate", config.status());
+    auto plan = MakePlan(*config, config_path);
+    if (!plan.ok()) return Fail("generate", plan.status());
+    if (fs::exists(plan_path, ec)) {
+      auto existing = ReadJsonFile(plan_path, "");
+      if (!existing.ok()) return Fail("generate", existing.status());
+      if (*existing != *plan) {
+        return Fail("generate",
+                    Status(StatusCode::kInvalidArgument,
+                           plan_path.string() + ": holds a different plan than " +
+                               config_path.string() + " makes; use another --out/--work"));
+      }
+    } else {
+      Status s = WritePlanFromConfig(config_path, plan_path);
+      if (!s.ok()) return Fail("generate", s);
+    }
+  }
+
+  // On Slurm: one array task per unit (render + convert), then a final job (manifest, validate).
+  if (slurm.enabled) {
+    convert.edges = edges.Get();
+    return RunGenerateOnSlurm({db_dir, work_dir, blender, convert, quiet, as_json}, slurm);
+  }
+
+  // 2. Render.
+  stage("[2/4] render");
+  RenderOptions render;
+  render.jobs = jobs;
+  render.blender = blender;
+  render.progress = !quiet;
+  auto rendered = RenderPlan(plan_path, work_dir, render);
+  if (!rendered.ok()) return Fail("generate", rendered.status());
+
+  // 3. Convert.
+  stage("[3/4] convert");
+  convert.num_threads = jobs;
+  convert.edges = edges.Get();
+  convert.progress = !quiet;
+  std::vector<SkippedView> bad;
+  auto summary = ConvertRenderDir(work_dir, db_dir, convert, &bad);
+  if (!summary.ok()) {
+    if (!bad.empty() && !convert.skip_bad) PrintBad("generate", work_dir, bad);
+    return Fail("generate", summary.status());
+  }
+
+  // 4. Validate what was written, as `handdb validate` would.
+  stage("[4/4] validate");
+  ValidateOptions vopt;
+  vopt.show_progress = !quiet;
+  const ValidationReport report = ValidateDatabase(db_dir, vopt);
+  if (!report.ok()) {
+    for (const auto& p : report.problems) {
+      std::fprintf(stderr, "handdb generate: %s\n", p.message.c_str());
+    }
+    return Fail("generate",
+                Status(StatusCode::kSchemaViolation,
+                       db_dir.string() + ": validation found " +
+                           std::to_string(report.num_problems()) + " problem(s)"));
+  }
+  if (as_json) {
+    json out = SummaryJson(*summary, db_dir);
+    out["render"] = {{"units", rendered->units_total},
+                     {"units_rendered", rendered->units_rendered},
+                     {"units_skipped", rendered->units_skipped},
+                     {"renders", rendered->renders_total},
+                     {"seconds", rendered->seconds}};
+    out["validated_views"] = report.views;
+    std::printf("%s\n", out.dump(2).c_str());
+  } else {
+    std::printf("rendered %u units (%u already done) in %.1f s\n",
+                rendered->units_total,
+                rendered->units_skipped,
+                rendered->seconds);
+    PrintSummary("generate", *summary, db_dir);
+    std::printf("validated %llu views: ok\n", static_cast<unsigned long long>(report.views));
+  }
+  return kExitOk;
+}
+
+namespace {
+
+// Finger chains of the 21 keypoints (docs/conventions.md): wrist, then 4 per finger.
+void DrawSkeleton(cv::Mat& img, const ViewLabel& label, const cv::Point2d& origin, double scale) {
+  const cv::Scalar colours[5] = {
+      {60, 60, 255}, {60, 200, 60}, {255, 160, 40}, {40, 220, 240}, {220, 80, 220}};
+  auto at = [&](int k) {
+    return cv::Point(static_cast<int>(std::lround(origin.x + scale * label.keypoints[k][0])),
+                     static_cast<int>(std::lround(origin.y + scale * label.keypoints[k][1])));
+  };
+  for (int f = 0; f < 5; ++f) {
+    int prev = 0;
+    for (int j = 0; j < 4; ++j) {
+      const int k = 1 + 4 * f + j;
+      cv::line(img, at(prev), at(k), colours[f], 1, cv::LINE_AA);
+      prev = k;
+    }
+  }
+  for (int k = 0; k < kNumKeypoints; ++k) {
+    const cv::Scalar c = k == 0 ? cv::Scalar(255, 255, 255) : colours[(k - 1) / 4];
+    cv::circle(img, at(k), 3, c, cv::FILLED, cv::LINE_AA);
+  }
+}
+
+}  // namespace
+
+int RunShow(int argc, char** argv) {
+  CLI::App app("Draw a stored view's edge points (optionally rolled, with keypoints) as a PNG.",
+               "handdb show");
+  fs::path db_dir, out_path;
+  int64_t view = -1;
+  int64_t roll = 0;
+  int size = 384;
+  bool keypoints = false;
+  app.add_option("DB", db_dir, "database directory")->required();
+  app.add_option("--view", view, "canonical view index (manifest order)")->required();
+  app.add_option("--roll", roll, "roll index 0..R-1")->capture_default_str();
+  app.add_flag("--keypoints", keypoints, "draw the 21 keypoints and the finger chains");
+  app.add_option("--size", size, "image size in px (the normalised frame is 192 px across)")
+      ->check(CLI::Range(64, 4096))
+      ->capture_default_str();
+  app.add_option("-o,--out", out_path, "output PNG")->required();
+  if (int rc = Parse(app, argc, argv); rc >= 0) return rc;
+
+  auto db = Database::Open(db_dir);
+  if (!db.ok()) return Fail("show", db.status());
+  if (view < 0 || static_cast<uint64_t>(view) >= db->num_views()) {
+    return Fail(
+        "show",
+        Status(StatusCode::kOutOfRange,
+               db_dir.string() + ": view " + std::to_string(view) + " out of range (database has " +
+                   std::to_string(db->num_views()) + " canonical views)"));
+  }
+  if (roll < 0 || roll >= static_cast<int64_t>(db->num_rolls())) {
+    return Fail("show",
+                Status(StatusCode::kOutOfRange,
+                       "roll " + std::to_string(roll) + " out of range 0.." +
+                           std::to_string(db->num_rolls() - 1)));
+  }
+  const auto v = static_cast<view_id_t>(view);
+  const float angle = RollAngle(static_cast<roll_id_t>(roll), db->num_rolls());
+  std::vector<Point2f> pts;
+  RollPoints(db->points(v), angle, &pts);
+  const ViewLabel label = RollLabel(db->label(v), angle);
+
+  // The normalised frame's points lie within 192 * sqrt(3) / 2 = 166 px of the origin.
+  const double scale = size / 384.0;
+  const cv::Point2d origin(size / 2.0, size / 2.0);
+  cv::Mat img(size, size, CV_8UC3, cv::Scalar(0, 0, 0));
+  for (const Point2f& p : pts) {
+    const int x = static_cast<int>(std::floor(origin.x + scale * p.x));
+    const int y = static_cast<int>(std::floor(origin.y + scale * p.y));
+    if (x >= 0 && y >= 0 && x < size && y < size) img.at<cv::Vec3b>(y, x) = {235, 235, 235};
+  }
+  if (keypoints) DrawSkeleton(img, label, origin, scale);
+  const std::string shape(db->shape_name(label.shape_id));
+  const std::string caption = "view " + std::to_string(view) + " roll " + std::to_string(roll) +
+                              "/" + std::to_string(db->num_rolls()) +
+                              (shape.empty() ? "" : "  " + shape) + "  " +
+                              std::to_string(db->points(v).size()) + " pts";
+  cv::putText(img,
+              caption,
+              cv::Point(6, 16),
+              cv::FONT_HERSHEY_SIMPLEX,
+              0.4,
+              cv::Scalar(160, 160, 160),
+              1,
+              cv::LINE_AA);
+  std::vector<uint8_t> png;
+  if (!cv::imencode(".png", img, png)) {
+    return Fail("show", Status(StatusCode::kIoError, out_path.string() + ": PNG encoding failed"));
+  }
+  Status s = WriteFileAtomic(
+      out_path, std::string_view(reinterpret_cast<const char*>(png.data()), png.size()));
+  if (!s.ok()) return Fail("show", s);
+  return kExitOk;
+}
+
+}  // namespace handdb::cli
