@@ -63,6 +63,18 @@ nlohmann::json TableToJson(const RankTable& t) {
 
 }  // namespace
 
+namespace {
+nlohmann::json ChanceToJson(const EvaluationReport& report) {
+  nlohmann::json cells = nlohmann::json::array();
+  for (size_t i = 0; i < report.chance_success.size(); ++i) {
+    cells.push_back({{"n", report.options.success_n[i]}, {"rate", report.chance_success[i]}});
+  }
+  return {{"computed", report.options.chance_baseline},
+          {"mean_correct_per_view", report.mean_correct_per_view},
+          {"success", cells}};
+}
+}  // namespace
+
 const char* QueryInputName(QueryInput input) {
   return input == QueryInput::kClean ? "clean" : "photo";
 }
@@ -120,6 +132,41 @@ bool EvaluationOptions::Check() const {
   }
   return true;
 }
+
+double ChanceOfCorrectInTopN(uint64_t total, uint64_t correct, uint64_t n) {
+  if (correct == 0 || total == 0) return 0;
+  if (n >= total || correct > total - std::min(n, total)) return 1;
+  // P(none in the first n) = prod_{i < n} (total - correct - i) / (total - i), in logs.
+  double log_none = 0;
+  for (uint64_t i = 0; i < n; ++i) {
+    log_none += std::log(static_cast<double>(total - correct - i)) -
+                std::log(static_cast<double>(total - i));
+  }
+  return 1.0 - std::exp(log_none);
+}
+
+namespace {
+// Correct (view, roll) pairs of the whole database for one judge. Shape and direction depend on
+// the view only, so rolls are tried only for views that pass both.
+int64_t CountCorrect(const Database& db, const CorrectnessJudge& judge) {
+  int64_t count = 0;
+  for (view_id_t v = 0; v < db.num_views(); ++v) {
+    const ViewLabel label = db.label(v);
+    PoseForEval pose;
+    pose.joint_angles = label.joint_angles;
+    pose.view_direction = {
+        label.view_direction[0], label.view_direction[1], label.view_direction[2]};
+    pose.camera_roll = label.camera_roll;
+    const CorrectnessDetail detail = judge.Judge(pose);
+    if (!detail.shape_ok || !detail.direction_ok) continue;
+    for (roll_id_t r = 0; r < db.num_rolls(); ++r) {
+      pose.camera_roll = label.camera_roll + RollAngle(r, db.num_rolls());
+      count += judge.Judge(pose).roll_ok ? 1 : 0;
+    }
+  }
+  return count;
+}
+}  // namespace
 
 std::vector<Criterion> MakeCriteria(const EvaluationOptions& options) {
   std::vector<Criterion> out;
@@ -185,6 +232,7 @@ Result<EvaluationReport> Evaluate(const Searcher& searcher,
       if (applies[c]) out.ranks[c] = kNoCorrectMatch;
     }
 
+    if (options.chance_baseline) out.num_correct = CountCorrect(db, judges[0]);
     const auto t_input = std::chrono::steady_clock::now();
     auto points = query_points(view);
     out.input_seconds = Seconds(t_input);
@@ -280,6 +328,20 @@ Result<EvaluationReport> Evaluate(const Searcher& searcher,
     top1.push_back(v.top1_keypoint_error);
     best10.push_back(v.best10_keypoint_error);
   }
+  if (options.chance_baseline && !report.views.empty()) {
+    double correct_sum = 0;
+    for (int64_t n_top : options.success_n) {
+      double sum = 0;
+      for (const auto& v : report.views) {
+        sum += ChanceOfCorrectInTopN(db.num_virtual_views(),
+                                     static_cast<uint64_t>(v.num_correct),
+                                     static_cast<uint64_t>(n_top));
+      }
+      report.chance_success.push_back(sum / static_cast<double>(report.views.size()));
+    }
+    for (const auto& v : report.views) correct_sum += static_cast<double>(v.num_correct);
+    report.mean_correct_per_view = correct_sum / static_cast<double>(report.views.size());
+  }
   report.top1_keypoint_error = Summarise(top1);
   report.best10_keypoint_error = Summarise(best10);
   const double searched = static_cast<double>(report.views.size());
@@ -318,7 +380,8 @@ nlohmann::json ReportToJson(const EvaluationReport& report) {
                         {"input_seconds", v.input_seconds},
                         {"search_seconds", v.search_seconds},
                         {"deep_search", v.deep_search},
-                        {"query_points", v.num_query_points}};
+                        {"query_points", v.num_query_points},
+                        {"num_correct", v.num_correct}};
     if (!v.error.empty()) j["error"] = v.error;
     if (v.top1) {
       j["top1"] = {{"view_id", v.top1->view_id},
@@ -363,6 +426,7 @@ nlohmann::json ReportToJson(const EvaluationReport& report) {
         {"end_to_end_queries_per_second", report.end_to_end_queries_per_second},
         {"deep_searches", report.deep_searches}}},
       {"failed_inputs", report.failed_inputs},
+      {"chance", ChanceToJson(report)},
       {"views", views},
   };
 }
@@ -415,6 +479,12 @@ std::string ReportToText(const EvaluationReport& report) {
       if (s.criterion == report.criteria[c].name) os << FormatDouble("  %6.1f%%", 100.0 * s.rate);
     }
     os << "\n";
+  }
+  if (!report.chance_success.empty()) {
+    os << "  chance    ";
+    for (double rate : report.chance_success) os << FormatDouble("  %6.2f%%", 100.0 * rate);
+    os << FormatDouble("   (random ordering; %.1f correct (view, roll) per test view)\n",
+                       report.mean_correct_per_view);
   }
   os << "\n3D keypoint error (root-relative, hand sizes)   median    mean     p90\n";
   os << FormatDouble("  top-1                                         %6.3f",

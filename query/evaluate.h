@@ -67,9 +67,15 @@ struct EvaluationOptions {
   int64_t max_rank = kMaxBinnedRank;  // exact ranks up to this (Table 1 needs 1024)
   int num_threads = -1;               // search threads
   int max_views = 0;                  // evaluate only the first N test views (0: all)
+  // Count every correct (view, roll) of each test view under the main criterion, for the chance
+  // baseline: the success@n a random ordering of the database would reach. Linear in the database.
+  bool chance_baseline = true;
   bool progress = true;
   bool Check() const;
 };
+
+// P(at least one of `correct` marked items among the first n of a random ordering of `total`).
+double ChanceOfCorrectInTopN(uint64_t total, uint64_t correct, uint64_t n);
 
 // A criterion's name and its rules; `basic_only` criteria skip PCA-sampled test views.
 struct Criterion {
@@ -103,6 +109,8 @@ struct ViewOutcome {
   double search_seconds = 0;  // the timed top-first_k search
   bool deep_search = false;   // a second search for the rank was needed
   size_t num_query_points = 0;
+  int64_t num_correct =
+      -1;  // correct (view, roll) in the database, main criterion (-1: not counted)
   std::vector<Point2f> query_points;  // for example sheets
 };
 
@@ -129,6 +137,10 @@ struct EvaluationReport {
   std::vector<SuccessCell> success;
   Summary top1_keypoint_error;
   Summary best10_keypoint_error;
+  // Chance baseline (options.chance_baseline), main criterion, per success_n: the mean over test
+  // views of P(a correct match in the top n of a uniformly random ordering).
+  std::vector<double> chance_success;
+  double mean_correct_per_view = 0;
   int64_t failed_inputs = 0;  // views whose query could not be made
   int64_t deep_searches = 0;
   double search_seconds = 0;  // sum of timed searches

@@ -69,7 +69,12 @@ TEST(Evaluate, DatabaseViewsAreFoundAtRankOne) {
     EXPECT_NEAR(v.top1_keypoint_error, 0.0, 1e-5);
     EXPECT_NEAR(v.best10_keypoint_error, 0.0, 1e-5);
     EXPECT_FALSE(v.deep_search);
+    EXPECT_GE(v.num_correct, 1);  // at least the view itself
   }
+  ASSERT_EQ(report->chance_success.size(), 2u);
+  EXPECT_GT(report->chance_success[0], 0.0);
+  EXPECT_LT(report->chance_success[0], report->chance_success[1]);
+  EXPECT_LT(report->chance_success[1], 0.5);
   // Table 1 of the main criterion: all three at rank 1; same-shape applies to the basic view only.
   EXPECT_EQ(report->tables[0].counts[0], 3);
   EXPECT_EQ(report->tables[0].total(), 3);
@@ -142,6 +147,15 @@ TEST(Evaluate, UnreachableTruthAndFailedInputsLandInTheLastBin) {
   EXPECT_TRUE(std::isnan(report->views[1].top1_keypoint_error));
   EXPECT_EQ(report->top1_keypoint_error.count, 1);
   EXPECT_TRUE(ValidateJson(ReportToJson(*report), "evaluation.schema.json", "report").ok());
+}
+
+TEST(ChanceBaseline, HypergeometricKnownValues) {
+  EXPECT_DOUBLE_EQ(ChanceOfCorrectInTopN(10, 0, 5), 0.0);
+  EXPECT_NEAR(ChanceOfCorrectInTopN(10, 1, 1), 0.1, 1e-12);
+  EXPECT_NEAR(ChanceOfCorrectInTopN(10, 1, 3), 0.3, 1e-12);
+  EXPECT_NEAR(ChanceOfCorrectInTopN(4, 2, 2), 1.0 - (2.0 / 4) * (1.0 / 3), 1e-12);
+  EXPECT_DOUBLE_EQ(ChanceOfCorrectInTopN(10, 1, 10), 1.0);
+  EXPECT_DOUBLE_EQ(ChanceOfCorrectInTopN(10, 9, 2), 1.0);  // only one wrong item
 }
 
 TEST(EvaluationOptions, Check) {
