@@ -1,0 +1,121 @@
+#!/usr/bin/env bash
+# Runs every benchmark of handdb on this machine and writes the report:
+#   bench/results.json   every number (and each benchmark's own output)
+#   docs/results.md      the machine, the numbers, the ratios against the in-run baselines, and
+#                        pictures of successes and failures (docs/images/results/)
+#
+#   bench/run.sh                          # format, render, convert, query, evaluate (paper database)
+#   HANDDB_BENCH_PCA_LARGE=1 bench/run.sh # also the pca-large database (1,056,768 virtual views)
+#   HANDDB_BENCH_DIR=/data/bench bench/run.sh
+#
+# Steps (each one's stdout/stderr and wall time go to $HANDDB_BENCH_DIR/out/):
+#   build     Release build of handdb and the bench programs (build-bench/)
+#   format    bench/format_bench: shard write / scan / validate vs raw read() of the same bytes
+#   render    bench/render_bench.py: Blender renders/s vs one bare Blender start
+#   generate  handdb generate configs/paper.json (26 shapes x 86 directions x 48 rolls)
+#   convert   bench/convert_bench on the paper renders: views/s with 1 and 2 threads
+#   query     bench/query_bench on the paper database: pruned vs brute force vs naive PCL
+#   testset   handdb testset configs/testset-paper.json (plain photos) and --clutter
+#   evaluate  handdb evaluate: clean labels, plain photos, cluttered photos (Table 1,
+#             success@(d,n) with the chance baseline, keypoint error, queries/s)
+#   report    bench/report.py -> bench/results.json, docs/results.md
+# Databases and test sets are kept in $HANDDB_BENCH_DIR (default /tmp/handdb-bench) and reused by
+# a rerun (generate and testset resume); the benchmarks themselves always run again.
+# HANDDB_BENCH_STEPS="evaluate report" runs only some steps (the others' outputs are reused).
+set -euo pipefail
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$here"
+work="${HANDDB_BENCH_DIR:-/tmp/handdb-bench}"
+build="${HANDDB_BENCH_BUILD:-$here/build-bench}"
+jobs="${HANDDB_BENCH_JOBS:-$(nproc)}"
+steps="${HANDDB_BENCH_STEPS:-build format render generate convert query testset evaluate report}"
+pca_large="${HANDDB_BENCH_PCA_LARGE:-0}"
+out="$work/out"
+mkdir -p "$out"
+start=$(date +%s)
+handdb="$build/cli/handdb"
+
+want() { [[ " $steps " == *" $1 "* ]]; }
+log() { echo "=== bench/run.sh: $* ($(($(date +%s) - start)) s)" >&2; }
+
+# run NAME CMD...: stdout -> out/NAME.txt, stderr -> out/NAME.err, wall time + exit code -> out/NAME.time
+run() {
+  local name="$1"
+  shift
+  log "$name: $*"
+  local t0 t1 rc=0
+  t0=$(date +%s.%N)
+  "$@" >"$out/$name.txt" 2>"$out/$name.err" || rc=$?
+  t1=$(date +%s.%N)
+  printf '{"seconds": %.3f, "exit_code": %d, "command": "%s"}\n' \
+    "$(awk "BEGIN { print $t1 - $t0 }")" "$rc" "$*" >"$out/$name.time"
+  if [ "$rc" -ne 0 ]; then
+    log "$name failed (exit $rc): $(tail -n 3 "$out/$name.err" | tr '\n' ' ')"
+  fi
+  return 0
+}
+
+if want build; then
+  log "build (Release) into $build"
+  cmake -S "$here" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=Release -DHANDDB_BUILD_TESTS=OFF \
+    >"$out/build.txt" 2>&1
+  cmake --build "$build" -j "$jobs" --target handdb format_bench convert_bench query_bench \
+    >>"$out/build.txt" 2>&1
+fi
+
+if want format; then
+  run format "$build/bench/format_bench" --dir "$work"
+fi
+
+if want render; then
+  # 6 shapes x 86 directions (516 renders) in 4 units: long enough for a stable rate.
+  run render /usr/bin/python3 bench/render_bench.py --shapes 6 --dirs 86 --unit-size 129 \
+    --jobs "$jobs" --json
+fi
+
+if want generate; then
+  run generate_paper "$handdb" generate configs/paper.json -o "$work/db-paper" -j "$jobs" -q --json
+fi
+
+if want convert; then
+  run convert "$build/bench/convert_bench" --render-dir "$work/db-paper/render"
+fi
+
+if want query; then
+  run query "$build/bench/query_bench" --db "$work/db-paper" --threads "$jobs"
+fi
+
+if want testset; then
+  run testset_paper "$handdb" testset configs/testset-paper.json --out "$work/ts-paper" \
+    -j "$jobs" -q --json
+  run testset_paper_clutter "$handdb" testset configs/testset-paper.json --clutter \
+    --out "$work/ts-paper-clutter" -j "$jobs" -q --json
+fi
+
+evaluate() {  # NAME DB TESTSET INPUT
+  run "eval_$1" "$handdb" evaluate "$2" "$3" --input "$4" --threads "$jobs" \
+    --json "$out/eval_$1.json" --plots "$work/plots/$1" -q
+}
+if want evaluate; then
+  evaluate paper_clean "$work/db-paper" "$work/ts-paper" clean
+  evaluate paper_photo "$work/db-paper" "$work/ts-paper" photo
+  evaluate paper_clutter "$work/db-paper" "$work/ts-paper-clutter" photo
+fi
+
+if [ "$pca_large" = 1 ]; then
+  if want generate; then
+    run generate_pca_large "$handdb" generate configs/pca-large.json -o "$work/db-pca-large" \
+      -j "$jobs" -q --json
+  fi
+  if want evaluate; then
+    evaluate pca_large_clean "$work/db-pca-large" "$work/ts-paper" clean
+    evaluate pca_large_photo "$work/db-pca-large" "$work/ts-paper" photo
+  fi
+fi
+
+if want report; then
+  log "report"
+  /usr/bin/python3 bench/report.py --work "$work" --handdb "$handdb" \
+    --results bench/results.json --markdown docs/results.md --images docs/images/results
+fi
+log "done"
