@@ -69,7 +69,7 @@ nlohmann::json ChanceToJson(const EvaluationReport& report) {
   for (size_t i = 0; i < report.chance_success.size(); ++i) {
     cells.push_back({{"n", report.options.success_n[i]}, {"rate", report.chance_success[i]}});
   }
-  return {{"computed", report.options.chance_baseline},
+  return {{"computed", !report.chance_success.empty()},
           {"mean_correct_per_view", report.mean_correct_per_view},
           {"success", cells}};
 }
@@ -148,19 +148,16 @@ double ChanceOfCorrectInTopN(uint64_t total, uint64_t correct, uint64_t n) {
 namespace {
 // Correct (view, roll) pairs of the whole database for one judge. Shape and direction depend on
 // the view only, so rolls are tried only for views that pass both.
-int64_t CountCorrect(const Database& db, const CorrectnessJudge& judge) {
+int64_t CountCorrect(const std::vector<PoseForEval>& db_poses,
+                     uint32_t num_rolls,
+                     const CorrectnessJudge& judge) {
   int64_t count = 0;
-  for (view_id_t v = 0; v < db.num_views(); ++v) {
-    const ViewLabel label = db.label(v);
-    PoseForEval pose;
-    pose.joint_angles = label.joint_angles;
-    pose.view_direction = {
-        label.view_direction[0], label.view_direction[1], label.view_direction[2]};
-    pose.camera_roll = label.camera_roll;
-    const CorrectnessDetail detail = judge.Judge(pose);
+  for (const PoseForEval& canonical : db_poses) {
+    const CorrectnessDetail detail = judge.Judge(canonical);
     if (!detail.shape_ok || !detail.direction_ok) continue;
-    for (roll_id_t r = 0; r < db.num_rolls(); ++r) {
-      pose.camera_roll = label.camera_roll + RollAngle(r, db.num_rolls());
+    PoseForEval pose = canonical;
+    for (roll_id_t r = 0; r < num_rolls; ++r) {
+      pose.camera_roll = canonical.camera_roll + RollAngle(r, num_rolls);
       count += judge.Judge(pose).roll_ok ? 1 : 0;
     }
   }
@@ -214,6 +211,18 @@ Result<EvaluationReport> Evaluate(const Searcher& searcher,
   SearchOptions deep = first;
   deep.top_k = static_cast<int>(std::min<uint64_t>(options.max_rank, db.num_virtual_views()));
 
+  // The canonical poses of the database (keypoints are not needed to judge correctness): every
+  // test view's correct (view, roll) pairs are counted from them, which gives the chance baseline
+  // and tells when a deeper search can find nothing (no correct pair exists at all).
+  std::vector<PoseForEval> db_poses(db.num_views());
+  for (view_id_t v = 0; v < db.num_views(); ++v) {
+    const ViewLabel label = db.label(v);
+    db_poses[v].joint_angles = label.joint_angles;
+    db_poses[v].view_direction = {
+        label.view_direction[0], label.view_direction[1], label.view_direction[2]};
+    db_poses[v].camera_roll = label.camera_roll;
+  }
+
   Progress progress("evaluate", n, options.progress, "queries");
   for (size_t i = 0; i < n; ++i) {
     const TestView& view = testset.views[i];
@@ -232,7 +241,11 @@ Result<EvaluationReport> Evaluate(const Searcher& searcher,
       if (applies[c]) out.ranks[c] = kNoCorrectMatch;
     }
 
-    if (options.chance_baseline) out.num_correct = CountCorrect(db, judges[0]);
+    std::vector<int64_t> correct_pairs(num_criteria, 0);
+    for (size_t c = 0; c < num_criteria; ++c) {
+      if (applies[c]) correct_pairs[c] = CountCorrect(db_poses, db.num_rolls(), judges[c]);
+    }
+    out.num_correct = correct_pairs[0];
     const auto t_input = std::chrono::steady_clock::now();
     auto points = query_points(view);
     out.input_seconds = Seconds(t_input);
@@ -271,7 +284,8 @@ Result<EvaluationReport> Evaluate(const Searcher& searcher,
             break;
           }
         }
-        missing = missing || out.ranks[c] == kNoCorrectMatch;
+        // Worth a deeper search only if a correct pair exists beyond this list.
+        missing = missing || (out.ranks[c] == kNoCorrectMatch && correct_pairs[c] > 0);
       }
       return missing;
     };
@@ -328,7 +342,7 @@ Result<EvaluationReport> Evaluate(const Searcher& searcher,
     top1.push_back(v.top1_keypoint_error);
     best10.push_back(v.best10_keypoint_error);
   }
-  if (options.chance_baseline && !report.views.empty()) {
+  if (!report.views.empty()) {
     double correct_sum = 0;
     for (int64_t n_top : options.success_n) {
       double sum = 0;

@@ -8,7 +8,9 @@
 //  - queries per second.
 // Ranks are exact: each query is first searched for the top `first_k` (the timed search); when a
 // criterion has no correct match among them, the query is searched again for the top `max_rank`,
-// which the pruned search also returns exactly, so a rank is either exact or "> max_rank".
+// which the pruned search also returns exactly, so a rank is either exact or "> max_rank". Every
+// correct (view, roll) pair of the database is counted from the labels first (linear, cheap): a
+// view with none skips the deeper search, and the counts give the chance baseline.
 //
 // This library knows nothing of images: the caller turns a test view into query edge points (the
 // CLI uses the converter for clean label renders and the photo path for photos).
@@ -67,9 +69,6 @@ struct EvaluationOptions {
   int64_t max_rank = kMaxBinnedRank;  // exact ranks up to this (Table 1 needs 1024)
   int num_threads = -1;               // search threads
   int max_views = 0;                  // evaluate only the first N test views (0: all)
-  // Count every correct (view, roll) of each test view under the main criterion, for the chance
-  // baseline: the success@n a random ordering of the database would reach. Linear in the database.
-  bool chance_baseline = true;
   bool progress = true;
   bool Check() const;
 };
@@ -137,8 +136,8 @@ struct EvaluationReport {
   std::vector<SuccessCell> success;
   Summary top1_keypoint_error;
   Summary best10_keypoint_error;
-  // Chance baseline (options.chance_baseline), main criterion, per success_n: the mean over test
-  // views of P(a correct match in the top n of a uniformly random ordering).
+  // Chance baseline, main criterion, per success_n: the mean over test views of P(a correct match
+  // in the top n of a uniformly random ordering of the database).
   std::vector<double> chance_success;
   double mean_correct_per_view = 0;
   int64_t failed_inputs = 0;  // views whose query could not be made

@@ -138,7 +138,8 @@ TEST(Evaluate, UnreachableTruthAndFailedInputsLandInTheLastBin) {
   auto report = Evaluate(searcher, set, QueryInput::kPhoto, points, FastOptions());
   ASSERT_TRUE(report.ok());
   EXPECT_EQ(report->views[0].ranks[0], kNoCorrectMatch);
-  EXPECT_TRUE(report->views[0].deep_search);
+  EXPECT_EQ(report->views[0].num_correct, 0);
+  EXPECT_FALSE(report->views[0].deep_search) << "no correct pair exists: nothing to search for";
   EXPECT_EQ(report->views[1].ranks[0], kNoCorrectMatch);
   EXPECT_EQ(report->views[1].error, "photo: no hand found");
   EXPECT_EQ(report->failed_inputs, 1);
