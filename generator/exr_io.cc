@@ -175,27 +175,33 @@ Result<LabelImage> ReadLabelExr(const fs::path& path, const ExrReadOptions& opti
   return image;
 }
 
-Status WriteLabelExr(const fs::path& path, const LabelImage& image, const std::string& layer) {
+Status WriteLabelExr(const fs::path& path,
+                     const LabelImage& image,
+                     const ExrWriteOptions& options) {
   const size_t n = static_cast<size_t>(image.width) * static_cast<size_t>(image.height);
   THROW_CHECK_EQ(image.labels.size(), n);
   THROW_CHECK(image.depth.empty() || image.depth.size() == n);
-  const int nch = image.has_depth() ? 2 : 1;
   // Channels in the order Blender writes them (alphabetical within the layer).
-  OIIO::ImageSpec spec(image.width, image.height, nch, OIIO::TypeDesc::FLOAT);
-  spec.channelnames.clear();
-  if (image.has_depth()) spec.channelnames.push_back(layer + "." + kDepthChannelSuffix);
-  spec.channelnames.push_back(layer + "." + kLabelChannelSuffix);
+  std::vector<std::string> names;
+  if (options.combined_pass) {
+    for (const char* c : {"R", "G", "B", "A"}) names.push_back(options.layer + ".Combined." + c);
+  }
+  if (image.has_depth()) names.push_back(options.layer + "." + kDepthChannelSuffix);
+  names.push_back(options.layer + "." + kLabelChannelSuffix);
+  const size_t nch = names.size();
+  OIIO::ImageSpec spec(image.width,
+                       image.height,
+                       static_cast<int>(nch),
+                       options.half ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::FLOAT);
+  spec.channelnames = names;
   spec.alpha_channel = -1;
   spec.z_channel = -1;
-  spec.attribute("compression", "zip");
-  std::vector<float> pixels(n * static_cast<size_t>(nch));
+  spec.attribute("compression", options.compression);
+  std::vector<float> pixels(n * nch, 0.0f);
   for (size_t i = 0; i < n; ++i) {
-    if (image.has_depth()) {
-      pixels[i * 2] = image.depth[i];
-      pixels[i * 2 + 1] = image.labels[i];
-    } else {
-      pixels[i] = image.labels[i];
-    }
+    float* px = &pixels[i * nch + nch - 1];
+    *px = image.labels[i];
+    if (image.has_depth()) px[-1] = image.depth[i];
   }
   std::vector<unsigned char> bytes;
   OIIO::Filesystem::IOVecOutput proxy(bytes);

@@ -29,11 +29,17 @@ struct ExrReadOptions {
 //   0..16, or non-finite depth on the hand).
 Result<LabelImage> ReadLabelExr(const std::filesystem::path& path, const ExrReadOptions& options);
 
-// Writes a label image the way Blender does (32-bit float channels "<layer>.IndexMA.X" and, with
-// depth, "<layer>.Depth.Z"; ZIP compression), atomically. For tests, benchmarks and tools that
-// synthesise label renders.
+struct ExrWriteOptions {
+  std::string layer = "ViewLayer";
+  bool half = false;           // 16-bit float channels instead of 32-bit
+  bool combined_pass = false;  // also "<layer>.Combined.RGBA" (zeros), as Blender writes by default
+  std::string compression = "zip";
+};
+
+// Writes a label image the way Blender does (float channels "<layer>.IndexMA.X" and, with depth,
+// "<layer>.Depth.Z"), atomically. For tests, benchmarks and tools that synthesise label renders.
 Status WriteLabelExr(const std::filesystem::path& path,
                      const LabelImage& image,
-                     const std::string& layer = "ViewLayer");
+                     const ExrWriteOptions& options = {});
 
 }  // namespace handdb

@@ -61,6 +61,24 @@ TEST_F(ExrIo, RoundTripsABlenderStyleLabelImage) {
   EXPECT_EQ(img->depth, hand.image.depth);
 }
 
+TEST_F(ExrIo, RoundTripsHalfFloatAndBlenderCombinedPass) {
+  const SyntheticHand hand = RenderSyntheticHand(SyntheticHandParams{});
+  ExrWriteOptions options;
+  options.half = true;
+  options.combined_pass = true;
+  options.layer = "View Layer";
+  const fs::path path = dir_ / "half.exr";
+  ASSERT_TRUE(WriteLabelExr(path, hand.image, options).ok());
+  auto img = ReadLabelExr(path, ExrReadOptions{});
+  ASSERT_TRUE(img.ok()) << img.status().ToString();
+  EXPECT_EQ(img->labels, hand.image.labels);  // small integers are exact in half floats
+  for (size_t i = 0; i < img->labels.size(); ++i) {
+    if (img->labels[i] != 0) {
+      EXPECT_NEAR(img->depth[i], hand.image.depth[i], 1e-3);
+    }
+  }
+}
+
 TEST_F(ExrIo, FindsChannelsByDottedSuffixAmongOthers) {
   const int w = 4, h = 3;
   std::vector<float> px;
