@@ -401,6 +401,28 @@ bool KeepExistingShard(UnitState* st, bool skip_bad) {
   return true;
 }
 
+// Temp files a killed run left behind (format/atomic_file.h names them "<target>.tmp-*"): those
+// of the shards this run writes and, when it writes the manifest, the manifest's. Nothing else in
+// DB_DIR is touched.
+void RemoveStaleTempFiles(const fs::path& db_dir,
+                          const std::vector<UnitState>& units,
+                          bool writes_manifest) {
+  std::set<std::string> prefixes;
+  for (const UnitState& st : units) {
+    if (!st.kept) prefixes.insert(st.shard_path.filename().string() + ".tmp-");
+  }
+  if (writes_manifest) prefixes.insert(std::string(kManifestFileName) + ".tmp-");
+  std::error_code ec;
+  for (fs::directory_iterator it(db_dir, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    const size_t dot = name.find(".tmp-");
+    if (dot == std::string::npos) continue;
+    if (prefixes.count(name.substr(0, dot + 5)) == 0) continue;
+    std::error_code rm_ec;
+    fs::remove(it->path(), rm_ec);  // best effort: a leftover temp file is harmless
+  }
+}
+
 // Runs fn(i) for i in [0, n) on `threads` threads. Stops early on cancel; rethrows the first
 // exception (a broken invariant) on the calling thread.
 Status ParallelFor(size_t n,
@@ -644,6 +666,7 @@ Result<ConvertSummary> ConvertOrCheck(const fs::path& render_dir,
   for (size_t u = 0; u < units.size(); ++u) {
     if (!units[u].kept) to_write.push_back(u);
   }
+  RemoveStaleTempFiles(db_dir, units, options.units.empty());
   const json generation = GenerationJson(ctx);
   const json hand_json = HandModelJson(ctx.hand);
   const json label_names = LabelNamesJson(ctx.hand);

@@ -293,10 +293,16 @@ TEST_F(ConvertDir, RerunKeepsShardsAndOutputIsByteIdentical) {
   // A lost shard and manifest (killed run): only that shard is written again.
   fs::remove(db / ShardFileName(1));
   fs::remove(db / "manifest.json");
+  // ... with the temp files a kill -9 leaves behind, and a file that is not ours.
+  ASSERT_TRUE(WriteFileAtomic(db / (ShardFileName(1) + ".tmp-AbC123"), "partial").ok());
+  ASSERT_TRUE(WriteFileAtomic(db / "manifest.json.tmp-x9", "{").ok());
+  ASSERT_TRUE(WriteFileAtomic(db / "notes.txt.tmp-1", "keep").ok());
   auto resumed = ConvertRenderDir(run_, db, Options(2));
   ASSERT_TRUE(resumed.ok());
   EXPECT_EQ(resumed->shards_kept, 2u);
   EXPECT_EQ(resumed->shards_written, 1u);
+  EXPECT_TRUE(fs::exists(db / "notes.txt.tmp-1"));
+  fs::remove(db / "notes.txt.tmp-1");
   EXPECT_EQ(ReadDir(db), first);
 
   // A damaged shard is not kept.
