@@ -118,6 +118,8 @@ Status WriteCdfPng(const std::filesystem::path& path,
       }
     }
     if (x_max <= 0) x_max = 1;
+    // A round axis end: the next tenth (or whole number above 10).
+    x_max = x_max < 10 ? std::ceil(x_max * 10.0 - 1e-9) / 10.0 : std::ceil(x_max);
   }
   cv::Mat image(kHeight, kWidth, CV_8UC3, kWhite);
   Text(image, title, {kLeft, 28}, 0.6);
@@ -140,7 +142,6 @@ Status WriteCdfPng(const std::filesystem::path& path,
                 0.4);
   }
   CentredText(image, x_label, kLeft + plot_w / 2, kHeight - 15, 0.5);
-  int legend_y = kTop + 20;
   for (const auto& s : series) {
     const cv::Scalar colour(s.bgr[0], s.bgr[1], s.bgr[2]);
     const auto cdf = EmpiricalCdf(s.values);
@@ -153,19 +154,30 @@ Status WriteCdfPng(const std::filesystem::path& path,
       cv::line(image, flat, up, colour, 2, cv::LINE_AA);
       previous = up;
     }
-    if (!cdf.empty())
+    if (!cdf.empty()) {
       cv::line(image, previous, {kLeft + plot_w, previous.y}, colour, 2, cv::LINE_AA);
-    const Summary summary = Summarise(s.values);
-    cv::line(image,
-             {kLeft + plot_w - 300, legend_y - 5},
-             {kLeft + plot_w - 270, legend_y - 5},
-             colour,
-             2);
-    Text(image,
-         s.name + Format("  median %.3f", summary.median) + Format("  mean %.3f", summary.mean),
-         {kLeft + plot_w - 262, legend_y},
-         0.45);
-    legend_y += 22;
+    }
+  }
+  // Legend in the lower right (where risen CDFs leave room), on a white box over the grid.
+  if (!series.empty()) {
+    constexpr int kLegendWidth = 400;
+    const int legend_x = kLeft + plot_w - kLegendWidth;
+    int legend_y = kTop + plot_h - 14 - 22 * static_cast<int>(series.size() - 1);
+    cv::rectangle(image,
+                  {legend_x - 8, legend_y - 18},
+                  {kLeft + plot_w - 4, kTop + plot_h - 4},
+                  kWhite,
+                  cv::FILLED);
+    for (const auto& s : series) {
+      const cv::Scalar colour(s.bgr[0], s.bgr[1], s.bgr[2]);
+      const Summary summary = Summarise(s.values);
+      cv::line(image, {legend_x, legend_y - 5}, {legend_x + 30, legend_y - 5}, colour, 2);
+      Text(image,
+           s.name + Format("  median %.3f", summary.median) + Format("  mean %.3f", summary.mean),
+           {legend_x + 38, legend_y},
+           0.45);
+      legend_y += 22;
+    }
   }
   return WritePng(path, image);
 }
