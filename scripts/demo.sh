@@ -29,7 +29,9 @@ step "render held-out test views (configs/testset-demo.json)"
 "$handdb" testset configs/testset-demo.json --out "$out/testset"
 
 step "query the database with a held-out photo-like test image"
-query_image="$(ls "$out"/testset/photo/*.png | head -1)"
+# The first held-out photo of a basic shape (the demo database holds 6 of them, on its grid of
+# 42 directions x 12 rolls; the test view's direction and roll are off that grid).
+query_image="$out/testset/$(/usr/bin/python3 -c 'import json,sys; t=json.load(open(sys.argv[1])); print(next(i["photo"] for i in t["items"] if i["basic"]))' "$out/testset/testset.json")"
 "$handdb" query "$out/db" "$query_image" --top 5 --sheet "$out/query_sheet.png"
 "$handdb" query "$out/db" "$query_image" --top 5 --json > "$out/query_result.json"
 
