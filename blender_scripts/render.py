@@ -3,7 +3,7 @@
     blender -b --factory-startup -noaudio -t 1 -P blender_scripts/render.py -- \
         --plan RUN_DIR/plan.json --unit 7 --out RUN_DIR [--frames-per-process N]
 
-Per render item: units/uNNNNN/rNNNNNN.exr (multilayer float EXR: IndexMA = link id, Depth) and
+Per render item: units/uNNNNN/rNNNNNN.exr (multilayer half-float EXR: IndexMA.X = link id, Depth.Z) and
 rNNNNNN.json (sidecar), each written to a temp name and renamed; items with both files are
 skipped; units/uNNNNN/DONE is written last. Prints `rendered <render_id>` per finished item.
 With --frames-per-process N the script re-executes Blender (same pid, fresh memory) after every

@@ -139,7 +139,9 @@ class PhotoStudio:
         scene.view_settings.look = "None"
         scene.view_settings.exposure = 0.0
         scene.view_settings.gamma = 1.0
+        self.hs.use_label_output(False)  # save the render result (PNG), not the label EXR
         vl = scene.view_layers[0]
+        vl.use_pass_combined = True
         vl.use_pass_z = False
         vl.use_pass_material_index = False
         settings = scene.render.image_settings

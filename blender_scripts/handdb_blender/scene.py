@@ -9,6 +9,7 @@ Per render only the pose bones and the camera change (persistent data keeps the 
 from __future__ import annotations
 
 import os
+import struct
 import warnings
 from typing import Sequence
 
@@ -16,7 +17,7 @@ import bpy
 import mathutils
 import numpy as np
 
-from . import kinematics
+from . import exr, kinematics
 from .errors import RenderError
 
 CAMERA_DISTANCE = 1.0  # hand-frame units from the look-at point; the hand spans ~0.25
@@ -115,14 +116,66 @@ def _setup_render(scene, resolution: int) -> None:
     scene.render.use_compositing = False
     scene.render.use_sequencer = False
     scene.render.dither_intensity = 0.0
+    # No render date/time in the EXR header: the same plan gives the same bytes.
+    for stamp in ("date", "time", "render_time", "frame", "filename", "memory", "hostname"):
+        setattr(scene.render, "use_stamp_" + stamp, False)
     vl = scene.view_layers[0]
-    vl.use_pass_combined = True
+    vl.use_pass_combined = False
     vl.use_pass_z = True
     vl.use_pass_material_index = True
-    settings = scene.render.image_settings
-    settings.file_format = "OPEN_EXR_MULTILAYER"
-    settings.color_depth = "32"
-    settings.exr_codec = "ZIP"
+
+
+# The label renders are written by a compositor File Output node, not by saving the render result:
+# Blender's render-result EXR always carries the RGBA Combined pass and writes Depth/IndexMA as
+# float32 whatever color_depth says, and decoding those 6 channels was ~90% of the converter's
+# time (docs/conversion.md). The node writes exactly two HALF channels: half floats hold the link
+# ids 0..16 exactly and depth to ~1 mm near the camera distance (far below the 5 mm occlusion
+# jump); the background depth 1e10 becomes +inf, which the converter accepts off the hand. The
+# node names a float input's channel "<slot>.V"; render_to renames it in the header to the
+# ".X"/".Z" names Blender's own passes carry (same length, so no offset moves).
+_LABEL_SLOT, _DEPTH_SLOT = "ViewLayer.IndexMA", "ViewLayer.Depth"
+_CHANNEL_RENAMES = ((_DEPTH_SLOT + ".V", _DEPTH_SLOT + ".Z"), (_LABEL_SLOT + ".V", _LABEL_SLOT + ".X"))
+
+
+def _setup_label_output(scene):
+    scene.use_nodes = True
+    nt = scene.node_tree
+    for node in list(nt.nodes):
+        nt.nodes.remove(node)
+    layers = nt.nodes.new("CompositorNodeRLayers")
+    layers.scene = scene
+    out = nt.nodes.new("CompositorNodeOutputFile")
+    fmt = out.format
+    fmt.file_format = "OPEN_EXR_MULTILAYER"
+    fmt.color_depth = "16"
+    fmt.exr_codec = "ZIP"
+    out.layer_slots.clear()
+    out.layer_slots.new(_LABEL_SLOT)
+    out.layer_slots.new(_DEPTH_SLOT)
+    nt.links.new(layers.outputs["IndexMA"], out.inputs[_LABEL_SLOT])
+    nt.links.new(layers.outputs["Depth"], out.inputs[_DEPTH_SLOT])
+    scene.render.use_compositing = True
+    return out
+
+
+def _rename_channels(path: str) -> None:
+    with open(path, "r+b") as f:
+        data = f.read(1 << 16)
+        try:
+            header, end = exr._read_header(data, path)
+        except (exr.ExrError, ValueError, IndexError, struct.error) as e:
+            raise RenderError(f"{path}: Blender wrote an unreadable EXR header ({e})") from e
+        names = sorted(c[0] for c in header.get("channels", []))
+        if names != sorted(old for old, _ in _CHANNEL_RENAMES) or any(c[1] != 1 for c in header["channels"]):
+            raise RenderError(f"{path}: expected half channels {[o for o, _ in _CHANNEL_RENAMES]}, got {names}")
+        head = data[:end]
+        for old, new in _CHANNEL_RENAMES:
+            needle = old.encode() + b"\0"
+            if head.count(needle) != 1:
+                raise RenderError(f"{path}: channel name '{old}' not found once in the header")
+            head = head.replace(needle, new.encode() + b"\0")
+        f.seek(0)
+        f.write(head)
 
 
 class HandScene:
@@ -151,6 +204,14 @@ class HandScene:
         self.scene.collection.objects.link(self.camera)
         self.scene.camera = self.camera
         _setup_render(self.scene, resolution)
+        self._label_output = _setup_label_output(self.scene)
+        self._labels = True
+
+    def use_label_output(self, enabled: bool) -> None:
+        """True (the default): render_to writes the label EXR; False: it saves the render result
+        in the scene's image format (photo.py's studio renders)."""
+        self._labels = enabled
+        self.scene.render.use_compositing = enabled
 
     def set_pose(self, joints: Sequence[float]) -> None:
         rots = kinematics.local_rotations(self.model, joints)
@@ -191,7 +252,22 @@ class HandScene:
         return co @ mw[:3, :3].T + mw[:3, 3]
 
     def render_to(self, path: str) -> None:
-        self.scene.render.filepath = path
-        result = bpy.ops.render.render(write_still=True)
-        if "FINISHED" not in result or not os.path.exists(path):
+        if not self._labels:
+            self.scene.render.filepath = path
+            result = bpy.ops.render.render(write_still=True)
+            if "FINISHED" not in result or not os.path.exists(path):
+                raise RenderError(f"{path}: Blender did not write the render")
+            return
+        path = os.path.abspath(path)
+        if "#" in path:
+            raise RenderError(f"{path}: '#' in a render path (Blender reads it as a frame number)")
+        # The node appends the frame number in place of '#': write PATH.<frame>, then rename.
+        self._label_output.base_path = path + ".#"
+        written = f"{path}.{self.scene.frame_current}"
+        if os.path.exists(written):
+            os.remove(written)
+        result = bpy.ops.render.render(write_still=False)
+        if "FINISHED" not in result or not os.path.exists(written):
             raise RenderError(f"{path}: Blender did not write the render")
+        _rename_channels(written)
+        os.replace(written, path)
