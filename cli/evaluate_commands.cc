@@ -226,7 +226,9 @@ int RunEvaluate(int argc, char** argv) {
   app.add_option("--max-rank", options.max_rank, "exact ranks up to this depth")
       ->check(CLI::Range(10, 1000000))
       ->capture_default_str();
-  app.add_option("--limit", options.max_views, "evaluate only the first N test views")
+  app.add_option("--stride", options.stride, "evaluate every K-th test view (a spread-out subset)")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--limit", options.max_views, "evaluate only the first N (selected) test views")
       ->check(CLI::NonNegativeNumber);
   app.add_flag("-q,--quiet", quiet, "no progress, no text report");
   if (int rc = Parse(app, argc, argv); rc >= 0) return rc;

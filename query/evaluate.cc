@@ -125,6 +125,7 @@ bool EvaluationOptions::Check() const {
   CHECK_OPTION_GE(max_rank, static_cast<int64_t>(first_k));
   CHECK_OPTION(num_threads == -1 || num_threads >= 1);
   CHECK_OPTION_GE(max_views, 0);
+  CHECK_OPTION_GE(stride, 1);
   for (double d : d_grid_deg) CHECK_OPTION_GE(d, 0.0);
   for (int64_t n : success_n) {
     CHECK_OPTION_GE(n, 1);
@@ -202,8 +203,14 @@ Result<EvaluationReport> Evaluate(const Searcher& searcher,
   report.criteria = MakeCriteria(options);
   report.threads = ResolveThreadCount(options.num_threads);
   const size_t num_criteria = report.criteria.size();
-  size_t n = testset.views.size();
-  if (options.max_views > 0) n = std::min(n, static_cast<size_t>(options.max_views));
+  std::vector<size_t> selected;
+  for (size_t i = 0; i < testset.views.size(); i += static_cast<size_t>(options.stride)) {
+    selected.push_back(i);
+  }
+  if (options.max_views > 0 && selected.size() > static_cast<size_t>(options.max_views)) {
+    selected.resize(static_cast<size_t>(options.max_views));
+  }
+  const size_t n = selected.size();
 
   SearchOptions first;
   first.top_k = static_cast<int>(std::min<uint64_t>(options.first_k, db.num_virtual_views()));
@@ -224,7 +231,7 @@ Result<EvaluationReport> Evaluate(const Searcher& searcher,
   }
 
   Progress progress("evaluate", n, options.progress, "queries");
-  for (size_t i = 0; i < n; ++i) {
+  for (size_t i : selected) {
     const TestView& view = testset.views[i];
     ViewOutcome out;
     out.test_id = view.id;

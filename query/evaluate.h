@@ -69,6 +69,7 @@ struct EvaluationOptions {
   int64_t max_rank = kMaxBinnedRank;  // exact ranks up to this (Table 1 needs 1024)
   int num_threads = -1;               // search threads
   int max_views = 0;                  // evaluate only the first N test views (0: all)
+  int stride = 1;                     // evaluate every stride-th test view (0, s, 2s, ...)
   bool progress = true;
   bool Check() const;
 };

@@ -168,6 +168,9 @@ TEST(EvaluationOptions, Check) {
   o.max_rank = 50;  // below first_k
   EXPECT_FALSE(o.Check());
   o = EvaluationOptions();
+  o.stride = 0;
+  EXPECT_FALSE(o.Check());
+  o = EvaluationOptions();
   o.success_n = {2000};
   EXPECT_FALSE(o.Check());
 }
