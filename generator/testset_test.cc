@@ -2,8 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <map>
 #include <set>
 
 #include "format/json_schema.h"
@@ -47,16 +49,22 @@ TEST(TestSetPlan, ItemsMixBasicAndPcaShapesWithinLimits) {
   ASSERT_TRUE(hand.ok());
   auto library = LoadShapes(RepoRoot() / "configs/shapes/basic.json", hand->limits());
   ASSERT_TRUE(library.ok());
+  // The demo config draws its basic views from the demo database's shapes only (basic_names).
+  const nlohmann::json config = DemoConfig();
   std::set<std::string> names;
-  for (const auto& s : *library) names.insert(s.name);
+  for (const auto& n : config.at("basic_names")) names.insert(n.get<std::string>());
+  for (const auto& n : names) {
+    EXPECT_TRUE(std::any_of(library->begin(), library->end(), [&](const auto& s) {
+      return s.name == n;
+    })) << n;
+  }
   int basic = 0;
-  std::set<std::string> basic_seen;
+  std::map<std::string, int> basic_seen;
   for (const TestSetItem& item : plan->items) {
     if (item.basic) {
       ++basic;
       EXPECT_TRUE(names.count(item.shape_name)) << item.shape_name;
-      EXPECT_TRUE(basic_seen.insert(item.shape_name).second)
-          << "repeated before the library is used up";
+      ++basic_seen[item.shape_name];
       EXPECT_TRUE(item.coeffs.empty());
     } else {
       EXPECT_EQ(item.coeffs.size(), 6u);
@@ -68,7 +76,10 @@ TEST(TestSetPlan, ItemsMixBasicAndPcaShapesWithinLimits) {
     EXPECT_LT(item.roll, 2 * M_PI);
     EXPECT_NEAR(item.theta, std::acos(item.direction[2]), 1e-12);
   }
-  EXPECT_EQ(basic, 6);  // round(0.25 * 24)
+  EXPECT_EQ(basic, 12);  // round(0.5 * 24)
+  // The named shapes are used up evenly before any repeats: 12 views over 6 names, twice each.
+  EXPECT_EQ(basic_seen.size(), names.size());
+  for (const auto& [name, count] : basic_seen) EXPECT_EQ(count, 2) << name;
 }
 
 TEST(TestSetPlan, DirectionsAndRollsAreUniform) {
