@@ -146,8 +146,8 @@ def eval_summary(report):
 
 def md_table1(report):
     bins = report["rank_tables"][0]["bins"]
-    lines = ["| criterion | " + " | ".join(bins) + " | views |",
-             "|---|" + "---:|" * (len(bins) + 1)]
+    lines = ["| criterion | " + " | ".join(bins) + " | views | of them with no correct view in the database |",
+             "|---|" + "---:|" * (len(bins) + 2)]
     for t in report["rank_tables"]:
         if t["criterion"] not in ("main", "same-shape"):
             continue
@@ -155,7 +155,8 @@ def md_table1(report):
         rule = (f"{'same shape (basic-shape views)' if c['same_shape'] else 'joints ≤ %g° %s' % (c['max_joint_distance_deg'], c['joint_distance'].upper())}"
                 f", dir ≤ {c['max_direction_deg']:g}°, roll ≤ {c['max_roll_deg']:g}°")
         name = f"{t['criterion']}: {rule}"
-        lines.append(f"| {name} | " + " | ".join(str(c) for c in t["counts"]) + f" | {t['total']} |")
+        none = t.get("no_correct_in_database", "–")
+        lines.append(f"| {name} | " + " | ".join(str(c) for c in t["counts"]) + f" | {t['total']} | {none} |")
     return "\n".join(lines)
 
 
@@ -317,11 +318,17 @@ def main():
         md.append("")
 
     md += ["## The pca-large database", ""]
-    if results["pca_large"]["run"]:
-        md += ["Generated and evaluated above (`configs/pca-large.json`: 256 PCA shapes x 86 directions x "
-               "48 rolls = 1,056,768 virtual views)."]
+    pca_gen = results["steps"].get("generate_pca_large")
+    if pca_gen is not None:
+        md += ["`configs/pca-large.json`: 256 PCA shapes (8 components, Sobol) x 86 directions x 48 rolls = "
+               "1,056,768 virtual views; evaluated above when the evaluation step ran.", "",
+               f"`{pca_gen['command']}` (wall {pca_gen['seconds']:.1f} s, exit {pca_gen['exit_code']}):", "",
+               code_block(pca_gen["stdout"] or pca_gen["stderr_tail"])]
     else:
         md += [PCA_LARGE_NOTE]
+    notes = read(os.path.join(out, "notes.md"))
+    if notes:
+        md += ["", notes.strip()]
     md += ["", "## Reproduce", "", "```", "bench/run.sh                          # paper database",
            "HANDDB_BENCH_PCA_LARGE=1 bench/run.sh # also pca-large", "```", ""]
     with open(args.markdown + ".tmp", "w") as f:

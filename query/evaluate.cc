@@ -253,6 +253,7 @@ Result<EvaluationReport> Evaluate(const Searcher& searcher,
       if (applies[c]) correct_pairs[c] = CountCorrect(db_poses, db.num_rolls(), judges[c]);
     }
     out.num_correct = correct_pairs[0];
+    out.correct_pairs = correct_pairs;
     const auto t_input = std::chrono::steady_clock::now();
     auto points = query_points(view);
     out.input_seconds = Seconds(t_input);
@@ -331,6 +332,11 @@ Result<EvaluationReport> Evaluate(const Searcher& searcher,
       if (v.ranks[c] != kNotApplicable) ranks.push_back(v.ranks[c]);
     }
     report.tables.push_back(MakeRankTable(ranks));
+    int64_t without = 0;
+    for (const auto& v : report.views) {
+      if (v.ranks[c] != kNotApplicable && v.correct_pairs[c] == 0) ++without;
+    }
+    report.views_without_correct.push_back(without);
     for (int64_t n_top : options.success_n) {
       SuccessCell cell;
       cell.criterion = report.criteria[c].name;
@@ -380,6 +386,7 @@ nlohmann::json ReportToJson(const EvaluationReport& report) {
     criteria.push_back(CriterionToJson(report.criteria[c]));
     nlohmann::json t = TableToJson(report.tables[c]);
     t["criterion"] = report.criteria[c].name;
+    t["no_correct_in_database"] = report.views_without_correct[c];
     tables.push_back(t);
   }
   nlohmann::json success = nlohmann::json::array();
@@ -470,7 +477,7 @@ std::string ReportToText(const EvaluationReport& report) {
   os << "Table 1: rank of the highest-ranking correct match\n";
   os << "  criterion  ";
   for (int b = 0; b < kNumRankBins; ++b) os << "  " << RankBinName(b);
-  os << "  | views\n";
+  os << "  | views  none in DB\n";
   for (size_t c = 0; c < report.criteria.size(); ++c) {
     if (c > 1) break;  // the d grid is summarised by success@(d, n) below
     char line[256];
@@ -485,7 +492,12 @@ std::string ReportToText(const EvaluationReport& report) {
                     static_cast<long long>(report.tables[c].counts[b]));
       os << line;
     }
-    os << "  | " << report.tables[c].total() << "\n";
+    std::snprintf(line,
+                  sizeof line,
+                  "  | %5lld  %10lld\n",
+                  static_cast<long long>(report.tables[c].total()),
+                  static_cast<long long>(report.views_without_correct[c]));
+    os << line;
   }
   os << "\nsuccess@(d, n) (share of views with a correct match in the top n)\n";
   os << "  criterion  ";
@@ -561,10 +573,13 @@ Status WriteReportPlots(const EvaluationReport& report,
   auto tile_for = [&](const ViewOutcome& v) {
     ExampleTile tile;
     const int64_t rank = v.ranks[0];
-    tile.caption =
-        "test " + std::to_string(v.test_id) + " " + v.shape_name + "  rank " +
-        (rank == kNoCorrectMatch ? std::string(">") + std::to_string(report.options.max_rank)
-                                 : std::to_string(rank));
+    std::string rank_text = std::to_string(rank);
+    if (v.num_correct == 0) {
+      rank_text = "- (no correct view in the database)";
+    } else if (rank == kNoCorrectMatch) {
+      rank_text = ">" + std::to_string(report.options.max_rank);
+    }
+    tile.caption = "test " + std::to_string(v.test_id) + " " + v.shape_name + "  rank " + rank_text;
     tile.query_points = v.query_points;
     if (v.top1) {
       tile.caption2 = "top-1 " + v.top1->shape_name +
@@ -594,7 +609,10 @@ Status WriteReportPlots(const EvaluationReport& report,
   std::sort(ok.begin(), ok.end(), [](const ViewOutcome* a, const ViewOutcome* b) {
     return a->top1_keypoint_error < b->top1_keypoint_error;
   });
+  // Worst ranks first among views that have a correct pair in the database; views without any
+  // (nothing to find) come last.
   auto badness = [](const ViewOutcome* v) {
+    if (v->num_correct == 0) return int64_t{-1};
     return v->ranks[0] == kNoCorrectMatch ? std::numeric_limits<int64_t>::max() : v->ranks[0];
   };
   std::stable_sort(bad.begin(), bad.end(), [&](const ViewOutcome* a, const ViewOutcome* b) {
@@ -612,7 +630,7 @@ Status WriteReportPlots(const EvaluationReport& report,
       dir / "failures.png",
       tiles,
       "Failures (" + input +
-          "): query edges blue, top-1 match red; worst ranks of a correct match");
+          "): query edges blue, top-1 match red; the worst ranks of a correct match");
 }
 
 }  // namespace handdb

@@ -109,8 +109,8 @@ struct ViewOutcome {
   double search_seconds = 0;  // the timed top-first_k search
   bool deep_search = false;   // a second search for the rank was needed
   size_t num_query_points = 0;
-  int64_t num_correct =
-      -1;  // correct (view, roll) in the database, main criterion (-1: not counted)
+  int64_t num_correct = 0;             // correct (view, roll) pairs in the database, main criterion
+  std::vector<int64_t> correct_pairs;  // the same per criterion (0 where it does not apply)
   std::vector<Point2f> query_points;  // for example sheets
 };
 
@@ -134,6 +134,9 @@ struct EvaluationReport {
   std::vector<Criterion> criteria;
   std::vector<ViewOutcome> views;
   std::vector<RankTable> tables;  // per criterion (views the criterion applies to)
+  // Per criterion: applicable views with no correct pair in the whole database (a PCA shape far
+  // from every database shape); they are part of the last bin of the table.
+  std::vector<int64_t> views_without_correct;
   std::vector<SuccessCell> success;
   Summary top1_keypoint_error;
   Summary best10_keypoint_error;

@@ -144,6 +144,7 @@ TEST(Evaluate, UnreachableTruthAndFailedInputsLandInTheLastBin) {
   EXPECT_EQ(report->views[1].error, "photo: no hand found");
   EXPECT_EQ(report->failed_inputs, 1);
   EXPECT_EQ(report->tables[0].counts[kNumRankBins - 1], 2);
+  EXPECT_EQ(report->views_without_correct[0], 1);  // the unreachable one, not the failed input
   EXPECT_EQ(report->tables[0].total(), 2);
   EXPECT_TRUE(std::isnan(report->views[1].top1_keypoint_error));
   EXPECT_EQ(report->top1_keypoint_error.count, 1);
