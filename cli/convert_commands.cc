@@ -13,6 +13,7 @@
 #include <thread>
 #include <vector>
 
+#include "cli/cli_util.h"
 #include "cli/commands.h"
 #include "cli/slurm_commands.h"
 #include "format/atomic_file.h"
@@ -30,21 +31,6 @@ namespace {
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;
-
-// Parses argv with CLI11; returns -1 to continue, else the exit code (help: 0, bad usage: 2).
-int Parse(CLI::App& app, int argc, char** argv) {
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e) == 0 ? kExitOk : kExitUsage;
-  }
-  return -1;
-}
-
-int Fail(const char* cmd, const Status& status) {
-  std::fprintf(stderr, "handdb %s: %s\n", cmd, status.message().c_str());
-  return kExitError;
-}
 
 struct EdgeFlags {
   std::string occlusion = "on";
@@ -141,7 +127,7 @@ int RunConvert(int argc, char** argv) {
   edges.Add(app);
   app.add_flag("--quiet,-q", quiet, "no progress display");
   app.add_flag("--json", as_json, "print the summary as JSON on stdout");
-  if (int rc = Parse(app, argc, argv); rc >= 0) return rc;
+  if (int rc = ParseArgs(app, argc, argv); rc >= 0) return rc;
   options.edges = edges.Get();
   options.progress = !quiet;
   std::vector<SkippedView> bad;
@@ -185,7 +171,7 @@ int RunGenerate(int argc, char** argv) {
   app.add_flag("--json", as_json, "print the summary as JSON on stdout");
   SlurmFlags slurm;  // --slurm and its options (cli/slurm_commands.h)
   slurm.Add(app);
-  if (int rc = Parse(app, argc, argv); rc >= 0) return rc;
+  if (int rc = ParseArgs(app, argc, argv); rc >= 0) return rc;
   if (jobs <= 0) jobs = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
   if (work_dir.empty()) work_dir = db_dir / "render";
   auto stage = [&](const char* what) {
@@ -323,7 +309,7 @@ int RunShow(int argc, char** argv) {
       ->check(CLI::Range(64, 4096))
       ->capture_default_str();
   app.add_option("-o,--out", out_path, "output PNG")->required();
-  if (int rc = Parse(app, argc, argv); rc >= 0) return rc;
+  if (int rc = ParseArgs(app, argc, argv); rc >= 0) return rc;
 
   auto db = Database::Open(db_dir);
   if (!db.ok()) return Fail("show", db.status());

@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "cli/cli_util.h"
 #include "cli/commands.h"
 #include "format/atomic_file.h"
 #include "format/json_schema.h"
@@ -28,22 +29,6 @@ namespace {
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;
-
-constexpr int kExitInterrupted = 130;
-
-int Parse(CLI::App& app, int argc, char** argv) {
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e) == 0 ? kExitOk : kExitUsage;
-  }
-  return -1;
-}
-
-int Fail(const char* cmd, const Status& status) {
-  std::fprintf(stderr, "handdb %s: %s\n", cmd, status.message().c_str());
-  return status.code() == StatusCode::kCancelled ? kExitInterrupted : kExitError;
-}
 
 std::atomic<bool> g_cancel{false};
 void OnSignal(int) { g_cancel = true; }
@@ -114,7 +99,7 @@ int RunTestset(int argc, char** argv) {
   app.add_option("--blender", blender, "Blender executable (default: $HANDDB_BLENDER, else PATH)");
   app.add_flag("-q,--quiet", quiet, "no progress");
   app.add_flag("--json", as_json, "print a JSON summary on stdout");
-  if (int rc = Parse(app, argc, argv); rc >= 0) return rc;
+  if (int rc = ParseArgs(app, argc, argv); rc >= 0) return rc;
 
   auto config = ReadJsonFile(config_path, "testset_config.schema.json");
   if (!config.ok()) return Fail("testset", config.status());
@@ -231,7 +216,7 @@ int RunEvaluate(int argc, char** argv) {
   app.add_option("--limit", options.max_views, "evaluate only the first N (selected) test views")
       ->check(CLI::NonNegativeNumber);
   app.add_flag("-q,--quiet", quiet, "no progress, no text report");
-  if (int rc = Parse(app, argc, argv); rc >= 0) return rc;
+  if (int rc = ParseArgs(app, argc, argv); rc >= 0) return rc;
   options.correctness.joint_distance = *ParseJointDistanceKind(distance);
   options.correctness.roll_compare =
       roll_compare == "aligned" ? RollCompare::kAligned : RollCompare::kLabel;

@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "cli/cli_util.h"
 #include "cli/commands.h"
 #include "format/manifest.h"
 #include "format/shard_layout.h"
@@ -19,20 +20,6 @@ namespace {
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;
-
-int ParseArgs(CLI::App& app, int argc, char** argv) {
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e) == 0 ? kExitOk : kExitUsage;
-  }
-  return -1;
-}
-
-int Fail(const char* cmd, const Status& status) {
-  std::fprintf(stderr, "handdb %s: %s\n", cmd, status.message().c_str());
-  return kExitError;
-}
 
 std::string Hex(uint64_t v) {
   char buf[24];

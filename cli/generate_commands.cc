@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "cli/cli_util.h"
 #include "cli/commands.h"
 #include "generator/plan.h"
 #include "generator/render_driver.h"
@@ -17,23 +18,6 @@ namespace {
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;
-
-// Exit code when the user interrupted a run (128 + SIGINT, as shells report it).
-constexpr int kExitInterrupted = 130;
-
-int ParseArgs(CLI::App& app, int argc, char** argv) {
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e) == 0 ? kExitOk : kExitUsage;
-  }
-  return -1;
-}
-
-int Fail(const char* cmd, const Status& status) {
-  std::fprintf(stderr, "handdb %s: %s\n", cmd, status.message().c_str());
-  return status.code() == StatusCode::kCancelled ? kExitInterrupted : kExitError;
-}
 
 }  // namespace
 
