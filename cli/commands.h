@@ -9,8 +9,8 @@ constexpr int kExitError = 1;
 constexpr int kExitUsage = 2;
 
 int RunVersion(int argc, char** argv);
-int RunPlan(int argc, char** argv);    // cli/generate_commands.cc
-int RunRender(int argc, char** argv);  // cli/generate_commands.cc
+int RunPlan(int argc, char** argv);      // cli/generate_commands.cc
+int RunRender(int argc, char** argv);    // cli/generate_commands.cc
 int RunConvert(int argc, char** argv);   // cli/convert_commands.cc
 int RunGenerate(int argc, char** argv);  // cli/convert_commands.cc
 int RunShow(int argc, char** argv);      // cli/convert_commands.cc

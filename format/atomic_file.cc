@@ -49,7 +49,8 @@ Status AtomicFileWriter::Open(const std::filesystem::path& target) {
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
   if (ec) {
-    return Status(StatusCode::kIoError, dir.string() + ": cannot create directory: " + ec.message());
+    return Status(StatusCode::kIoError,
+                  dir.string() + ": cannot create directory: " + ec.message());
   }
   temp_ = dir / (target.filename().string() + ".tmp-" + RandomSuffix());
   fd_ = ::open(temp_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);

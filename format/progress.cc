@@ -64,9 +64,16 @@ void Progress::Draw(bool final) {
                           : (rate > 0 && total >= done
                                  ? "ETA " + FormatDuration(static_cast<double>(total - done) / rate)
                                  : "ETA ?");
-  std::fprintf(stderr, "%s%-10s %llu/%llu %5.1f%%  %.1f %s/s  %s%s", tty_ ? "\r\033[K" : "",
-               label_.c_str(), static_cast<unsigned long long>(done),
-               static_cast<unsigned long long>(total), pct, rate, unit_.c_str(), eta.c_str(),
+  std::fprintf(stderr,
+               "%s%-10s %llu/%llu %5.1f%%  %.1f %s/s  %s%s",
+               tty_ ? "\r\033[K" : "",
+               label_.c_str(),
+               static_cast<unsigned long long>(done),
+               static_cast<unsigned long long>(total),
+               pct,
+               rate,
+               unit_.c_str(),
+               eta.c_str(),
                (final || !tty_) ? "\n" : "");
   std::fflush(stderr);
 }

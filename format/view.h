@@ -10,11 +10,11 @@
 
 namespace handdb {
 
-using view_id_t = uint32_t;   // canonical view index inside a database (manifest order)
-using shape_id_t = uint32_t;  // index into the plan's shape table
-using dir_id_t = uint32_t;    // index into the plan's view-direction table
-using render_id_t = uint32_t; // index of the render item in the plan (shape-major)
-using roll_id_t = uint32_t;   // 0..R-1, angle = 2*pi*roll_id/R
+using view_id_t = uint32_t;    // canonical view index inside a database (manifest order)
+using shape_id_t = uint32_t;   // index into the plan's shape table
+using dir_id_t = uint32_t;     // index into the plan's view-direction table
+using render_id_t = uint32_t;  // index of the render item in the plan (shape-major)
+using roll_id_t = uint32_t;    // 0..R-1, angle = 2*pi*roll_id/R
 constexpr view_id_t kInvalidViewId = std::numeric_limits<view_id_t>::max();
 constexpr shape_id_t kInvalidShapeId = std::numeric_limits<shape_id_t>::max();
 constexpr dir_id_t kInvalidDirId = std::numeric_limits<dir_id_t>::max();
@@ -22,7 +22,7 @@ constexpr render_id_t kInvalidRenderId = std::numeric_limits<render_id_t>::max()
 
 constexpr int kNumJointAngles = 20;
 constexpr int kNumKeypoints = 21;
-constexpr int kNumLinks = 16;           // link ids 1..16, 0 = background
+constexpr int kNumLinks = 16;                  // link ids 1..16, 0 = background
 constexpr float kNormalisedDiameter = 192.0f;  // px, largest distance between two contour points
 
 // Edge points are stored as fixed point in the canonical normalised frame: origin at the
@@ -42,18 +42,18 @@ struct ViewLabel {
   render_id_t render_id = kInvalidRenderId;
   shape_id_t shape_id = kInvalidShapeId;
   dir_id_t dir_id = kInvalidDirId;
-  uint32_t flags = 0;                              // reserved, 0
+  uint32_t flags = 0;                                 // reserved, 0
   std::array<float, kNumJointAngles> joint_angles{};  // radians, hand-model DOF order
-  std::array<float, 3> view_direction{};           // unit vector hand->camera, hand frame
-  float view_theta = 0;                            // acos(dir.z), radians
-  float view_phi = 0;                              // atan2(dir.y, dir.x), radians
-  float camera_roll = 0;                           // radians, of the rendered image (normally 0)
+  std::array<float, 3> view_direction{};              // unit vector hand->camera, hand frame
+  float view_theta = 0;                               // acos(dir.z), radians
+  float view_phi = 0;                                 // atan2(dir.y, dir.x), radians
+  float camera_roll = 0;                              // radians, of the rendered image (normally 0)
   // 21 keypoints: x, y in normalised px (same frame as the points), z depth in the same px
   // units, measured away from the camera, relative to the camera's look-at plane.
   std::array<std::array<float, 3>, kNumKeypoints> keypoints{};
-  float source_diameter_px = 0;                    // contour diameter in the rendered image
-  float scale = 0;                                 // normalised px per rendered px
-  std::array<float, 2> source_centre_px{};         // normalisation centre in the rendered image
+  float source_diameter_px = 0;             // contour diameter in the rendered image
+  float scale = 0;                          // normalised px per rendered px
+  std::array<float, 2> source_centre_px{};  // normalisation centre in the rendered image
 };
 
 // Roll is virtual (DESIGN.md section 3): the view (v, r) is canonical view v rotated in the image
@@ -61,7 +61,8 @@ struct ViewLabel {
 // (x right, y down: positive a turns +x towards +y, i.e. clockwise on screen). Its pose label
 // is the canonical one with camera_roll += a and keypoints (x, y) rotated the same way.
 inline float RollAngle(roll_id_t roll, uint32_t num_rolls) {
-  return static_cast<float>(2.0 * M_PI * static_cast<double>(roll) / static_cast<double>(num_rolls));
+  return static_cast<float>(2.0 * M_PI * static_cast<double>(roll) /
+                            static_cast<double>(num_rolls));
 }
 
 }  // namespace handdb
