@@ -111,7 +111,7 @@ struct ViewOutcome {
   size_t num_query_points = 0;
   int64_t num_correct = 0;             // correct (view, roll) pairs in the database, main criterion
   std::vector<int64_t> correct_pairs;  // the same per criterion (0 where it does not apply)
-  std::vector<Point2f> query_points;  // for example sheets
+  std::vector<Point2f> query_points;   // for example sheets
 };
 
 struct SuccessCell {

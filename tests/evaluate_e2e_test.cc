@@ -81,7 +81,7 @@ class EvaluateE2E : public ::testing::Test {
         {"render", {{"resolution", 128}}}};
     ASSERT_TRUE(WriteJsonFileAtomic(*dir_ / "db.json", db_config).ok());
     const CliRun gen = Handdb("generate " + (*dir_ / "db.json").string() + " -o " +
-                           (*dir_ / "db").string() + " -j 2 -q");
+                              (*dir_ / "db").string() + " -j 2 -q");
     ASSERT_EQ(gen.code, 0) << gen.err;
 
     // The test set: a planned one whose first two items are replaced by database views.
@@ -144,8 +144,8 @@ class EvaluateE2E : public ::testing::Test {
   json Evaluate(const std::string& input) {
     const fs::path out = *dir_ / ("eval-" + input + ".json");
     const CliRun r = Handdb("evaluate " + (*dir_ / "db").string() + " " + (*dir_ / "ts").string() +
-                         " --input " + input + " --json " + out.string() + " --plots " +
-                         (*dir_ / ("plots-" + input)).string() + " --threads 2 -q");
+                            " --input " + input + " --json " + out.string() + " --plots " +
+                            (*dir_ / ("plots-" + input)).string() + " --threads 2 -q");
     EXPECT_EQ(r.code, 0) << r.err;
     auto doc = ReadJsonFile(out, "evaluation.schema.json");
     EXPECT_TRUE(doc.ok()) << doc.status().ToString();
