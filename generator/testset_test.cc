@@ -18,10 +18,17 @@ namespace fs = std::filesystem;
 
 fs::path DemoConfigPath() { return RepoRoot() / "configs" / "testset-demo.json"; }
 
+// The demo config with the fields these tests count on pinned (the demo itself may be retuned).
 nlohmann::json DemoConfig() {
   auto doc = ReadJsonFile(DemoConfigPath(), "testset_config.schema.json");
   THROW_CHECK_MSG(doc.ok(), doc.status().ToString());
-  return *doc;
+  nlohmann::json config = *doc;
+  config["count"] = 24;
+  config["unit_size"] = 12;
+  config["basic_fraction"] = 0.25;
+  config.erase("basic_names");
+  config["pca"] = {{"components", 6}, {"sampling", "gaussian"}, {"scale", 1.0}, {"max_sigma", 2.5}};
+  return config;
 }
 
 TEST(TestSetPlan, DeterministicAndValid) {
@@ -80,6 +87,23 @@ TEST(TestSetPlan, ItemsMixBasicAndPcaShapesWithinLimits) {
   // The named shapes are used up evenly before any repeats: 12 views over 6 names, twice each.
   EXPECT_EQ(basic_seen.size(), names.size());
   for (const auto& [name, count] : basic_seen) EXPECT_EQ(count, 2) << name;
+}
+
+TEST(TestSetPlan, BasicNamesRestrictTheBasicShapes) {
+  nlohmann::json config = DemoConfig();
+  config["basic_fraction"] = 0.5;
+  config["basic_names"] = {"fist", "flat", "Y"};
+  auto doc = MakeTestSetPlan(config, DemoConfigPath(), false);
+  ASSERT_TRUE(doc.ok()) << doc.status().ToString();
+  auto plan = ParseTestSetPlan(*doc, "names");
+  ASSERT_TRUE(plan.ok());
+  std::map<std::string, int> seen;
+  for (const auto& item : plan->items) {
+    if (item.basic) ++seen[item.shape_name];
+  }
+  EXPECT_EQ(seen, (std::map<std::string, int>{{"fist", 4}, {"flat", 4}, {"Y", 4}}));
+  config["basic_names"] = {"no-such-shape"};
+  EXPECT_FALSE(MakeTestSetPlan(config, DemoConfigPath(), false).ok());
 }
 
 TEST(TestSetPlan, DirectionsAndRollsAreUniform) {
