@@ -25,8 +25,8 @@ nlohmann::json DemoConfig() {
   nlohmann::json config = *doc;
   config["count"] = 24;
   config["unit_size"] = 12;
-  config["basic_fraction"] = 0.25;
-  config.erase("basic_names");
+  config["basic_fraction"] = 0.5;
+  config["basic_names"] = {"flat", "fist", "asl-1", "asl-2", "asl-5", "Y"};
   config["pca"] = {{"components", 6}, {"sampling", "gaussian"}, {"scale", 1.0}, {"max_sigma", 2.5}};
   return config;
 }
