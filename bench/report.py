@@ -14,6 +14,7 @@ import glob
 import json
 import os
 import platform
+import re
 import shutil
 import subprocess
 
@@ -247,10 +248,34 @@ def main():
                 rows.append(f"| Blender label renders/s if the cores were free (CPU time) | "
                             f"{render['cpu_bound_renders_per_s']:.1f} | target 15/s | "
                             f"{render['cpu_bound_renders_per_s'] / 15.0:.2f}x |")
+    # Headlines of the C++ benchmarks, read from their text output (a row is left out if the
+    # output's wording changed; the full output is in its section below).
+    def grab(step_name, pattern):
+        text = (results["steps"].get(step_name) or {}).get("stdout") or ""
+        m_ = re.search(pattern, text)
+        return m_.groups() if m_ else None
+    g = grab("format", r"scan / raw read = ([0-9.]+) by cpu time")
+    if g:
+        rows.append(f"| shard sequential scan, share of raw `read()` speed (CPU time) | {g[0]} | raw read() = 1 | {g[0]} |")
+    g = grab("convert", r"convert, 2 threads: [0-9.]+ s, ([0-9.]+) canonical views/s")
+    g1 = grab("convert", r"convert, 1 thread : [0-9.]+ s, ([0-9.]+) canonical views/s")
+    if g and g1:
+        rows.append(f"| convert, canonical views/s (2 threads) | {g[0]} | 1 thread {g1[0]} | "
+                    f"{float(g[0]) / float(g1[0]):.2f}x |")
+    g = grab("query", r"\(a\) pruned exact\s+median\s+([0-9.]+) ms")
+    gb = grab("query", r"\(b\) brute force\s+median\s+([0-9.]+) ms")
+    if g and gb:
+        rows.append(f"| query latency, top 10, paper database (pruned exact search) | {g[0]} ms | "
+                    f"brute force {gb[0]} ms | {float(gb[0]) / float(g[0]):.0f}x faster |")
     for name, title in EVALUATIONS:
         s = results["evaluations"].get(name)
         if not s:
             continue
+        ss1 = s["success_same_shape"][1]
+        ss10 = s["success_same_shape"][10]
+        if ss1 is not None:
+            rows.append(f"| {title}: same-shape success@1 / @10 (paper's rule, {s['same_shape_views']} "
+                        f"basic-shape views) | {pct(ss1)} / {pct(ss10)} | – | – |")
         s1 = s["success_main"][1]
         c1 = s["chance_main"].get(1)
         rows.append(f"| {title}: success@1 (d = 15°) | {pct(s1)} | chance {pct(c1)} | "
