@@ -195,6 +195,52 @@ std::string ShardFileName(uint32_t unit_id) {
   return buf;
 }
 
+Result<ViewConversionOptions> ViewConversionOptionsFromMetadata(const json& metadata,
+                                                                const std::string& what) {
+  const json* edges = nullptr;
+  if (metadata.is_object() && metadata.contains("conversion") &&
+      metadata["conversion"].is_object() && metadata["conversion"].contains("edges")) {
+    edges = &metadata["conversion"]["edges"];
+  }
+  if (edges == nullptr || edges->is_null()) {
+    return Status(StatusCode::kNotFound,
+                  what + ": metadata does not record the edge options (conversion.edges)");
+  }
+  auto bad = [&](const std::string& problem) {
+    return Status(StatusCode::kBadJson, what + ": conversion.edges: " + problem);
+  };
+  if (!edges->is_object()) return bad("not an object");
+  ViewConversionOptions options;
+  const auto occlusion = edges->find("occlusion_edges");
+  if (occlusion == edges->end() || !occlusion->is_boolean()) {
+    return bad("occlusion_edges missing or not a boolean");
+  }
+  options.edges.occlusion_edges = occlusion->get<bool>();
+  const auto jump = edges->find("depth_jump");
+  if (jump == edges->end() || !jump->is_number()) return bad("depth_jump missing or not a number");
+  options.edges.depth_jump = jump->get<double>();
+  if (!options.edges.Check()) return bad("depth_jump must be finite and positive");
+  if (const auto pairs = edges->find("joint_pairs"); pairs != edges->end()) {
+    if (!pairs->is_array()) return bad("joint_pairs not an array");
+    JointPairs table;
+    for (const json& pair : *pairs) {
+      if (!pair.is_array() || pair.size() != 2 || !pair[0].is_number_integer() ||
+          !pair[1].is_number_integer()) {
+        return bad("joint_pairs entry " + pair.dump() + " is not a pair of link ids");
+      }
+      const int a = pair[0].get<int>();
+      const int b = pair[1].get<int>();
+      if (a < 1 || a > kNumLinks || b < 1 || b > kNumLinks || a == b) {
+        return bad("joint_pairs entry " + pair.dump() + " is not a pair of link ids 1.." +
+                   std::to_string(kNumLinks));
+      }
+      table.Add(a, b);
+    }
+    options.joint_pairs = table;
+  }
+  return options;
+}
+
 namespace {
 
 // ---------------------------------------------------------------------------------------------

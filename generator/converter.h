@@ -119,4 +119,12 @@ Result<std::vector<bool>> FindCompleteShards(const std::filesystem::path& render
 // "shard-00007.hdb"
 std::string ShardFileName(uint32_t unit_id);
 
+// The view conversion a database was made with, read back from its manifest metadata
+// (`conversion.edges`: occlusion_edges, depth_jump, joint_pairs, as ConvertRenderDir writes
+// them), so that a clean label query is converted exactly like the database (handdb evaluate).
+// kNotFound when the metadata does not record the edge options; kBadJson when they are malformed.
+// `what` (e.g. the manifest path) starts the messages.
+Result<ViewConversionOptions> ViewConversionOptionsFromMetadata(const nlohmann::json& metadata,
+                                                                const std::string& what);
+
 }  // namespace handdb

@@ -329,6 +329,50 @@ TEST_F(ConvertDir, DifferentOptionsRewriteShards) {
   // Shape 1 has a folded finger: without occlusion edges its views have fewer points.
   EXPECT_LT(s->points, ConvertRenderDir(run_, root_ / "db_on", Options(2))->points);
   EXPECT_NE(ReadDir(db), with_occlusion);
+
+  // The manifest records the options; a query reads them back (handdb evaluate).
+  for (const auto& [dir, occlusion] : {std::pair{db, false}, std::pair{root_ / "db_on", true}}) {
+    auto manifest = ReadManifest(dir);
+    ASSERT_TRUE(manifest.ok());
+    auto read = ViewConversionOptionsFromMetadata(manifest->metadata, dir.string());
+    ASSERT_TRUE(read.ok()) << read.status().ToString();
+    EXPECT_EQ(read->edges.occlusion_edges, occlusion);
+    EXPECT_EQ(read->edges.depth_jump, EdgeOptions{}.depth_jump);
+    EXPECT_EQ(read->joint_pairs.size(), 15);
+    EXPECT_TRUE(read->joint_pairs.Contains(1, 5));
+    EXPECT_FALSE(read->joint_pairs.Contains(5, 8));
+  }
+}
+
+TEST(ViewConversionOptionsFromMetadata, ReadsAndRejects) {
+  nlohmann::json meta = {
+      {"conversion",
+       {{"edges",
+         {{"occlusion_edges", false}, {"depth_jump", 0.01}, {"joint_pairs", {{1, 2}, {2, 3}}}}}}}};
+  auto ok = ViewConversionOptionsFromMetadata(meta, "m.json");
+  ASSERT_TRUE(ok.ok()) << ok.status().ToString();
+  EXPECT_FALSE(ok->edges.occlusion_edges);
+  EXPECT_EQ(ok->edges.depth_jump, 0.01);
+  EXPECT_EQ(ok->joint_pairs.size(), 2);
+  EXPECT_TRUE(ok->joint_pairs.Contains(3, 2));
+  EXPECT_FALSE(ok->joint_pairs.Contains(1, 5));
+
+  auto missing = ViewConversionOptionsFromMetadata(nlohmann::json::object(), "m.json");
+  EXPECT_EQ(missing.status().code(), StatusCode::kNotFound);
+  EXPECT_NE(missing.status().message().find("m.json"), std::string::npos);
+  const std::vector<std::pair<std::string, nlohmann::json>> bad_fields = {
+      {"/conversion/edges/depth_jump", -1.0},
+      {"/conversion/edges/depth_jump", "5mm"},
+      {"/conversion/edges/occlusion_edges", "on"},
+      {"/conversion/edges/joint_pairs/0/1", 17},
+      {"/conversion/edges/joint_pairs/1", {2}},
+      {"/conversion/edges", 3}};
+  for (const auto& [path, value] : bad_fields) {
+    nlohmann::json bad = meta;
+    bad[nlohmann::json::json_pointer(path)] = value;
+    auto r = ViewConversionOptionsFromMetadata(bad, "m.json");
+    EXPECT_EQ(r.status().code(), StatusCode::kBadJson) << path << " = " << value;
+  }
 }
 
 TEST_F(ConvertDir, BadInputWritesNothingAndNamesEveryFile) {
