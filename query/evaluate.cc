@@ -92,6 +92,7 @@ Result<TestSet> ReadTestSet(const fs::path& dir_or_file) {
   }
   TestSet set;
   set.dir = file.parent_path();
+  set.file = file;
   set.name = doc->at("name").get<std::string>();
   set.seed = doc->at("seed").get<uint64_t>();
   set.hand_model_sha256 = doc->at("hand_model").at("sha256").get<std::string>();
@@ -181,16 +182,22 @@ std::vector<Criterion> MakeCriteria(const EvaluationOptions& options) {
   return out;
 }
 
-Result<EvaluationReport> Evaluate(const Searcher& searcher,
-                                  const TestSet& testset,
-                                  QueryInput input,
-                                  const QueryPointsFn& query_points,
-                                  const EvaluationOptions& options) {
-  if (!options.Check()) {
-    return Status(StatusCode::kInvalidArgument, "evaluation options are invalid (see above)");
+std::vector<uint32_t> SelectTestViews(const TestSet& testset, const EvaluationOptions& options) {
+  std::vector<uint32_t> selected;
+  const size_t stride = static_cast<size_t>(std::max(1, options.stride));
+  for (size_t i = 0; i < testset.views.size(); i += stride) {
+    selected.push_back(static_cast<uint32_t>(i));
   }
-  const auto wall_start = std::chrono::steady_clock::now();
-  const Database& db = searcher.database();
+  if (options.max_views > 0 && selected.size() > static_cast<size_t>(options.max_views)) {
+    selected.resize(static_cast<size_t>(options.max_views));
+  }
+  return selected;
+}
+
+EvaluationReport StartReport(const Database& db,
+                             const TestSet& testset,
+                             QueryInput input,
+                             const EvaluationOptions& options) {
   EvaluationReport report;
   report.database = db.path().string();
   report.database_views = db.num_views();
@@ -202,15 +209,27 @@ Result<EvaluationReport> Evaluate(const Searcher& searcher,
   report.options = options;
   report.criteria = MakeCriteria(options);
   report.threads = ResolveThreadCount(options.num_threads);
-  const size_t num_criteria = report.criteria.size();
-  std::vector<size_t> selected;
-  for (size_t i = 0; i < testset.views.size(); i += static_cast<size_t>(options.stride)) {
-    selected.push_back(i);
+  return report;
+}
+
+Result<std::vector<ViewOutcome>> EvaluateViews(const Searcher& searcher,
+                                               const TestSet& testset,
+                                               const QueryPointsFn& query_points,
+                                               const EvaluationOptions& options,
+                                               std::span<const uint32_t> positions) {
+  if (!options.Check()) {
+    return Status(StatusCode::kInvalidArgument, "evaluation options are invalid (see above)");
   }
-  if (options.max_views > 0 && selected.size() > static_cast<size_t>(options.max_views)) {
-    selected.resize(static_cast<size_t>(options.max_views));
+  const Database& db = searcher.database();
+  const std::vector<Criterion> criteria = MakeCriteria(options);
+  const size_t num_criteria = criteria.size();
+  for (uint32_t i : positions) {
+    if (i >= testset.views.size()) {
+      return Status(StatusCode::kOutOfRange,
+                    testset.file.string() + ": no test view at position " + std::to_string(i) +
+                        " (the test set has " + std::to_string(testset.views.size()) + ")");
+    }
   }
-  const size_t n = selected.size();
 
   SearchOptions first;
   first.top_k = static_cast<int>(std::min<uint64_t>(options.first_k, db.num_virtual_views()));
@@ -230,18 +249,21 @@ Result<EvaluationReport> Evaluate(const Searcher& searcher,
     db_poses[v].camera_roll = label.camera_roll;
   }
 
-  Progress progress("evaluate", n, options.progress, "queries");
-  for (size_t i : selected) {
+  std::vector<ViewOutcome> outcomes;
+  outcomes.reserve(positions.size());
+  Progress progress("evaluate", positions.size(), options.progress, "queries");
+  for (uint32_t i : positions) {
     const TestView& view = testset.views[i];
     ViewOutcome out;
     out.test_id = view.id;
+    out.testset_index = i;
     out.basic = view.basic;
     out.shape_name = view.shape_name;
     std::vector<CorrectnessJudge> judges;
     std::vector<bool> applies(num_criteria);
     for (size_t c = 0; c < num_criteria; ++c) {
-      applies[c] = !report.criteria[c].basic_only || view.basic;
-      judges.emplace_back(view.truth, view.basic, testset.axes, report.criteria[c].options);
+      applies[c] = !criteria[c].basic_only || view.basic;
+      judges.emplace_back(view.truth, view.basic, testset.axes, criteria[c].options);
     }
     out.ranks.assign(num_criteria, kNotApplicable);
     for (size_t c = 0; c < num_criteria; ++c) {
@@ -257,11 +279,9 @@ Result<EvaluationReport> Evaluate(const Searcher& searcher,
     const auto t_input = std::chrono::steady_clock::now();
     auto points = query_points(view);
     out.input_seconds = Seconds(t_input);
-    report.input_seconds += out.input_seconds;
     if (!points.ok()) {
       out.error = points.status().message();
-      ++report.failed_inputs;
-      report.views.push_back(std::move(out));
+      outcomes.push_back(std::move(out));
       progress.Add();
       continue;
     }
@@ -269,11 +289,9 @@ Result<EvaluationReport> Evaluate(const Searcher& searcher,
     const auto t_search = std::chrono::steady_clock::now();
     auto matches = searcher.Search(*points, first);
     out.search_seconds = Seconds(t_search);
-    report.search_seconds += out.search_seconds;
     if (!matches.ok()) {
       out.error = matches.status().message();
-      ++report.failed_inputs;
-      report.views.push_back(std::move(out));
+      outcomes.push_back(std::move(out));
       progress.Add();
       continue;
     }
@@ -303,7 +321,6 @@ Result<EvaluationReport> Evaluate(const Searcher& searcher,
       if (deeper.ok()) {
         rank_all(*deeper);
         out.deep_search = true;
-        ++report.deep_searches;
       }
     }
     if (!matches->empty()) {
@@ -320,13 +337,38 @@ Result<EvaluationReport> Evaluate(const Searcher& searcher,
       out.best10_keypoint_error = best10;
     }
     out.query_points = std::move(*points);
-    report.views.push_back(std::move(out));
+    outcomes.push_back(std::move(out));
     progress.Add();
   }
   progress.Finish();
+  return outcomes;
+}
+
+void FinishReport(EvaluationReport* report_ptr) {
+  EvaluationReport& report = *report_ptr;
+  const EvaluationOptions& options = report.options;
+  std::stable_sort(
+      report.views.begin(), report.views.end(), [](const ViewOutcome& a, const ViewOutcome& b) {
+        return a.testset_index < b.testset_index;
+      });
+  report.tables.clear();
+  report.views_without_correct.clear();
+  report.success.clear();
+  report.chance_success.clear();
+  report.mean_correct_per_view = 0;
+  report.failed_inputs = 0;
+  report.deep_searches = 0;
+  report.search_seconds = 0;
+  report.input_seconds = 0;
+  for (const auto& v : report.views) {
+    if (!v.error.empty()) ++report.failed_inputs;
+    if (v.deep_search) ++report.deep_searches;
+    report.search_seconds += v.search_seconds;
+    report.input_seconds += v.input_seconds;
+  }
 
   // Tables and success per criterion, over the views each applies to.
-  for (size_t c = 0; c < num_criteria; ++c) {
+  for (size_t c = 0; c < report.criteria.size(); ++c) {
     std::vector<int64_t> ranks;
     for (const auto& v : report.views) {
       if (v.ranks[c] != kNotApplicable) ranks.push_back(v.ranks[c]);
@@ -360,7 +402,7 @@ Result<EvaluationReport> Evaluate(const Searcher& searcher,
     for (int64_t n_top : options.success_n) {
       double sum = 0;
       for (const auto& v : report.views) {
-        sum += ChanceOfCorrectInTopN(db.num_virtual_views(),
+        sum += ChanceOfCorrectInTopN(report.database_virtual_views,
                                      static_cast<uint64_t>(v.num_correct),
                                      static_cast<uint64_t>(n_top));
       }
@@ -375,6 +417,23 @@ Result<EvaluationReport> Evaluate(const Searcher& searcher,
   report.queries_per_second = report.search_seconds > 0 ? searched / report.search_seconds : 0;
   const double e2e = report.search_seconds + report.input_seconds;
   report.end_to_end_queries_per_second = e2e > 0 ? searched / e2e : 0;
+}
+
+Result<EvaluationReport> Evaluate(const Searcher& searcher,
+                                  const TestSet& testset,
+                                  QueryInput input,
+                                  const QueryPointsFn& query_points,
+                                  const EvaluationOptions& options) {
+  if (!options.Check()) {
+    return Status(StatusCode::kInvalidArgument, "evaluation options are invalid (see above)");
+  }
+  const auto wall_start = std::chrono::steady_clock::now();
+  EvaluationReport report = StartReport(searcher.database(), testset, input, options);
+  const std::vector<uint32_t> selected = SelectTestViews(testset, options);
+  auto views = EvaluateViews(searcher, testset, query_points, options, selected);
+  if (!views.ok()) return views.status();
+  report.views = std::move(*views);
+  FinishReport(&report);
   report.wall_seconds = Seconds(wall_start);
   return report;
 }
@@ -539,7 +598,8 @@ std::string ReportToText(const EvaluationReport& report) {
 Status WriteReportPlots(const EvaluationReport& report,
                         const Searcher& searcher,
                         const TestSet& testset,
-                        const fs::path& dir) {
+                        const fs::path& dir,
+                        const QueryPointsFn& query_points) {
   std::error_code ec;
   fs::create_directories(dir, ec);
   if (ec) return Status(StatusCode::kIoError, dir.string() + ": " + ec.message());
@@ -581,6 +641,11 @@ Status WriteReportPlots(const EvaluationReport& report,
     }
     tile.caption = "test " + std::to_string(v.test_id) + " " + v.shape_name + "  rank " + rank_text;
     tile.query_points = v.query_points;
+    if (tile.query_points.empty() && v.error.empty() && query_points &&
+        v.testset_index < testset.views.size()) {
+      auto points = query_points(testset.views[v.testset_index]);
+      if (points.ok()) tile.query_points = std::move(*points);
+    }
     if (v.top1) {
       tile.caption2 = "top-1 " + v.top1->shape_name +
                       FormatDouble("  kp %.3f", v.top1_keypoint_error) +

@@ -21,6 +21,7 @@
 #include <functional>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -43,6 +44,7 @@ struct TestView {
 
 struct TestSet {
   std::filesystem::path dir;
+  std::filesystem::path file;  // the testset.json read (its bytes are part of a Slurm fingerprint)
   std::string name;
   uint64_t seed = 0;
   std::string hand_model_sha256;
@@ -97,6 +99,7 @@ struct MatchBrief {
 
 struct ViewOutcome {
   uint32_t test_id = 0;
+  uint32_t testset_index = 0;  // position in TestSet::views (reports list views in this order)
   bool basic = false;
   std::string shape_name;
   std::string error;           // query could not be made (empty: fine)
@@ -111,7 +114,7 @@ struct ViewOutcome {
   size_t num_query_points = 0;
   int64_t num_correct = 0;             // correct (view, roll) pairs in the database, main criterion
   std::vector<int64_t> correct_pairs;  // the same per criterion (0 where it does not apply)
-  std::vector<Point2f> query_points;   // for example sheets
+  std::vector<Point2f> query_points;   // for example sheets (not kept in Slurm parts)
 };
 
 struct SuccessCell {
@@ -154,6 +157,39 @@ struct EvaluationReport {
   int threads = 0;
 };
 
+// An evaluation is (1) the per-view work, EvaluateViews, over any subset of the selected test
+// views, and (2) the aggregation, FinishReport, over the outcomes of all of them. `Evaluate` does
+// both in one process; `handdb evaluate --slurm` runs (1) in array tasks, each writing its outcomes
+// to a part file (query/eval_parts.h), and (2) in the final job over the merged parts. Both paths
+// call the same two functions, which is why their reports are identical (docs/cluster.md lists the
+// run-specific timing fields that differ).
+
+// Positions (in testset.views) of the test views an evaluation scores: every stride-th view, then
+// at most max_views of them.
+std::vector<uint32_t> SelectTestViews(const TestSet& testset, const EvaluationOptions& options);
+
+// The report's header: database and test-set description, options, criteria, thread count. No
+// views yet.
+EvaluationReport StartReport(const Database& db,
+                             const TestSet& testset,
+                             QueryInput input,
+                             const EvaluationOptions& options);
+
+// Scores the test views at `positions` (in testset.views), in that order, with the criteria of
+// MakeCriteria(options). Outcomes carry their query points (for example sheets).
+Result<std::vector<ViewOutcome>> EvaluateViews(const Searcher& searcher,
+                                               const TestSet& testset,
+                                               const QueryPointsFn& query_points,
+                                               const EvaluationOptions& options,
+                                               std::span<const uint32_t> positions);
+
+// Sorts report->views by testset_index and computes everything derived from them: Table 1 per
+// criterion, success@(d, n), keypoint-error summaries, the chance baseline, counts of failed inputs
+// and deeper searches, summed input and search times and the queries-per-second rates.
+// wall_seconds is left to the caller (it is the one number that depends on how the work ran).
+void FinishReport(EvaluationReport* report);
+
+// StartReport + EvaluateViews(SelectTestViews) + FinishReport, timed.
 Result<EvaluationReport> Evaluate(const Searcher& searcher,
                                   const TestSet& testset,
                                   QueryInput input,
@@ -163,10 +199,13 @@ Result<EvaluationReport> Evaluate(const Searcher& searcher,
 nlohmann::json ReportToJson(const EvaluationReport& report);
 std::string ReportToText(const EvaluationReport& report);
 
-// rank_histogram.png, keypoint_error_cdf.png, successes.png, failures.png in `dir`.
+// rank_histogram.png, keypoint_error_cdf.png, successes.png, failures.png in `dir`. The example
+// sheets show each chosen view's query points; a view without them (a report merged from Slurm
+// parts) gets them from `query_points` when given (the same function the evaluation used).
 Status WriteReportPlots(const EvaluationReport& report,
                         const Searcher& searcher,
                         const TestSet& testset,
-                        const std::filesystem::path& dir);
+                        const std::filesystem::path& dir,
+                        const QueryPointsFn& query_points = nullptr);
 
 }  // namespace handdb
