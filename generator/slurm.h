@@ -162,6 +162,51 @@ Result<SlurmSubmission> SubmitGenerateJobs(const SlurmGenerateLayout& layout,
                                            const std::vector<uint32_t>& units,
                                            bool dry_run);
 
+// Submits one array job per chunk of `indices` (PlanArrayChunks; each task gets its chunk's base
+// as the script's argument $1) and a final job with --dependency=afterok on all of them (alone,
+// without a dependency, when `indices` is empty). The scripts must exist. Unless `dry_run`, records
+// the submission in `jobs_file`. `target` names what the jobs build (SlurmSubmission::db_dir).
+Result<SlurmSubmission> SubmitArrayWithFinal(const std::filesystem::path& array_script,
+                                             const std::filesystem::path& final_script,
+                                             const std::filesystem::path& jobs_file,
+                                             const std::string& target,
+                                             const SlurmOptions& options,
+                                             const std::vector<uint32_t>& indices,
+                                             bool dry_run);
+
+// ---- handdb evaluate --slurm -------------------------------------------------------------------
+
+// Where a Slurm evaluation keeps its files (WORK = the evaluation's work directory).
+struct SlurmEvaluateLayout {
+  std::filesystem::path handdb;      // the handdb executable the jobs run (shared filesystem)
+  std::filesystem::path submit_dir;  // every job runs here (--chdir): the DB, test-set, --json and
+                                     // --plots paths resolve as they did when submitted
+  std::filesystem::path work_dir;    // WORK: parts/, logs/, failed/, scripts, jobs.json
+  // The words after `handdb` each array task runs (the script appends --task T) and the final job
+  // runs: `unit evaluate DB TESTSET --tasks N --work WORK OPTIONS...` and
+  // `unit evaluate-merge DB TESTSET --tasks N --work WORK OPTIONS... [--json F] [--plots P]`.
+  std::vector<std::string> task_args;
+  std::vector<std::string> merge_args;
+
+  std::filesystem::path array_script() const { return work_dir / "evaluate-array.sbatch"; }
+  std::filesystem::path final_script() const { return work_dir / "evaluate-merge.sbatch"; }
+  std::filesystem::path log_dir() const { return work_dir / "logs"; }
+  std::filesystem::path failed_dir() const { return work_dir / "failed"; }
+  std::filesystem::path jobs_file() const { return work_dir / "jobs.json"; }
+  std::filesystem::path report_text() const { return work_dir / "report.txt"; }
+  // logs/part-00007.log (all attempts at task 7), failed/part-00007 (why the last one failed).
+  std::filesystem::path TaskLog(uint32_t task) const;
+  std::filesystem::path TaskFailedMarker(uint32_t task) const;
+  std::filesystem::path final_log() const { return log_dir() / "merge.log"; }
+};
+
+// The array script: argument $1 is the chunk's base; task BASE + SLURM_ARRAY_TASK_ID runs
+// `handdb unit evaluate ... --task T` (a no-op when its part is already complete) and records a
+// failure marker with the exit code when it fails.
+std::string EvaluateArrayScript(const SlurmEvaluateLayout& layout, const SlurmOptions& options);
+// The final job: `handdb unit evaluate-merge ...` (report text, JSON, plots).
+std::string EvaluateFinalScript(const SlurmEvaluateLayout& layout, const SlurmOptions& options);
+
 // Why a unit is incomplete after its task ran: from the failure marker and Slurm's job state.
 struct UnitFailure {
   uint32_t unit = 0;
