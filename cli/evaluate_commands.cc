@@ -14,6 +14,7 @@
 
 #include "cli/cli_util.h"
 #include "cli/commands.h"
+#include "cli/evaluate_cli.h"
 #include "format/atomic_file.h"
 #include "format/json_schema.h"
 #include "format/manifest.h"
@@ -158,30 +159,10 @@ int RunTestset(int argc, char** argv) {
   return kExitOk;
 }
 
-int RunEvaluate(int argc, char** argv) {
-  CLI::App app(
-      "Score a database on a held-out test set: the paper's Table 1 (rank of the highest-ranking "
-      "correct match in 1, 2-4, 5-16, 17-64, 65-256, 257-1024, >1024), success@(d, n) for n = 1, "
-      "10, 100, root-relative 3D keypoint error of the top-1 match and the best of the top 10, "
-      "and queries per second. A match is correct when its joint vector is within d of the truth, "
-      "its view direction within 30 deg and its roll within 30 deg (docs/evaluation.md).",
-      "handdb evaluate");
-  std::string db_dir;
-  std::string testset_path;
-  std::string input = "clean";
-  std::string json_out;
-  std::string plots_dir;
-  std::string distance = "rms";
-  std::string roll_compare = "aligned";
-  EvaluationOptions options;
-  bool quiet = false;
-  app.add_option("db", db_dir, "database directory (manifest.json + shards)")->required();
-  app.add_option("testset", testset_path, "test-set directory (or its testset.json)")->required();
+void EvaluateFlags::Add(CLI::App& app) {
   app.add_option("--input", input, "query from the clean label render or the photo")
       ->check(CLI::IsMember({"clean", "photo"}))
       ->capture_default_str();
-  app.add_option("--json", json_out, "write the full report (schemas/evaluation.schema.json)");
-  app.add_option("--plots", plots_dir, "write PNG plots and example sheets into this directory");
   app.add_option("--threads", options.num_threads, "search threads (-1: all cores)")
       ->capture_default_str();
   app.add_option(
@@ -215,57 +196,70 @@ int RunEvaluate(int argc, char** argv) {
       ->check(CLI::PositiveNumber);
   app.add_option("--limit", options.max_views, "evaluate only the first N (selected) test views")
       ->check(CLI::NonNegativeNumber);
-  app.add_flag("-q,--quiet", quiet, "no progress, no text report");
-  if (int rc = ParseArgs(app, argc, argv); rc >= 0) return rc;
+}
+
+bool EvaluateFlags::Finish(const std::string& cmd, bool quiet) {
   options.correctness.joint_distance = *ParseJointDistanceKind(distance);
   options.correctness.roll_compare =
       roll_compare == "aligned" ? RollCompare::kAligned : RollCompare::kLabel;
   options.progress = !quiet;
   if (options.max_rank < options.first_k) {
-    std::fprintf(stderr, "handdb evaluate: --max-rank must be at least --first-k\n");
-    return kExitUsage;
+    std::fprintf(stderr, "handdb %s: --max-rank must be at least --first-k\n", cmd.c_str());
+    return false;
   }
+  return true;
+}
 
-  auto testset = ReadTestSet(testset_path);
-  if (!testset.ok()) return Fail("evaluate", testset.status());
-  auto searcher = Searcher::Open(db_dir);
-  if (!searcher.ok()) return Fail("evaluate", searcher.status());
-  // Clean queries are converted like the database was (its manifest records the edge options).
-  ViewConversionOptions view_options;
-  if (auto manifest = ReadManifest(db_dir); manifest.ok()) {
-    auto recorded = ViewConversionOptionsFromMetadata(
-        manifest->metadata, (fs::path(db_dir) / "manifest.json").string());
-    if (recorded.ok()) {
-      view_options = *recorded;
-    } else if (recorded.status().code() == StatusCode::kNotFound) {
-      std::fprintf(stderr,
-                   "handdb evaluate: warning: %s; clean queries use the default edge options\n",
-                   recorded.status().message().c_str());
-    } else {
-      return Fail("evaluate", recorded.status());
-    }
-    const json* seed = FindKey(manifest->metadata, "seed");
-    if (seed != nullptr && seed->is_number_unsigned() && seed->get<uint64_t>() == testset->seed) {
-      std::fprintf(stderr,
-                   "handdb evaluate: warning: the test set and the database share seed %llu\n",
-                   static_cast<unsigned long long>(testset->seed));
-    }
-    const json* sha = FindKey(manifest->metadata, "hand_model_sha256");
-    if (sha != nullptr && sha->is_string() &&
-        sha->get<std::string>() != testset->hand_model_sha256) {
-      std::fprintf(stderr,
-                   "handdb evaluate: warning: the test set was rendered with another hand model "
-                   "(sha256 %s) than the database (%s)\n",
-                   testset->hand_model_sha256.c_str(),
-                   sha->get<std::string>().c_str());
-    }
-  }
+std::vector<std::string> EvaluateFlags::Args() const {
+  auto exact = [](double v) {
+    char buf[40];
+    std::snprintf(buf, sizeof buf, "%.17g", v);
+    return std::string(buf);
+  };
+  const CorrectnessOptions& c = options.correctness;
+  std::vector<std::string> args = {"--input",
+                                   input,
+                                   "--d",
+                                   exact(c.max_joint_distance_deg),
+                                   "--distance",
+                                   std::string(JointDistanceKindName(c.joint_distance)),
+                                   "--max-direction",
+                                   exact(c.max_direction_deg),
+                                   "--max-roll",
+                                   exact(c.max_roll_deg),
+                                   "--roll-compare",
+                                   c.roll_compare == RollCompare::kAligned ? "aligned" : "label",
+                                   "--first-k",
+                                   std::to_string(options.first_k),
+                                   "--max-rank",
+                                   std::to_string(options.max_rank),
+                                   "--stride",
+                                   std::to_string(options.stride),
+                                   "--limit",
+                                   std::to_string(options.max_views)};
+  if (c.same_shape) args.push_back("--same-shape");
+  return args;
+}
 
-  const QueryInput query_input = input == "clean" ? QueryInput::kClean : QueryInput::kPhoto;
-  QueryPointsFn points_fn;
-  if (query_input == QueryInput::kClean) {
-    // The label render through the database's own conversion (edges, normalisation).
-    points_fn = [view_options](const TestView& view) -> Result<std::vector<Point2f>> {
+Result<QueryPointsFn> MakeQueryPointsFn(QueryInput input, const fs::path& db_dir) {
+  if (input == QueryInput::kClean) {
+    // The label render through the database's own conversion (edges, normalisation): the edge
+    // options its manifest records (conversion.edges), else the defaults.
+    ViewConversionOptions view_options;
+    if (auto manifest = ReadManifest(db_dir); manifest.ok()) {
+      auto recorded = ViewConversionOptionsFromMetadata(manifest->metadata,
+                                                        (db_dir / "manifest.json").string());
+      if (recorded.ok()) {
+        view_options = *recorded;
+      } else if (recorded.status().code() == StatusCode::kNotFound) {
+        std::fprintf(stderr,
+                     "handdb evaluate: warning: %s; clean queries use the default edge options\n",
+                     recorded.status().message().c_str());
+      } else {
+        return recorded.status();
+      }
+    }
+    return QueryPointsFn([view_options](const TestView& view) -> Result<std::vector<Point2f>> {
       auto image = ReadLabelExr(view.label, ExrReadOptions{});
       if (!image.ok()) return image.status();
       fs::path sidecar_path = view.label;
@@ -279,24 +273,106 @@ int RunEvaluate(int argc, char** argv) {
       for (const PointQ& p : converted->points)
         points.push_back({PointQToPx(p.x), PointQToPx(p.y)});
       return points;
-    };
-  } else {
-    // The photo through the real-image path: skin segmentation, Canny, the same normalisation.
-    points_fn = [](const TestView& view) -> Result<std::vector<Point2f>> {
-      if (view.photo.empty()) {
-        return Status(StatusCode::kNotFound,
-                      "test view " + std::to_string(view.id) +
-                          ": no photo (the test set was made with --no-photos)");
-      }
-      ImageEdgeOptions image_options;
-      image_options.kind = QueryInputKind::kPhoto;
-      auto edges = LoadQueryEdges(view.photo, image_options);
-      if (!edges.ok()) return edges.status();
-      return edges->points_px();
-    };
+    });
+  }
+  // The photo through the real-image path: skin segmentation, Canny, the same normalisation.
+  return QueryPointsFn([](const TestView& view) -> Result<std::vector<Point2f>> {
+    if (view.photo.empty()) {
+      return Status(StatusCode::kNotFound,
+                    "test view " + std::to_string(view.id) +
+                        ": no photo (the test set was made with --no-photos)");
+    }
+    ImageEdgeOptions image_options;
+    image_options.kind = QueryInputKind::kPhoto;
+    auto edges = LoadQueryEdges(view.photo, image_options);
+    if (!edges.ok()) return edges.status();
+    return edges->points_px();
+  });
+}
+
+void WarnIfTestSetMatchesDatabase(const fs::path& db_dir, const TestSet& testset) {
+  auto manifest = ReadManifest(db_dir);
+  if (!manifest.ok()) return;
+  const json* seed = FindKey(manifest->metadata, "seed");
+  if (seed != nullptr && seed->is_number_unsigned() && seed->get<uint64_t>() == testset.seed) {
+    std::fprintf(stderr,
+                 "handdb evaluate: warning: the test set and the database share seed %llu\n",
+                 static_cast<unsigned long long>(testset.seed));
+  }
+  const json* sha = FindKey(manifest->metadata, "hand_model_sha256");
+  if (sha != nullptr && sha->is_string() && sha->get<std::string>() != testset.hand_model_sha256) {
+    std::fprintf(stderr,
+                 "handdb evaluate: warning: the test set was rendered with another hand model "
+                 "(sha256 %s) than the database (%s)\n",
+                 testset.hand_model_sha256.c_str(),
+                 sha->get<std::string>().c_str());
+  }
+}
+
+int RunEvaluate(int argc, char** argv) {
+  CLI::App app(
+      "Score a database on a held-out test set: the paper's Table 1 (rank of the highest-ranking "
+      "correct match in 1, 2-4, 5-16, 17-64, 65-256, 257-1024, >1024), success@(d, n) for n = 1, "
+      "10, 100, root-relative 3D keypoint error of the top-1 match and the best of the top 10, "
+      "and queries per second. A match is correct when its joint vector is within d of the truth, "
+      "its view direction within 30 deg and its roll within 30 deg (docs/evaluation.md). With "
+      "--slurm the test views are split over a Slurm job array and the parts merged into the same "
+      "report (docs/cluster.md).",
+      "handdb evaluate");
+  std::string db_dir;
+  std::string testset_path;
+  std::string json_out;
+  std::string plots_dir;
+  EvaluateFlags flags;
+  bool quiet = false;
+  SlurmFlags slurm;
+  uint32_t tasks = 0;
+  std::string work;
+  app.add_option("db", db_dir, "database directory (manifest.json + shards)")->required();
+  app.add_option("testset", testset_path, "test-set directory (or its testset.json)")->required();
+  app.add_option("--json", json_out, "write the full report (schemas/evaluation.schema.json)");
+  app.add_option("--plots", plots_dir, "write PNG plots and example sheets into this directory");
+  flags.Add(app);
+  app.add_flag("-q,--quiet", quiet, "no progress, no text report");
+  slurm.Add(app);
+  const char* group = "Slurm (docs/cluster.md)";
+  app.add_option("--tasks", tasks, "array tasks (default: one per 16 test views, at most 1000)")
+      ->check(CLI::Range(1, 100000))
+      ->group(group);
+  app.add_option("--work",
+                 work,
+                 "directory for parts, scripts and logs (default: "
+                 "TESTSET/slurm-evaluations/<fingerprint>)")
+      ->group(group);
+  if (int rc = ParseArgs(app, argc, argv); rc >= 0) return rc;
+  if (!flags.Finish("evaluate", quiet)) return kExitUsage;
+  if (!slurm.enabled && (tasks != 0 || !work.empty())) {
+    std::fprintf(stderr, "handdb evaluate: --tasks and --work need --slurm\n");
+    return kExitUsage;
+  }
+  if (slurm.enabled) {
+    EvaluateSlurmRequest request;
+    request.db = db_dir;
+    request.testset = testset_path;
+    request.json_out = json_out;
+    request.plots_dir = plots_dir;
+    request.flags = flags;
+    request.tasks = tasks;
+    request.work = work;
+    request.quiet = quiet;
+    return RunEvaluateOnSlurm(request, slurm);
   }
 
-  auto report = Evaluate(**searcher, *testset, query_input, points_fn, options);
+  auto testset = ReadTestSet(testset_path);
+  if (!testset.ok()) return Fail("evaluate", testset.status());
+  auto searcher = Searcher::Open(db_dir);
+  if (!searcher.ok()) return Fail("evaluate", searcher.status());
+  WarnIfTestSetMatchesDatabase(db_dir, *testset);
+
+  const QueryInput query_input = flags.query_input();
+  auto points_fn = MakeQueryPointsFn(query_input, db_dir);
+  if (!points_fn.ok()) return Fail("evaluate", points_fn.status());
+  auto report = Evaluate(**searcher, *testset, query_input, *points_fn, flags.options);
   if (!report.ok()) return Fail("evaluate", report.status());
   if (!quiet) std::printf("%s", ReportToText(*report).c_str());
   if (!json_out.empty()) {

@@ -14,6 +14,7 @@
 #include <thread>
 
 #include "cli/commands.h"
+#include "cli/evaluate_cli.h"
 #include "format/atomic_file.h"
 #include "format/manifest.h"
 #include "format/progress.h"
@@ -495,8 +496,8 @@ int RunGenerateOnSlurm(const SlurmGenerateRequest& request, const SlurmFlags& fl
 int RunUnit(int argc, char** argv) {
   CLI::App app(
       "Per-unit work, as run by the Slurm array tasks of `handdb generate --slurm` (one task = one "
-      "render unit). Every subcommand is idempotent: finished renders and complete shards are "
-      "kept.",
+      "render unit) and `handdb evaluate --slurm` (one task = one slice of the test views). Every "
+      "subcommand is idempotent: finished renders, complete shards and parts are kept.",
       "handdb unit");
   app.require_subcommand(1);
   bool quiet = false;
@@ -540,11 +541,15 @@ int RunUnit(int argc, char** argv) {
   convert_flags.Add(*status);
   status->add_flag("--json", as_json, "print the status as JSON on stdout");
 
+  // unit evaluate | evaluate-merge: the tasks of `handdb evaluate --slurm`.
+  UnitEvaluateCommands evaluate_commands(app);
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e) == 0 ? kExitOk : kExitUsage;
   }
+  if (evaluate_commands.parsed()) return evaluate_commands.Run();
   if (threads <= 0) threads = TaskThreads();
 
   if (render->parsed()) {

@@ -1,0 +1,78 @@
+// What `handdb evaluate` shares with the Slurm array tasks and the merge job of
+// `handdb evaluate --slurm` (`handdb unit evaluate|evaluate-merge`,
+// cli/evaluate_slurm_commands.cc): the options that define an evaluation, the query-input function,
+// the database/test-set checks. Sharing them is what makes a Slurm evaluation score exactly like a
+// local one.
+#pragma once
+
+#include <CLI/CLI.hpp>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "cli/slurm_commands.h"
+#include "query/evaluate.h"
+
+namespace handdb::cli {
+
+// The evaluation options of `handdb evaluate` (correctness, search depth, test-view selection,
+// input, threads), parsed once and passed on to Slurm tasks verbatim (Args()).
+struct EvaluateFlags {
+  std::string input = "clean";
+  std::string distance = "rms";
+  std::string roll_compare = "aligned";
+  EvaluationOptions options;
+  void Add(CLI::App& app);
+  // Completes `options` after parsing; false (message printed) on bad usage.
+  bool Finish(const std::string& cmd, bool quiet);
+  QueryInput query_input() const {
+    return input == "clean" ? QueryInput::kClean : QueryInput::kPhoto;
+  }
+  // The flags that reproduce input and every scoring option exactly (not --threads, --quiet).
+  std::vector<std::string> Args() const;
+};
+
+// Test view -> query edge points: the clean label render through the database's own conversion
+// (the edge options its manifest records), or the photo through the real-image path.
+Result<QueryPointsFn> MakeQueryPointsFn(QueryInput input, const std::filesystem::path& db_dir);
+
+// Warns on stderr when the database's manifest records the test set's seed or another hand model.
+void WarnIfTestSetMatchesDatabase(const std::filesystem::path& db_dir, const TestSet& testset);
+
+struct EvaluateSlurmRequest {
+  std::string db;       // as typed: jobs run in the submission directory, so the report's paths
+  std::string testset;  // are the ones a local run with the same arguments prints
+  std::string json_out;
+  std::string plots_dir;
+  EvaluateFlags flags;
+  uint32_t tasks = 0;          // 0: one task per 16 selected test views, at most 1000
+  std::filesystem::path work;  // empty: TESTSET_DIR/slurm-evaluations/<fingerprint>
+  bool quiet = false;
+};
+// `handdb evaluate DB TESTSET --slurm ...`: submits (or with --dry-run only writes) an array of
+// tasks for the parts that are missing plus the merge job; with --wait, waits and prints the
+// report as a local run does. Returns the exit code.
+int RunEvaluateOnSlurm(const EvaluateSlurmRequest& request, const SlurmFlags& flags);
+
+// `handdb unit evaluate` and `handdb unit evaluate-merge`, added to `handdb unit`'s app.
+class UnitEvaluateCommands {
+ public:
+  explicit UnitEvaluateCommands(CLI::App& unit_app);
+  bool parsed() const;
+  int Run();
+
+ private:
+  CLI::App* task_cmd_ = nullptr;
+  CLI::App* merge_cmd_ = nullptr;
+  std::string db_;
+  std::string testset_;
+  std::filesystem::path work_;
+  uint32_t tasks_ = 1;
+  uint32_t task_ = 0;
+  std::string json_out_;
+  std::string plots_dir_;
+  bool quiet_ = false;
+  EvaluateFlags flags_;
+};
+
+}  // namespace handdb::cli
