@@ -146,6 +146,17 @@ const std::string& ShardReader::name() const { return impl_->name; }
 size_t ShardReader::num_views() const { return impl_->num_views; }
 std::span<const uint8_t> ShardReader::bytes() const { return impl_->bytes; }
 
+void ShardReader::ReleaseViewTablePages() const {
+  const Impl& r = *impl_;
+  if (r.map == nullptr) return;
+  const RawSection& vs = r.layout.sections[r.layout.views];
+  constexpr uint64_t kPage = 4096;
+  // Whole pages inside the section only: the pages it shares with its neighbours stay.
+  const uint64_t begin = (vs.offset + kPage - 1) & ~(kPage - 1);
+  const uint64_t end = std::min<uint64_t>(vs.offset + vs.size, r.map_size) & ~(kPage - 1);
+  if (end > begin) ::madvise(static_cast<uint8_t*>(r.map) + begin, end - begin, MADV_DONTNEED);
+}
+
 ViewLabel ShardReader::label(size_t i) const {
   THROW_CHECK_LT(i, impl_->num_views);
   return DecodeViewLabel(impl_->record(i));

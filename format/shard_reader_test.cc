@@ -203,6 +203,23 @@ TEST(ShardReader, FromMemoryMatchesPath) {
   fs::remove_all(dir);
 }
 
+TEST(ShardReader, LabelsReadBackAfterReleasingTheViewTablePages) {
+  auto dir = TempDir("release");
+  ASSERT_TRUE(testing::WriteSyntheticShard(dir / "a.hdb", 200).ok());  // an 80 KB view table
+  auto bytes = ReadBytes(dir / "a.hdb");
+  auto mapped = ShardReader::Open(dir / "a.hdb");
+  auto memory = ShardReader::FromMemory(bytes, "a.hdb");
+  ASSERT_TRUE(mapped.ok() && memory.ok());
+  mapped->ReleaseViewTablePages();
+  memory->ReleaseViewTablePages();  // no-op
+  for (size_t i = 0; i < mapped->num_views(); ++i) {
+    ExpectSameLabel(mapped->label(i), memory->label(i));
+    ASSERT_EQ(mapped->point_offset(i), memory->point_offset(i));
+  }
+  EXPECT_TRUE(mapped->VerifyChecksums().ok());
+  fs::remove_all(dir);
+}
+
 TEST(ShardReader, MissingFileAndDirectory) {
   auto dir = TempDir("missing");
   auto missing = ShardReader::Open(dir / "nope.hdb");
