@@ -98,6 +98,8 @@ Result<Database> Database::Open(const std::filesystem::path& dir, bool verify_ch
       db.views_.push_back({shard_index, static_cast<uint32_t>(i), owned->points(i)});
       db.num_points_ += db.views_.back().points.size();
     }
+    // The point spans are copied out; labels are read again only for the top-k of a search.
+    owned->ReleaseViewTablePages();
     db.size_bytes_ += header.file_size;
     db.shards_.push_back(std::move(owned));
   }

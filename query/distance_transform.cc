@@ -4,7 +4,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdlib>
-#include <opencv2/imgproc.hpp>
+#include <limits>
 
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
 #include <immintrin.h>
@@ -34,38 +34,108 @@ DistanceGrid::DistanceGrid(const DistanceGridOptions& options) : options_(option
   THROW_CHECK_EQ(1 << shift_, cell_u_);
 }
 
+namespace {
+
+constexpr uint16_t kNoSeed = 0xFFFF;  // column pass: no seed in this column
+// Largest grid side: a query far from the hand coarsens the grid instead of growing it (a
+// 2049 x 2049 grid is 8 MB); up to 4 px cells, which still covers +-4000 px.
+constexpr int kMaxGridSide = 2049;
+constexpr int kMaxCellUnits = 64;
+
+}  // namespace
+
 void DistanceGrid::Build(std::span<const PointQ> points) {
   THROW_CHECK(!points.empty());
-  THROW_CHECK_GT(cell_u_, 0);
   int max_abs = static_cast<int>(std::ceil(options_.min_half_extent_px * kPointScale));
   for (const PointQ& q : points) {
     max_abs = std::max({max_abs, std::abs(static_cast<int>(q.x)), std::abs(static_cast<int>(q.y))});
   }
-  half_extent_u_ = (max_abs + cell_u_ - 1) / cell_u_ * cell_u_;
-  size_ = 2 * half_extent_u_ / cell_u_ + 1;
+  cell_u_ = static_cast<int>(std::lround(options_.cell_px * kPointScale));
+  for (;;) {
+    half_extent_u_ = (max_abs + cell_u_ - 1) / cell_u_ * cell_u_;
+    size_ = 2 * half_extent_u_ / cell_u_ + 1;
+    if (size_ <= kMaxGridSide || cell_u_ >= kMaxCellUnits) break;
+    cell_u_ *= 2;
+  }
+  shift_ = 0;
+  while ((1 << shift_) < cell_u_) ++shift_;
+  THROW_CHECK_EQ(1 << shift_, cell_u_);
   fast_limit_ = half_extent_u_;
+  const size_t n = static_cast<size_t>(size_);
 
-  // Seeds are 0, everything else non-zero: OpenCV measures the distance to the nearest zero pixel.
-  seeds_.assign(static_cast<size_t>(size_) * size_, 255);
+  // Seeds: the node nearest to each point (distance 0 in the column pass).
+  dt_.assign(n * n + 1, kNoSeed);
   double r_max_sq = 0;
   const double cell = cell_u_;
   for (const PointQ& q : points) {
     const int ix = NodeIndex(q.x);
     const int iy = NodeIndex(q.y);
-    seeds_[static_cast<size_t>(iy) * size_ + ix] = 0;
+    dt_[static_cast<size_t>(iy) * n + ix] = 0;
     const double dx = q.x - (static_cast<double>(ix) * cell - half_extent_u_);
     const double dy = q.y - (static_cast<double>(iy) * cell - half_extent_u_);
     r_max_sq = std::max(r_max_sq, dx * dx + dy * dy);
   }
   r_max_px_ = static_cast<float>(std::sqrt(r_max_sq) / kPointScale);
 
-  dt_.resize(static_cast<size_t>(size_) * size_);
-  const cv::Mat src(size_, size_, CV_8UC1, seeds_.data());
-  cv::Mat dst(size_, size_, CV_32FC1, dt_.data());
-  cv::distanceTransform(src, dst, cv::DIST_L2, cv::DIST_MASK_PRECISE, CV_32F);
-  THROW_CHECK(dst.data == reinterpret_cast<uchar*>(dt_.data()));  // written in place
-  const float scale = options_.cell_px;
-  for (float& d : dt_) d *= scale;
+  // Pass 1, per column: distance in nodes to the nearest seed in the same column (two sweeps,
+  // done row by row so memory is read contiguously).
+  uint16_t* g = dt_.data();
+  auto relax = [n](uint16_t* row, const uint16_t* from) {
+    for (size_t x = 0; x < n; ++x) {
+      const uint32_t via = from[x] == kNoSeed ? kNoSeed : from[x] + 1u;
+      row[x] = static_cast<uint16_t>(std::min<uint32_t>(row[x], via));
+    }
+  };
+  for (size_t y = 1; y < n; ++y) relax(g + y * n, g + (y - 1) * n);
+  for (size_t y = n - 1; y-- > 0;) relax(g + y * n, g + (y + 1) * n);
+
+  // Pass 2, per row: lower envelope of the parabolas (x - v)^2 + g(v)^2 over the columns v that
+  // have a seed (Felzenszwalb & Huttenlocher 2012), then floor(distance in 1/64 px).
+  row_f_.resize(n);
+  row_v_.resize(n);
+  row_z_.resize(n + 1);
+  const double units_per_node = kUnitsPerPx * static_cast<double>(cell_u_) / kPointScale;
+  for (size_t y = 0; y < n; ++y) {
+    uint16_t* row = g + y * n;
+    int k = -1;
+    for (int q = 0; q < size_; ++q) {
+      if (row[q] == kNoSeed) continue;
+      const int32_t fq = static_cast<int32_t>(row[q]) * row[q];
+      row_f_[q] = fq;
+      if (k < 0) {
+        k = 0;
+        row_v_[0] = q;
+        row_z_[0] = -std::numeric_limits<double>::infinity();
+        row_z_[1] = std::numeric_limits<double>::infinity();
+        continue;
+      }
+      // z[0] = -inf, so the loop stops at k = 0 at the latest.
+      double s;
+      for (;;) {
+        const int32_t v = row_v_[k];
+        s = (static_cast<double>(fq) + static_cast<double>(q) * q - row_f_[v] -
+             static_cast<double>(v) * v) /
+            (2.0 * (q - v));
+        if (s > row_z_[k]) break;
+        --k;
+      }
+      ++k;
+      row_v_[k] = q;
+      row_z_[k] = s;
+      row_z_[k + 1] = std::numeric_limits<double>::infinity();
+    }
+    THROW_CHECK_GE(k, 0);  // every column below or above a seed has a finite distance
+    int j = 0;
+    for (int q = 0; q < size_; ++q) {
+      while (row_z_[j + 1] < q) ++j;
+      const int64_t dx = q - row_v_[j];
+      const int64_t d2 = dx * dx + row_f_[row_v_[j]];
+      // Exact floor: sqrt is correctly rounded, units_per_node a power of two, and no integer
+      // d2 has a scaled root within rounding distance below an integer.
+      const double units = std::floor(std::sqrt(static_cast<double>(d2)) * units_per_node);
+      row[q] = static_cast<uint16_t>(std::min(units, 65535.0));
+    }
+  }
 
   // r_max + |p - n| for every position of p inside its cell.
   offset_table_.resize(static_cast<size_t>(cell_u_) * cell_u_);
@@ -91,7 +161,10 @@ float DistanceGrid::LowerBound(PointQ p) const {
   const int mask = cell_u_ - 1;
   const int half = cell_u_ / 2;
   const float off = offset_table_[(((p.y + half) & mask) << shift_) | ((p.x + half) & mask)];
-  return std::max(0.0f, dt_[static_cast<size_t>(NodeIndex(p.y)) * size_ + NodeIndex(p.x)] - off);
+  const float d =
+      static_cast<float>(dt_[static_cast<size_t>(NodeIndex(p.y)) * size_ + NodeIndex(p.x)]) *
+      (1.0f / kUnitsPerPx);
+  return std::max(0.0f, d - off);
 }
 
 double DistanceGrid::SumLowerBounds(std::span<const PointQ> points) const {
@@ -110,7 +183,7 @@ __attribute__((target("avx2"), always_inline)) inline __m256 Step(const PointQ* 
                                                                   __m256i vsize,
                                                                   __m128i vshift,
                                                                   __m256 zero,
-                                                                  const float* dt,
+                                                                  const uint16_t* dt,
                                                                   const float* table) {
   const __m256i v = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
   const __m256i x = _mm256_srai_epi32(_mm256_slli_epi32(v, 16), 16);
@@ -121,7 +194,11 @@ __attribute__((target("avx2"), always_inline)) inline __m256 Step(const PointQ* 
   const __m256i tx = _mm256_and_si256(_mm256_add_epi32(x, vhalf), vmask);
   const __m256i ty = _mm256_and_si256(_mm256_add_epi32(y, vhalf), vmask);
   const __m256i tidx = _mm256_or_si256(_mm256_sll_epi32(ty, vshift), tx);
-  const __m256 d = _mm256_i32gather_ps(dt, idx, 4);
+  // 32-bit loads at 2-byte steps (dt_ has one padding element), low halves are the uint16 DT.
+  const __m256i raw = _mm256_i32gather_epi32(reinterpret_cast<const int*>(dt), idx, 2);
+  const __m256 d =
+      _mm256_mul_ps(_mm256_cvtepi32_ps(_mm256_and_si256(raw, _mm256_set1_epi32(0xFFFF))),
+                    _mm256_set1_ps(1.0f / DistanceGrid::kUnitsPerPx));
   const __m256 off = _mm256_i32gather_ps(table, tidx, 4);
   return _mm256_max_ps(_mm256_sub_ps(d, off), zero);
 }
@@ -130,7 +207,7 @@ __attribute__((target("avx2"), always_inline)) inline __m256 Step(const PointQ* 
 // Returns the sum over the first n - n % 8 points; *done receives that count.
 __attribute__((target("avx2"))) double SumLowerBoundsAvx2(const PointQ* pts,
                                                           size_t n,
-                                                          const float* dt,
+                                                          const uint16_t* dt,
                                                           const float* table,
                                                           int mask,
                                                           int half,
@@ -173,7 +250,7 @@ bool HaveAvx2() {
 }  // namespace
 
 double DistanceGrid::SumLowerBoundsFast(std::span<const PointQ> points) const {
-  const float* dt = dt_.data();
+  const uint16_t* dt = dt_.data();
   const float* table = offset_table_.data();
   const int mask = cell_u_ - 1;
   const int half = cell_u_ / 2;
@@ -194,7 +271,8 @@ double DistanceGrid::SumLowerBoundsFast(std::span<const PointQ> points) const {
     const int x = p.x;
     const int y = p.y;
     const float off = table[(((y + half) & mask) << shift) | ((x + half) & mask)];
-    const float d = dt[((y + bias) >> shift) * size + ((x + bias) >> shift)];
+    const float d = static_cast<float>(dt[((y + bias) >> shift) * size + ((x + bias) >> shift)]) *
+                    (1.0f / kUnitsPerPx);
     return std::max(0.0f, d - off);
   };
   for (; i + 4 <= n; i += 4) {

@@ -50,7 +50,10 @@ TEST(DistanceGrid, NodeValuesAreTheExactEuclideanTransform) {
     for (int ix = 0; ix < grid.size(); ix += 5) {
       const PointQ node{static_cast<int16_t>((ix - grid.size() / 2) * 16),
                         static_cast<int16_t>((iy - grid.size() / 2) * 16)};
-      ASSERT_NEAR(grid.NodeDistance(ix, iy), ExactDistancePx(pts, node), 1e-3) << ix << "," << iy;
+      // Rounded down to 1/64 px: never above the exact distance, at most 1/64 px below.
+      const double exact = ExactDistancePx(pts, node);
+      ASSERT_LE(grid.NodeDistance(ix, iy), exact) << ix << "," << iy;
+      ASSERT_GT(grid.NodeDistance(ix, iy), exact - 1.0 / 64) << ix << "," << iy;
     }
   }
 }
@@ -102,6 +105,42 @@ TEST(DistanceGrid, GrowsToContainFarPoints) {
   EXPECT_GE(grid.half_extent_px(), 400.0f);
   EXPECT_EQ(grid.LowerBound({static_cast<int16_t>(400 * 16), 0}), 0.0f);
   EXPECT_FALSE(grid.Covers(401 * 16));
+}
+
+TEST(DistanceGrid, MatchesBruteForceOnEveryNode) {
+  // Small grids with few, clustered and collinear seeds: the cases where the lower envelope of
+  // parabolas has ties and replacements.
+  for (uint32_t seed = 0; seed < 20; ++seed) {
+    std::mt19937 rng(seed);
+    std::uniform_int_distribution<int> u(-12, 12);
+    std::vector<PointQ> pts;
+    const int count = 1 + static_cast<int>(seed % 7);
+    for (int i = 0; i < count; ++i) {
+      const int x = seed % 3 == 0 ? 0 : u(rng);  // every third set lies on one column
+      pts.push_back({static_cast<int16_t>(x * 16), static_cast<int16_t>(u(rng) * 16)});
+    }
+    DistanceGrid grid(DistanceGridOptions{1.0f, 14});
+    grid.Build(pts);
+    for (int iy = 0; iy < grid.size(); ++iy) {
+      for (int ix = 0; ix < grid.size(); ++ix) {
+        const PointQ node{static_cast<int16_t>((ix - grid.size() / 2) * 16),
+                          static_cast<int16_t>((iy - grid.size() / 2) * 16)};
+        const double exact = ExactDistancePx(pts, node);
+        ASSERT_EQ(grid.NodeDistance(ix, iy), std::floor(exact * 64) / 64)
+            << "seed " << seed << " node " << ix << "," << iy;
+      }
+    }
+  }
+}
+
+TEST(DistanceGrid, FarPointsCoarsenTheGridInsteadOfGrowingIt) {
+  const std::vector<PointQ> set = {{0, 0}, {static_cast<int16_t>(1900 * 16), 0}};
+  DistanceGrid grid(DistanceGridOptions{1.0f / 16, 170});
+  grid.Build(set);
+  EXPECT_LE(grid.size(), 2049);
+  EXPECT_EQ(grid.cell_px(), 2.0f);
+  const auto probes = RandomPoints(5000, 2000 * 16, 9);
+  for (const PointQ& p : probes) ASSERT_LE(grid.LowerBound(p), ExactDistancePx(set, p) + 1e-5);
 }
 
 }  // namespace

@@ -41,8 +41,8 @@ struct Match {
   double distance = 0;     // D_c = a + b, px
   double a = 0;            // query -> view term, px
   double b = 0;            // view -> query term, px
-  double lower_bound = 0;  // the distance-transform bound L(v, r) used for pruning (0 in
-                           // brute force)
+  double lower_bound = 0;  // the distance-transform bound L(v, r) used for pruning, rounded
+                           // down to 1/64 px (0 in brute force)
   ViewLabel label;         // rolled: camera_roll += angle, keypoints rotated (RollLabel)
   std::string shape_name;  // from the database's shape table, "" if unknown
 };
