@@ -93,6 +93,56 @@ long CurrentRssKb() {
   return resident * (sysconf(_SC_PAGESIZE) / 1024);
 }
 
+// Resident memory by kind, from /proc/self/smaps: the database's mapped shard files, other files
+// (program and library code, read-only data) and anonymous memory (heap, stacks).
+struct MemoryBreakdown {
+  long db_kb = 0;
+  long code_kb = 0;
+  long anon_kb = 0;
+};
+
+MemoryBreakdown ReadMemoryBreakdown() {
+  MemoryBreakdown m;
+  FILE* f = std::fopen("/proc/self/smaps", "r");
+  if (f == nullptr) return m;
+  char line[4096];
+  enum { kDb, kCode, kAnon } kind = kAnon;
+  while (std::fgets(line, sizeof(line), f) != nullptr) {
+    unsigned long lo = 0, hi = 0;
+    char path[4096] = "";
+    if (std::sscanf(line, "%lx-%lx %*s %*s %*s %*s %4095s", &lo, &hi, path) >= 2 &&
+        std::strchr(line, '-') != nullptr && std::strncmp(line, "Rss:", 4) != 0 &&
+        line[0] != ' ' && std::sscanf(line, "%lx-%lx", &lo, &hi) == 2 && hi > lo) {
+      const std::string p = path;
+      if (p.size() > 4 && p.compare(p.size() - 4, 4, ".hdb") == 0) {
+        kind = kDb;
+      } else if (!p.empty() && p[0] == '/') {
+        kind = kCode;
+      } else {
+        kind = kAnon;
+      }
+      continue;
+    }
+    long kb = 0;
+    if (std::sscanf(line, "Rss: %ld kB", &kb) == 1) {
+      (kind == kDb ? m.db_kb : kind == kCode ? m.code_kb : m.anon_kb) += kb;
+    }
+  }
+  std::fclose(f);
+  return m;
+}
+
+std::string FormatBreakdown(const MemoryBreakdown& m) {
+  char buf[160];
+  std::snprintf(buf,
+                sizeof(buf),
+                "db files %.2f MB, code %.2f MB, anonymous %.2f MB",
+                m.db_kb / 1024.0,
+                m.code_kb / 1024.0,
+                m.anon_kb / 1024.0);
+  return buf;
+}
+
 Status WriteSyntheticDatabase(const std::filesystem::path& dir, const Args& args) {
   Manifest manifest;
   manifest.tool_version = "query_bench";
@@ -258,6 +308,7 @@ int Run(const Args& args) {
   }
 
   const long rss_before = CurrentRssKb();
+  const MemoryBreakdown mem_before = ReadMemoryBreakdown();
   const long peak_before = PeakRssKb();
   const double t_open = Now();
   auto searcher_or = Searcher::Open(dir);
@@ -314,6 +365,7 @@ int Run(const Args& args) {
     refine_ms.push_back(stats.seconds_refine * 1e3);
   }
   const long peak_after_pruned = PeakRssKb();
+  const MemoryBreakdown mem_after_pruned = ReadMemoryBreakdown();
 
   std::vector<double> t_brute, cpu_brute;
   bool identical = true;
@@ -403,6 +455,8 @@ int Run(const Args& args) {
       a <= 0.25 ? "met" : "MISSED",
       b / a >= 20 ? "met" : "MISSED",
       static_cast<double>(peak_after_pruned - rss_before) <= 1.5 * db_kb ? "met" : "MISSED");
+  std::printf("  resident before opening: %s\n", FormatBreakdown(mem_before).c_str());
+  std::printf("  resident after (a):       %s\n", FormatBreakdown(mem_after_pruned).c_str());
   (void)peak_before;
   if (made && !args.keep) std::filesystem::remove_all(dir);
   return identical ? 0 : 1;
