@@ -267,6 +267,68 @@ TEST(Slurm, ArrayScriptPassesArgumentsVerbatim) {
       << r->out;
 }
 
+// `handdb evaluate --slurm`: task BASE+i runs the task words + --task, in the submission
+// directory; a failure leaves a marker naming the task; the merge job runs the merge words.
+TEST(Slurm, EvaluateScriptsRunTaskAndMergeWords) {
+  TempDir tmp;
+  const fs::path echo_args = tmp.path() / "echo-args";
+  ASSERT_TRUE(
+      WriteFileAtomic(echo_args, "#!/bin/sh\nprintf '[%s]' \"$@\"; echo; exit ${RC:-0}\n").ok());
+  fs::permissions(echo_args, fs::perms::owner_all);
+  SlurmEvaluateLayout layout;
+  layout.handdb = echo_args;
+  layout.submit_dir = tmp.path() / "my cwd";
+  layout.work_dir = tmp.path() / "work";
+  layout.task_args = {"unit", "evaluate", "db dir", "ts", "--tasks", "3"};
+  layout.merge_args = {
+      "unit", "evaluate-merge", "db dir", "ts", "--tasks", "3", "--json", "r.json"};
+  for (const auto& d : {layout.submit_dir, layout.log_dir(), layout.failed_dir()}) {
+    fs::create_directories(d);
+  }
+  SlurmOptions options;
+  options.partition = "short";
+  ASSERT_TRUE(WriteFileAtomic(layout.array_script(), EvaluateArrayScript(layout, options)).ok());
+  ASSERT_TRUE(WriteFileAtomic(layout.final_script(), EvaluateFinalScript(layout, options)).ok());
+  const std::string array = Slurp(layout.array_script());
+  EXPECT_NE(array.find("#SBATCH --chdir=" + layout.submit_dir.string() + "\n"), std::string::npos);
+  EXPECT_NE(array.find("#SBATCH --partition=short\n"), std::string::npos);
+  EXPECT_NE(array.find("#SBATCH --job-name=handdb-eval\n"), std::string::npos);
+
+  auto run_task = [&](const std::string& base, const std::string& task, const std::string& rc) {
+    auto r = RunCommand({"env",
+                         "RC=" + rc,
+                         "SLURM_ARRAY_JOB_ID=8",
+                         "SLURM_ARRAY_TASK_ID=" + task,
+                         "bash",
+                         layout.array_script().string(),
+                         base});
+    EXPECT_TRUE(r.ok());
+    return r.ok() ? r->exit_code : -1;
+  };
+  // Base 1 + task 1 = task 2.
+  EXPECT_EQ(run_task("1", "1", "3"), 1);
+  ASSERT_TRUE(fs::exists(layout.TaskFailedMarker(2)));
+  EXPECT_EQ(layout.TaskFailedMarker(2).filename(), "part-00002");
+  EXPECT_NE(Slurp(layout.TaskFailedMarker(2)).find("exit code 3 from handdb unit evaluate"),
+            std::string::npos);
+  EXPECT_EQ(run_task("0", "2", "0"), 0);
+  EXPECT_FALSE(fs::exists(layout.TaskFailedMarker(2)));
+  const std::string log = Slurp(layout.TaskLog(2));
+  EXPECT_EQ(layout.TaskLog(2).filename(), "part-00002.log");
+  EXPECT_NE(log.find("[unit][evaluate][db dir][ts][--tasks][3][--task][2][--quiet]\n"),
+            std::string::npos)
+      << log;
+  EXPECT_NE(log.find("=== task 2: done"), std::string::npos) << log;
+
+  auto r = RunCommand({"env", "SLURM_JOB_ID=9", "bash", layout.final_script().string()});
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->exit_code, 0);
+  EXPECT_NE(
+      r->out.find("[unit][evaluate-merge][db dir][ts][--tasks][3][--json][r.json][--quiet]\n"),
+      std::string::npos)
+      << r->out;
+}
+
 TEST(Slurm, DryRunWritesScriptsAndCommandsWithoutSubmitting) {
   TempDir tmp;
   SlurmOptions options;
