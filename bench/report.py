@@ -267,6 +267,16 @@ def main():
     if g and gb:
         rows.append(f"| query latency, top 10, paper database (pruned exact search) | {g[0]} ms | "
                     f"brute force {gb[0]} ms | {float(gb[0]) / float(g[0]):.0f}x faster |")
+    for step_name, db_title in [("query", "paper"), ("query_pca_large", "pca-large")]:
+        g = grab(step_name, r"\(a\) pruned exact\s+median\s+([0-9.]+) ms")
+        c = grab(step_name, r"\(a\) CPU / \d+ threads = ([0-9.]+) ms")
+        mem = grab(step_name, r"DB on disk ([0-9.]+) MB; \(peak during \(a\) - RSS before\) / DB = ([0-9.]+)")
+        if g and step_name == "query_pca_large":
+            rows.append(f"| query latency, top 10, pca-large database (pruned exact search) | {g[0]} ms "
+                        f"(CPU {c[0] if c else '?'} ms per thread) | – | – |")
+        if mem:
+            rows.append(f"| peak memory during queries, {db_title} database (RSS growth / DB size) | "
+                        f"{mem[1]}x | DB {mem[0]} MiB on disk | target <= 1.5x |")
     for name, title in EVALUATIONS:
         s = results["evaluations"].get(name)
         if not s:
@@ -351,6 +361,10 @@ def main():
                code_block(pca_gen["stdout"] or pca_gen["stderr_tail"])]
     else:
         md += [PCA_LARGE_NOTE]
+    section("Query on the pca-large database", "query_pca_large",
+            "`bench/query_bench` on pca-large (1,056,768 virtual views): pruned exact search, the naive "
+            "baseline (scaled from 0.1% of the views) and the read floor; brute force is left out "
+            "(minutes per query).")
     notes = read(os.path.join(out, "notes.md"))
     if notes:
         md += ["", notes.strip()]

@@ -21,8 +21,9 @@
 #   report    bench/report.py -> bench/results.json, docs/results.md
 # Databases and test sets are kept in $HANDDB_BENCH_DIR (default /tmp/handdb-bench) and reused by
 # a rerun (generate and testset resume); the benchmarks themselves always run again.
+# HANDDB_BENCH_FRESH=1 removes the databases and test sets first (renders included).
 # HANDDB_BENCH_STEPS="evaluate report" runs only some steps (the others' outputs are reused); the
-# pca-large steps are named pca_large_generate and pca_large_evaluate.
+# pca-large steps are named pca_large_generate, pca_large_query and pca_large_evaluate.
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
@@ -31,9 +32,13 @@ build="${HANDDB_BENCH_BUILD:-$here/build-bench}"
 jobs="${HANDDB_BENCH_JOBS:-$(nproc)}"
 steps="${HANDDB_BENCH_STEPS:-build format render generate convert query testset evaluate report}"
 if [ "${HANDDB_BENCH_PCA_LARGE:-0}" = 1 ] && [ -z "${HANDDB_BENCH_STEPS:-}" ]; then
-  steps="$steps pca_large_generate pca_large_evaluate"
+  steps="$steps pca_large_generate pca_large_query pca_large_evaluate"
 fi
 out="$work/out"
+if [ "${HANDDB_BENCH_FRESH:-0}" = 1 ]; then
+  rm -rf "$work/db-paper" "$work/db-pca-large" "$work/ts-paper" "$work/ts-paper-clutter" "$out" \
+    "$work/plots"
+fi
 mkdir -p "$out"
 start=$(date +%s)
 handdb="$build/cli/handdb"
@@ -110,6 +115,11 @@ fi
 if want pca_large_generate; then
   run generate_pca_large "$handdb" generate configs/pca-large.json -o "$work/db-pca-large" \
     -j "$jobs" -q --json
+fi
+if want pca_large_query; then
+  # Latency and memory at 1M virtual views; no brute force (~5 min per query here).
+  run query_pca_large "$build/bench/query_bench" --db "$work/db-pca-large" --threads "$jobs" \
+    --queries 5 --brute-queries 0 --baseline-fraction 0.001
 fi
 if want pca_large_evaluate; then
   # Every 4th test view (50: 25 basic-shape, 25 PCA): a query is ~10x slower than on the paper
