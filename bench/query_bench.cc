@@ -340,7 +340,7 @@ int Run(const Args& args) {
   std::vector<std::vector<Point2f>> queries;
   int top1_hits = 0;
   std::vector<double> t_pruned;
-  std::vector<double> refined, abandoned, trees, bounds_ms, refine_ms;
+  std::vector<double> refined, abandoned, probed, trees, bounds_ms, refine_ms;
   std::vector<std::vector<Match>> pruned_results;
   for (int i = 0; i < args.queries; ++i) {
     view_id_t v;
@@ -360,6 +360,7 @@ int Run(const Args& args) {
     pruned_results.push_back(*res);
     refined.push_back(static_cast<double>(stats.refined));
     abandoned.push_back(static_cast<double>(stats.abandoned));
+    probed.push_back(static_cast<double>(stats.probe_abandoned));
     trees.push_back(static_cast<double>(stats.view_trees));
     bounds_ms.push_back(stats.seconds_bounds * 1e3);
     refine_ms.push_back(stats.seconds_refine * 1e3);
@@ -407,13 +408,15 @@ int Run(const Args& args) {
       std::thread::hardware_concurrency());
   std::printf(
       "  (a) pruned exact     median %9.1f ms  over %d queries (bounds %.1f ms + refine %.1f ms; "
-      "refined %.0f pairs, %.0f abandoned early, %.0f view kd-trees)\n",
+      "refined %.0f pairs, %.0f abandoned early (%.0f by the probe, before a kd-tree), %.0f view "
+      "kd-trees)\n",
       a * 1e3,
       args.queries,
       Median(bounds_ms),
       Median(refine_ms),
       Median(refined),
       Median(abandoned),
+      Median(probed),
       Median(trees));
   const bool have_brute = !t_brute.empty();
   if (have_brute) {

@@ -47,4 +47,14 @@ ChamferTerms Chamfer(std::span<const PointQ> query,
 // The same without kd-trees: O(|Q| |Y|) brute force, the reference the trees are tested against.
 ChamferTerms ChamferBruteForce(std::span<const PointQ> query, std::span<const PointQ> view);
 
+// Coordinates up to this magnitude (PointQ units, 1023.9 px) keep every squared distance of
+// NearestSquaredSmall below 2^31.
+constexpr int kSmallCoordLimit = 16383;
+
+// Exact squared distance (PointQ units^2) from q to its nearest point of `points` by a linear
+// scan in 32-bit integers (AVX2 when the CPU has it): cheaper than building a kd-tree when only
+// a few points are asked. Requires non-empty `points` and |coordinates| <= kSmallCoordLimit for
+// q and every point.
+int32_t NearestSquaredSmall(PointQ q, std::span<const PointQ> points);
+
 }  // namespace handdb

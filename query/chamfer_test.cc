@@ -80,5 +80,23 @@ TEST(RotateAndQuantise, RoundsAndClamps) {
   EXPECT_EQ(r[0].y, 160);  // +x turns towards +y
 }
 
+TEST(NearestSquaredSmall, MatchesTheKdTreeForEverySizeAndTheCoordinateLimit) {
+  std::mt19937 rng(11);
+  for (size_t n : {1, 7, 8, 9, 16, 17, 555, 1000}) {
+    std::uniform_int_distribution<int> u(-kSmallCoordLimit, kSmallCoordLimit);
+    std::vector<PointQ> pts(n);
+    for (auto& p : pts) p = {static_cast<int16_t>(u(rng)), static_cast<int16_t>(u(rng))};
+    // Extremes of the documented range, where a 32-bit squared distance is closest to overflow.
+    pts[0] = {static_cast<int16_t>(kSmallCoordLimit), static_cast<int16_t>(kSmallCoordLimit)};
+    const KdTree tree(pts, KdTreeBackend::kNanoflann);
+    for (int i = 0; i < 200; ++i) {
+      PointQ q{static_cast<int16_t>(u(rng)), static_cast<int16_t>(u(rng))};
+      if (i == 0)
+        q = {static_cast<int16_t>(-kSmallCoordLimit), static_cast<int16_t>(-kSmallCoordLimit)};
+      ASSERT_EQ(NearestSquaredSmall(q, pts), tree.NearestSquared(q)) << "n " << n << " i " << i;
+    }
+  }
+}
+
 }  // namespace
 }  // namespace handdb

@@ -124,11 +124,16 @@ double Limit(double threshold, double known, double n) {
 // Per-query state shared by the workers.
 class QueryContext {
  public:
-  QueryContext(const Database& db, std::span<const Point2f> query, const SearchOptions& options)
+  QueryContext(const Database& db,
+               std::span<const int32_t> max_abs,
+               std::span<const Point2f> query,
+               const SearchOptions& options)
       : db_(db),
         options_(options),
         query_(query),
+        max_abs_(max_abs),
         rolled_(db.num_rolls()),
+        rolled_max_abs_(db.num_rolls()),
         query_trees_(db.num_rolls()),
         query_tree_once_(db.num_rolls()),
         caches_(ResolveThreadCount(options.num_threads)) {}
@@ -136,6 +141,11 @@ class QueryContext {
   // The query rotated by -angle(r) and quantised.
   void PrepareRoll(roll_id_t r) {
     rolled_[r] = RotateAndQuantise(query_, -RollAngle(r, db_.num_rolls()));
+    int32_t m = 0;
+    for (const PointQ& p : rolled_[r]) {
+      m = std::max({m, std::abs(static_cast<int32_t>(p.x)), std::abs(static_cast<int32_t>(p.y))});
+    }
+    rolled_max_abs_[r] = m;
   }
   // The kd-tree over the rolled query, built on first use: rolls whose pairs are all pruned
   // never get one (and the trees do not exist during the bounds step).
@@ -179,6 +189,10 @@ class QueryContext {
     bool stopped = false;
     const double limit_a = Limit(threshold, lower_bound, nq);
     if (limit_a < 0) return false;
+    if (limit_a != kInf && ProbeExceeds(v, r, limit_a)) {
+      probe_abandoned_.fetch_add(1, std::memory_order_relaxed);
+      return false;
+    }
     const double sum_a = ViewTree(v, worker).SumNearestDistances(q, limit_a, &stopped);
     if (stopped) return false;
     const double a = sum_a / nq;
@@ -194,13 +208,38 @@ class QueryContext {
     return true;
   }
 
+  // Before a view's kd-tree is built: the sum of the exact nearest distances of a spread-out
+  // sample of the query's points (linear scans, no tree) is a lower bound of the whole sum of A.
+  // True if it already exceeds `limit` (with a relative margin for float rounding), so the pair
+  // is abandoned without building a tree: on the real paper database most refined pairs are
+  // decided by the first few dozen points. The exact A is computed as before otherwise, so
+  // results do not depend on the probe.
+  bool ProbeExceeds(view_id_t v, roll_id_t r, double limit) const {
+    const std::span<const PointQ> view = db_.points(v);
+    const std::span<const PointQ> q = rolled_[r];
+    if (max_abs_[v] > kSmallCoordLimit || rolled_max_abs_[r] > kSmallCoordLimit) return false;
+    const size_t step = std::max<size_t>(1, q.size() / kProbePoints);
+    double sum = 0;
+    for (size_t i = 0; i < q.size(); i += step) {
+      sum += std::sqrt(static_cast<double>(NearestSquaredSmall(q[i], view))) /
+             static_cast<double>(kPointScale);
+      if (sum > limit * (1 + 1e-9) + 1e-9) return true;
+    }
+    return false;
+  }
+
   uint64_t num_view_trees() const { return num_view_trees_.load(); }
+  uint64_t num_probe_abandoned() const { return probe_abandoned_.load(); }
 
  private:
   const Database& db_;
   const SearchOptions& options_;
   std::span<const Point2f> query_;
+  std::span<const int32_t> max_abs_;  // per view: max |x|, |y| (PointQ units)
   std::vector<std::vector<PointQ>> rolled_;
+  std::vector<int32_t> rolled_max_abs_;
+  static constexpr size_t kProbePoints = 384;
+  std::atomic<uint64_t> probe_abandoned_{0};
   std::vector<std::unique_ptr<KdTree>> query_trees_;
   std::vector<std::once_flag> query_tree_once_;
   static constexpr size_t kTreeCacheSize = 2;
@@ -270,7 +309,7 @@ Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
   local.virtual_views = db.num_virtual_views();
   local.query_points = query_px.size();
 
-  QueryContext ctx(db, query_px, options);
+  QueryContext ctx(db, max_abs_, query_px, options);
   TopK top(k);
   std::atomic<uint64_t> refined{0};
   std::atomic<uint64_t> abandoned{0};
@@ -432,6 +471,7 @@ Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
   local.refined = refined.load();
   local.abandoned = abandoned.load();
   local.view_trees = ctx.num_view_trees();
+  local.probe_abandoned = ctx.num_probe_abandoned();
   local.seconds_total = Seconds(start);
   if (stats != nullptr) *stats = local;
   return matches;

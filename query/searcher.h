@@ -48,11 +48,12 @@ struct Match {
 };
 
 struct SearchStats {
-  uint64_t virtual_views = 0;  // (view, roll) pairs in the database
-  uint64_t bounded = 0;        // pairs whose lower bound was computed
-  uint64_t refined = 0;        // pairs whose exact D_c was started
-  uint64_t abandoned = 0;      // of those, stopped early above the k-th best
-  uint64_t view_trees = 0;     // kd-trees built over view points
+  uint64_t virtual_views = 0;    // (view, roll) pairs in the database
+  uint64_t bounded = 0;          // pairs whose lower bound was computed
+  uint64_t refined = 0;          // pairs whose exact D_c was started
+  uint64_t abandoned = 0;        // of those, stopped early above the k-th best
+  uint64_t probe_abandoned = 0;  // of those, decided by the probe before a view kd-tree
+  uint64_t view_trees = 0;       // kd-trees built over view points
   uint64_t query_points = 0;
   double seconds_bounds = 0;  // step 1 (rotations, distance transforms, lower bounds)
   double seconds_refine = 0;  // step 2
