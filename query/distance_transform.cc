@@ -42,6 +42,44 @@ constexpr uint16_t kNoSeed = 0xFFFF;  // column pass: no seed in this column
 constexpr int kMaxGridSide = 2049;
 constexpr int kMaxCellUnits = 64;
 
+// out[i] = min(65535, floor(sqrt(d2[i]) * scale)): exact, since sqrt is correctly rounded,
+// `scale` is a power of two, and no integer d2 has a scaled root within rounding distance below
+// an integer. The AVX2 path gives the same values (same IEEE operations), four at a time.
+#ifdef HANDDB_HAVE_AVX2_PATH
+__attribute__((target("avx2"))) size_t RowToUnitsAvx2(const int32_t* d2,
+                                                      size_t n,
+                                                      double scale,
+                                                      uint16_t* out) {
+  const __m256d vscale = _mm256_set1_pd(scale);
+  const __m256d vmax = _mm256_set1_pd(65535.0);
+  size_t i = 0;
+  for (; i + 4 <= n; i += 4) {
+    const __m128i v = _mm_loadu_si128(reinterpret_cast<const __m128i*>(d2 + i));
+    const __m256d r = _mm256_sqrt_pd(_mm256_cvtepi32_pd(v));
+    const __m256d u = _mm256_min_pd(_mm256_floor_pd(_mm256_mul_pd(r, vscale)), vmax);
+    alignas(16) int32_t lanes[4];
+    _mm_store_si128(reinterpret_cast<__m128i*>(lanes), _mm256_cvttpd_epi32(u));
+    for (int l = 0; l < 4; ++l) out[i + l] = static_cast<uint16_t>(lanes[l]);
+  }
+  return i;
+}
+bool HaveAvx2ForRows() {
+  static const bool have = __builtin_cpu_supports("avx2");
+  return have;
+}
+#endif
+
+void RowToUnits(const int32_t* d2, size_t n, double scale, uint16_t* out) {
+  size_t i = 0;
+#ifdef HANDDB_HAVE_AVX2_PATH
+  if (HaveAvx2ForRows()) i = RowToUnitsAvx2(d2, n, scale, out);
+#endif
+  for (; i < n; ++i) {
+    const double units = std::floor(std::sqrt(static_cast<double>(d2[i])) * scale);
+    out[i] = static_cast<uint16_t>(std::min(units, 65535.0));
+  }
+}
+
 }  // namespace
 
 void DistanceGrid::Build(std::span<const PointQ> points) {
@@ -90,51 +128,46 @@ void DistanceGrid::Build(std::span<const PointQ> points) {
   for (size_t y = n - 1; y-- > 0;) relax(g + y * n, g + (y + 1) * n);
 
   // Pass 2, per row: lower envelope of the parabolas (x - v)^2 + g(v)^2 over the columns v that
-  // have a seed (Felzenszwalb & Huttenlocher 2012), then floor(distance in 1/64 px).
+  // have a seed (Felzenszwalb & Huttenlocher 2012), in exact integer arithmetic: the boundary
+  // between parabolas is kept as a fraction zn/zd (zd > 0) and compared by cross-multiplying, so
+  // there is no division. Then floor(distance in 1/64 px) for the whole row (RowToUnits).
   row_f_.resize(n);
   row_v_.resize(n);
-  row_z_.resize(n + 1);
+  row_zn_.resize(n + 1);
+  row_zd_.resize(n + 1);
+  row_d2_.resize(n);
   const double units_per_node = kUnitsPerPx * static_cast<double>(cell_u_) / kPointScale;
   for (size_t y = 0; y < n; ++y) {
     uint16_t* row = g + y * n;
     int k = -1;
     for (int q = 0; q < size_; ++q) {
       if (row[q] == kNoSeed) continue;
-      const int32_t fq = static_cast<int32_t>(row[q]) * row[q];
-      row_f_[q] = fq;
-      if (k < 0) {
-        k = 0;
-        row_v_[0] = q;
-        row_z_[0] = -std::numeric_limits<double>::infinity();
-        row_z_[1] = std::numeric_limits<double>::infinity();
-        continue;
-      }
-      // z[0] = -inf, so the loop stops at k = 0 at the latest.
-      double s;
-      for (;;) {
-        const int32_t v = row_v_[k];
-        s = (static_cast<double>(fq) + static_cast<double>(q) * q - row_f_[v] -
-             static_cast<double>(v) * v) /
-            (2.0 * (q - v));
-        if (s > row_z_[k]) break;
+      const int64_t fq = static_cast<int64_t>(row[q]) * row[q];
+      row_f_[q] = static_cast<int32_t>(fq);
+      // Intersection of parabola q with parabola v: s = num / den, den = 2 (q - v) > 0.
+      int64_t num = 0;
+      int64_t den = 1;
+      // Pop parabolas while s <= z[k]; z[0] = -inf, so k = 0 always stays.
+      while (k >= 0) {
+        const int64_t v = row_v_[k];
+        num = fq + static_cast<int64_t>(q) * q - row_f_[v] - v * v;
+        den = 2 * (q - v);
+        if (k == 0 || num * row_zd_[k] > row_zn_[k] * den) break;
         --k;
       }
       ++k;
       row_v_[k] = q;
-      row_z_[k] = s;
-      row_z_[k + 1] = std::numeric_limits<double>::infinity();
+      row_zn_[k] = num;  // unused for k = 0 (-inf)
+      row_zd_[k] = den;
     }
     THROW_CHECK_GE(k, 0);  // every column below or above a seed has a finite distance
     int j = 0;
     for (int q = 0; q < size_; ++q) {
-      while (row_z_[j + 1] < q) ++j;
-      const int64_t dx = q - row_v_[j];
-      const int64_t d2 = dx * dx + row_f_[row_v_[j]];
-      // Exact floor: sqrt is correctly rounded, units_per_node a power of two, and no integer
-      // d2 has a scaled root within rounding distance below an integer.
-      const double units = std::floor(std::sqrt(static_cast<double>(d2)) * units_per_node);
-      row[q] = static_cast<uint16_t>(std::min(units, 65535.0));
+      while (j < k && row_zn_[j + 1] < static_cast<int64_t>(q) * row_zd_[j + 1]) ++j;
+      const int32_t dx = q - row_v_[j];
+      row_d2_[q] = dx * dx + row_f_[row_v_[j]];
     }
+    RowToUnits(row_d2_.data(), n, units_per_node, row);
   }
 
   // r_max + |p - n| for every position of p inside its cell.

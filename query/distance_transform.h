@@ -89,7 +89,9 @@ class DistanceGrid {
   // Row-pass scratch of the transform (one row each): parabola vertices and boundaries.
   std::vector<int32_t> row_f_;
   std::vector<int32_t> row_v_;
-  std::vector<double> row_z_;
+  std::vector<int64_t> row_zn_;
+  std::vector<int64_t> row_zd_;
+  std::vector<int32_t> row_d2_;
 };
 
 }  // namespace handdb
