@@ -9,7 +9,9 @@
 
 #include "cli/commands.h"
 #include "format/json_schema.h"
+#include "format/manifest.h"
 #include "format/roll.h"
+#include "generator/converter.h"
 #include "handdb_version.h"
 #include "query/image_edges.h"
 #include "query/searcher.h"
@@ -234,6 +236,17 @@ int RunQuery(int argc, char** argv) {
   auto shared_db = std::make_shared<const Database>(std::move(db).value());
   const Searcher searcher(shared_db);
 
+  // A label EXR is converted with the edge options the database was made with.
+  if (auto manifest = ReadManifest(db_dir); manifest.ok()) {
+    auto recorded = ViewConversionOptionsFromMetadata(
+        manifest->metadata, (std::filesystem::path(db_dir) / "manifest.json").string());
+    if (recorded.ok()) {
+      edge_options.label_edges = recorded->edges;
+      edge_options.label_joint_pairs = recorded->joint_pairs;
+    } else if (recorded.status().code() != StatusCode::kNotFound) {
+      return Fail(recorded.status());
+    }
+  }
   auto query = LoadQueryEdges(image, edge_options);
   if (!query.ok()) return Fail(query.status());
   SearchStats stats;

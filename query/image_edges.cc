@@ -104,12 +104,12 @@ Result<QueryEdges> FromEdgeImage(const std::filesystem::path& path, const cv::Ma
   return out;
 }
 
-Result<QueryEdges> FromLabels(const std::filesystem::path& path) {
+Result<QueryEdges> FromLabels(const std::filesystem::path& path, const ImageEdgeOptions& options) {
   ExrReadOptions exr;
   exr.require_depth = false;
   Result<LabelImage> image = ReadLabelExr(path, exr);
   if (!image.ok()) return image.status();
-  const EdgeResult edges = ExtractEdges(*image, DefaultJointPairs(), EdgeOptions{});
+  const EdgeResult edges = ExtractEdges(*image, options.label_joint_pairs, options.label_edges);
   QueryEdges out;
   out.kind = QueryInputKind::kLabels;
   out.width = image->width;
@@ -279,6 +279,7 @@ bool ImageEdgeOptions::Check() const {
   CHECK_OPTION_LE(dilate_px, 100);
   CHECK_OPTION_GE(min_hand_pixels, 1);
   CHECK_OPTION(roi.empty() || (roi.width > 0 && roi.height > 0));
+  CHECK_OPTION(label_edges.Check());
   return true;
 }
 
@@ -322,7 +323,7 @@ Result<QueryEdges> LoadQueryEdges(const std::filesystem::path& image,
   if (kind == QueryInputKind::kAuto && Lower(image.extension().string()) == ".exr") {
     kind = QueryInputKind::kLabels;
   }
-  if (kind == QueryInputKind::kLabels) return FromLabels(image);
+  if (kind == QueryInputKind::kLabels) return FromLabels(image, options);
 
   const cv::Mat any = cv::imread(image.string(), cv::IMREAD_UNCHANGED);
   if (any.empty()) {

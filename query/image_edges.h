@@ -24,6 +24,7 @@
 #include "format/roll.h"
 #include "format/status.h"
 #include "format/view.h"
+#include "generator/edges.h"
 
 namespace handdb {
 
@@ -58,6 +59,11 @@ struct ImageEdgeOptions {
   double canny_high = 120;
   int dilate_px = 4;          // Canny edges are kept within this distance of the hand region
   int min_hand_pixels = 400;  // smaller largest regions mean "no hand found"
+  // Label EXR: the converter's edge rule (generator/edges.h). Set these to the options the
+  // database was converted with (its manifest records them; `handdb query` reads them) so a
+  // label query is converted exactly like the database's views.
+  EdgeOptions label_edges;
+  JointPairs label_joint_pairs = DefaultJointPairs();
   bool Check() const;
 };
 

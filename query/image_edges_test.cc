@@ -13,6 +13,7 @@
 
 #include "generator/edges.h"
 #include "generator/exr_io.h"
+#include "generator/normalise.h"
 #include "generator/synthetic_hand.h"
 #include "query/searcher.h"
 #include "query/sheet.h"
@@ -116,6 +117,39 @@ TEST_F(ImageEdgesTest, LabelEdgeAndPhotoInputsShareTheDatabaseNormalisation) {
   EXPECT_NEAR(photo->centre_x, labels->centre_x, 1.0);
   EXPECT_NEAR(photo->centre_y, labels->centre_y, 1.0);
   EXPECT_GT(photo->points.size(), labels->points.size() / 2);
+}
+
+TEST_F(ImageEdgesTest, LabelQueryUsesTheGivenEdgeOptions) {
+  SyntheticHandParams p;
+  p.folded = {false, true, true, false, false};  // two fingers folded over the palm
+  const SyntheticHand hand = RenderSyntheticHand(p);
+  const fs::path exr = dir_ / "folded.exr";
+  ASSERT_TRUE(WriteLabelExr(exr, hand.image).ok());
+  auto points = [&](const EdgeOptions& edges) {
+    ImageEdgeOptions o;
+    o.label_edges = edges;
+    auto q = LoadQueryEdges(exr, o);
+    EXPECT_TRUE(q.ok()) << q.status().ToString();
+    return q.ok() ? q->points : std::vector<PointQ>{};
+  };
+  EdgeOptions off;
+  off.occlusion_edges = false;
+  // The converter's own rule gives the same points as the query path, for each option.
+  for (const EdgeOptions& e : {EdgeOptions{}, off}) {
+    const EdgeResult direct = ExtractEdges(hand.image, DefaultJointPairs(), e);
+    auto norm = ComputeNormalisation(direct.silhouette);
+    ASSERT_TRUE(norm.ok());
+    auto xy = [](const std::vector<PointQ>& v) {
+      std::vector<std::pair<int, int>> out;
+      for (const PointQ& q : v) out.emplace_back(q.x, q.y);
+      return out;
+    };
+    EXPECT_EQ(xy(points(e)), xy(NormalisePixels(direct.edges, *norm)));
+  }
+  EXPECT_GT(points(EdgeOptions{}).size(), points(off).size());  // occlusion edges add points
+  ImageEdgeOptions bad;
+  bad.label_edges.depth_jump = 0;
+  EXPECT_FALSE(bad.Check());
 }
 
 TEST_F(ImageEdgesTest, PhotoOfADatabaseViewFindsIt) {
