@@ -2,19 +2,15 @@
 // array task: one slice of the test views -> WORK/parts/part-0000T.json) and
 // `handdb unit evaluate-merge` (the final job: parts -> the report of a local run). Issue 7,
 // docs/cluster.md.
-#include <unistd.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
-#include <cstdlib>
 #include <nlohmann/json.hpp>
-#include <set>
-#include <thread>
 
 #include "cli/cli_util.h"
 #include "cli/commands.h"
 #include "cli/evaluate_cli.h"
+#include "cli/slurm_cli.h"
 #include "format/atomic_file.h"
 #include "format/json_schema.h"
 #include "format/progress.h"
@@ -31,85 +27,8 @@ using json = nlohmann::json;
 constexpr uint32_t kViewsPerTask = 16;  // default split: tasks of a few seconds to minutes
 constexpr uint32_t kMaxDefaultTasks = 1000;
 
-// Threads for a task: what Slurm gave it, else 1.
-int TaskThreads() {
-  if (const char* c = std::getenv("SLURM_CPUS_PER_TASK")) {
-    const int n = std::atoi(c);
-    if (n > 0) return n;
-  }
-  return 1;
-}
-
 double UnixNow() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
-}
-
-Result<fs::path> Absolute(const fs::path& p) {
-  std::error_code ec;
-  fs::path a = fs::absolute(p, ec);
-  if (ec) return Status(StatusCode::kIoError, p.string() + ": " + ec.message());
-  a = a.lexically_normal();
-  if (!a.has_filename() && a.has_parent_path()) a = a.parent_path();
-  return a;
-}
-
-Result<SlurmOptions> OptionsFromFlags(const SlurmFlags& flags) {
-  SlurmOptions options;
-  options.partition = flags.partition;
-  options.max_parallel = flags.max_parallel;
-  options.time_limit = flags.time;
-  options.mem_per_task = flags.mem;
-  options.cpus_per_task = flags.cpus_per_task;
-  options.sbatch_args = flags.sbatch_args;
-  if (!flags.time.empty() && !IsValidSlurmTime(flags.time)) {
-    return Status(
-        StatusCode::kInvalidArgument,
-        "--time '" + flags.time + "': not a Slurm time (M, M:S, H:M:S, D-H, D-H:M or D-H:M:S)");
-  }
-  if (!flags.setup_file.empty()) {
-    auto setup = ReadFileToString(flags.setup_file);
-    if (!setup.ok()) return setup.status();
-    options.setup = *setup;
-  }
-  if (!options.Check()) {
-    return Status(StatusCode::kInvalidArgument,
-                  "bad Slurm options (--partition, --mem, --sbatch-arg: see above)");
-  }
-  return options;
-}
-
-std::string JoinIds(const std::vector<std::string>& ids, const char* sep = ",") {
-  std::string out;
-  for (const auto& id : ids) out += (out.empty() ? "" : sep) + id;
-  return out;
-}
-
-std::vector<std::string> JobIds(const SlurmSubmission& sub) {
-  std::vector<std::string> ids = sub.array_job_ids;
-  if (!sub.final_job_id.empty()) ids.push_back(sub.final_job_id);
-  return ids;
-}
-
-// Jobs of `sub` Slurm still runs or queues (array job ids for arrays).
-Result<std::vector<std::string>> ActiveJobs(const SlurmSubmission& sub,
-                                            std::vector<SlurmJobState>* states) {
-  auto jobs = QueryJobs(JobIds(sub));
-  if (!jobs.ok()) return jobs.status();
-  std::set<std::string> active;
-  for (const auto& j : *jobs) {
-    if (!IsFinishedJobState(j.state))
-      active.insert(j.array_job_id.empty() ? j.job_id : j.array_job_id);
-  }
-  if (states != nullptr) *states = *jobs;
-  return std::vector<std::string>(active.begin(), active.end());
-}
-
-std::string ReadTrimmed(const fs::path& path) {
-  auto text = ReadFileToString(path);
-  if (!text.ok()) return "";
-  std::string s = *text;
-  while (!s.empty() && (s.back() == '\n' || s.back() == '\r')) s.pop_back();
-  return s;
 }
 
 // One line per task of `sub` without a complete part: "task 3: <reason>; log: <path>".
@@ -117,37 +36,14 @@ std::vector<std::string> TaskFailures(const SlurmEvaluateLayout& layout,
                                       const SlurmSubmission& sub,
                                       const std::vector<bool>& complete,
                                       const std::vector<SlurmJobState>& jobs) {
+  const TaskFiles files{[&](uint32_t t) { return layout.TaskLog(t); },
+                        [&](uint32_t t) { return layout.TaskFailedMarker(t); },
+                        layout.log_dir(),
+                        "part"};
   std::vector<std::string> lines;
-  for (uint32_t t : sub.units) {
-    if (t < complete.size() && complete[t]) continue;
-    const SlurmJobState* state = nullptr;
-    for (size_t c = 0; c < sub.array_job_ids.size() && c < sub.chunk_bases.size(); ++c) {
-      for (const auto& j : jobs) {
-        if (j.array_job_id == sub.array_job_ids[c] && j.array_task_id >= 0 &&
-            sub.chunk_bases[c] + static_cast<uint32_t>(j.array_task_id) == t) {
-          state = &j;
-        }
-      }
-    }
-    std::string reason;
-    const std::string marker = ReadTrimmed(layout.TaskFailedMarker(t));
-    if (state != nullptr && !IsFinishedJobState(state->state)) {
-      reason = "still " + state->state;
-    } else if (!marker.empty()) {
-      reason = marker + (state != nullptr ? " [Slurm: " + state->state + "]" : "");
-    } else if (state != nullptr) {
-      reason = "Slurm task " + state->job_id + " ended " + state->state + " (exit " +
-               state->exit_code + ") without a part";
-    } else {
-      reason = "no part written (Slurm no longer reports the task)";
-    }
-    std::error_code ec;
-    fs::path log = layout.TaskLog(t);
-    if (!fs::exists(log, ec)) {
-      log =
-          state != nullptr && !state->std_out.empty() ? fs::path(state->std_out) : layout.log_dir();
-    }
-    lines.push_back("task " + std::to_string(t) + ": " + reason + "; log: " + log.string());
+  for (const UnitFailure& f : CollectFailures(files, sub, complete, jobs)) {
+    lines.push_back("task " + std::to_string(f.unit) + ": " + f.reason +
+                    "; log: " + f.log.string());
   }
   return lines;
 }
@@ -234,14 +130,10 @@ int RunEvaluateOnSlurm(const EvaluateSlurmRequest& request, const SlurmFlags& fl
 
   SlurmEvaluateLayout layout;
   {
+    auto exe = SelfExecutable();
+    if (!exe.ok()) return Fail(cmd, exe.status());
+    layout.handdb = *exe;
     std::error_code ec;
-    fs::path exe = fs::read_symlink("/proc/self/exe", ec);
-    if (ec) {
-      return Fail(cmd,
-                  Status(StatusCode::kIoError,
-                         "/proc/self/exe: cannot find the handdb executable: " + ec.message()));
-    }
-    layout.handdb = exe;
     layout.submit_dir = fs::current_path(ec);
     if (ec) return Fail(cmd, Status(StatusCode::kIoError, "current directory: " + ec.message()));
     auto work = Absolute(request.work.empty() ? testset->dir / "slurm-evaluations" / fp->value
@@ -269,27 +161,12 @@ int RunEvaluateOnSlurm(const EvaluateSlurmRequest& request, const SlurmFlags& fl
   }
 
   // An earlier submission still running must end first (two tasks on one part do the work twice).
-  std::error_code ec;
-  SlurmSubmission previous;
-  bool have_previous = false;
-  std::vector<SlurmJobState> previous_states;
-  if (!flags.dry_run && fs::exists(layout.jobs_file(), ec)) {
-    auto prev = ReadSubmissionRecord(layout.jobs_file());
+  PreviousSubmission previous;
+  if (!flags.dry_run) {
+    auto prev = CheckPreviousSubmission(layout.jobs_file(),
+                                        "of this evaluation (" + layout.work_dir.string() + ")");
     if (!prev.ok()) return Fail(cmd, prev.status());
-    previous = *prev;
-    have_previous = true;
-    auto active = ActiveJobs(previous, &previous_states);
-    if (!active.ok()) return Fail(cmd, active.status());
-    if (!active->empty()) {
-      return Fail(
-          cmd,
-          Status(StatusCode::kInvalidArgument,
-                 "Slurm jobs " + JoinIds(*active, ", ") +
-                     " of an earlier submission of this evaluation (" + layout.work_dir.string() +
-                     ") are still queued or running; wait for them (squeue -j " + JoinIds(*active) +
-                     ") or cancel them (scancel " + JoinIds(*active, " ") +
-                     ") and run this again"));
-    }
+    previous = std::move(*prev);
   }
 
   const size_t num_criteria = MakeCriteria(eval).size();
@@ -297,12 +174,13 @@ int RunEvaluateOnSlurm(const EvaluateSlurmRequest& request, const SlurmFlags& fl
   if (!complete.ok()) return Fail(cmd, complete.status());
   const auto pending =
       PendingUnits(tasks, [&](uint32_t t) { return static_cast<bool>((*complete)[t]); });
-  if (have_previous) {
-    for (const auto& line : TaskFailures(layout, previous, *complete, previous_states)) {
+  if (previous.exists) {
+    for (const auto& line : TaskFailures(layout, previous.sub, *complete, previous.states)) {
       std::fprintf(stderr, "handdb %s: earlier Slurm run: %s\n", cmd, line.c_str());
     }
   }
 
+  std::error_code ec;
   for (const auto& dir : {layout.work_dir,
                           layout.log_dir(),
                           layout.failed_dir(),
@@ -376,24 +254,9 @@ int RunEvaluateOnSlurm(const EvaluateSlurmRequest& request, const SlurmFlags& fl
   std::vector<SlurmJobState> states;
   {
     Progress progress("slurm", pending.size(), !request.quiet, "tasks");
-    uint64_t shown = 0;
-    while (true) {
-      auto active = ActiveJobs(*sub, &states);
-      if (!active.ok()) return Fail(cmd, active.status());
-      uint64_t finished = 0;
-      for (const auto& j : states) {
-        if (!j.array_job_id.empty() && j.array_task_id >= 0 && IsFinishedJobState(j.state)) {
-          ++finished;
-        }
-      }
-      finished = std::min<uint64_t>(finished, pending.size());
-      if (finished > shown) {
-        progress.Add(finished - shown);
-        shown = finished;
-      }
-      if (active->empty()) break;
-      std::this_thread::sleep_for(std::chrono::duration<double>(flags.poll_seconds));
-    }
+    auto waited = WaitForJobs(*sub, pending.size(), flags.poll_seconds, progress);
+    if (!waited.ok()) return Fail(cmd, waited.status());
+    states = std::move(*waited);
   }
   auto after = CompleteParts(layout.work_dir, *fp, selected, tasks, num_criteria);
   if (!after.ok()) return Fail(cmd, after.status());
@@ -408,10 +271,7 @@ int RunEvaluateOnSlurm(const EvaluateSlurmRequest& request, const SlurmFlags& fl
   }
   auto report = ReadFileToString(layout.report_text());
   if (!report.ok()) {
-    std::string final_state = "unknown";
-    for (const auto& j : states) {
-      if (j.job_id == sub->final_job_id) final_state = j.state;
-    }
+    const std::string final_state = FinalJobState(*sub, states);
     const std::string why = MergeError(layout);
     return Fail(cmd,
                 Status(StatusCode::kExternalToolFailed,

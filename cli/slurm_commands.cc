@@ -2,19 +2,12 @@
 // `--slurm` path of `handdb generate` (issue 7, docs/cluster.md).
 #include "cli/slurm_commands.h"
 
-#include <unistd.h>
-
-#include <algorithm>
-#include <chrono>
 #include <cstdio>
-#include <cstdlib>
-#include <map>
 #include <nlohmann/json.hpp>
-#include <set>
-#include <thread>
 
 #include "cli/commands.h"
 #include "cli/evaluate_cli.h"
+#include "cli/slurm_cli.h"
 #include "format/atomic_file.h"
 #include "format/manifest.h"
 #include "format/progress.h"
@@ -63,38 +56,10 @@ struct ConvertFlags {
   }
 };
 
-// Threads for a task: what Slurm gave it, else 1.
-int TaskThreads() {
-  if (const char* c = std::getenv("SLURM_CPUS_PER_TASK")) {
-    const int n = std::atoi(c);
-    if (n > 0) return n;
-  }
-  return 1;
-}
-
 std::string FormatDouble(double v) {
   char buf[40];
   std::snprintf(buf, sizeof(buf), "%.17g", v);
   return buf;
-}
-
-Result<fs::path> SelfExecutable() {
-  std::error_code ec;
-  fs::path p = fs::read_symlink("/proc/self/exe", ec);
-  if (ec) {
-    return Status(StatusCode::kIoError,
-                  "/proc/self/exe: cannot find the handdb executable: " + ec.message());
-  }
-  return p;
-}
-
-Result<fs::path> Absolute(const fs::path& p) {
-  std::error_code ec;
-  fs::path a = fs::absolute(p, ec);
-  if (ec) return Status(StatusCode::kIoError, p.string() + ": " + ec.message());
-  a = a.lexically_normal();
-  if (!a.has_filename() && a.has_parent_path()) a = a.parent_path();  // "db/" -> "db"
-  return a;
 }
 
 // Units of the plan in RUN_DIR whose shard in DB_DIR is complete, as a rerun of convert sees them.
@@ -106,83 +71,16 @@ Result<std::vector<bool>> CompleteUnits(const fs::path& run_dir,
 
 // ---- failure reports ---------------------------------------------------------------------------
 
-// The Slurm state of each array task of a submission, keyed by unit.
-std::map<uint32_t, SlurmJobState> TaskStatesByUnit(const SlurmSubmission& sub,
-                                                   const std::vector<SlurmJobState>& jobs) {
-  std::map<uint32_t, SlurmJobState> by_unit;
-  for (size_t c = 0; c < sub.array_job_ids.size() && c < sub.chunk_bases.size(); ++c) {
-    for (const auto& j : jobs) {
-      if (j.array_job_id == sub.array_job_ids[c] && j.array_task_id >= 0) {
-        by_unit[sub.chunk_bases[c] + static_cast<uint32_t>(j.array_task_id)] = j;
-      }
-    }
-  }
-  return by_unit;
-}
-
+// Why each unit of `sub` without a complete shard failed.
 std::vector<UnitFailure> CollectFailures(const SlurmGenerateLayout& layout,
                                          const SlurmSubmission& sub,
                                          const std::vector<bool>& complete,
                                          const std::vector<SlurmJobState>& jobs) {
-  const auto states = TaskStatesByUnit(sub, jobs);
-  std::vector<UnitFailure> failures;
-  for (uint32_t u : sub.units) {
-    if (u < complete.size() && complete[u]) continue;
-    UnitFailure f;
-    f.unit = u;
-    f.log = layout.UnitLog(u);
-    std::string marker;
-    if (auto text = ReadFileToString(layout.UnitFailedMarker(u)); text.ok()) {
-      marker = *text;
-      while (!marker.empty() && marker.back() == '\n') marker.pop_back();
-    }
-    const auto it = states.find(u);
-    if (it != states.end() && !IsFinishedJobState(it->second.state)) {
-      f.reason = "still " + it->second.state;
-    } else if (!marker.empty()) {
-      f.reason = marker;
-      if (it != states.end()) f.reason += " [Slurm: " + it->second.state + "]";
-    } else if (it != states.end()) {
-      f.reason = "Slurm task " + it->second.job_id + " ended " + it->second.state + " (exit " +
-                 it->second.exit_code + ") without a shard";
-    } else {
-      f.reason = "no shard written (Slurm no longer reports the task)";
-    }
-    std::error_code ec;
-    if (!fs::exists(f.log, ec)) {
-      // The task never reached its unit log: Slurm's own output file is the place to look.
-      f.log = it != states.end() && !it->second.std_out.empty() ? fs::path(it->second.std_out)
-                                                                : layout.log_dir();
-    }
-    failures.push_back(std::move(f));
-  }
-  return failures;
-}
-
-std::vector<std::string> JobIds(const SlurmSubmission& sub) {
-  std::vector<std::string> ids = sub.array_job_ids;
-  if (!sub.final_job_id.empty()) ids.push_back(sub.final_job_id);
-  return ids;
-}
-
-std::string JoinIds(const std::vector<std::string>& ids, const char* sep = ",") {
-  std::string out;
-  for (const auto& id : ids) out += (out.empty() ? "" : sep) + id;
-  return out;
-}
-
-// Jobs of `sub` Slurm still runs or queues.
-Result<std::vector<std::string>> ActiveJobs(const SlurmSubmission& sub,
-                                            std::vector<SlurmJobState>* states) {
-  auto jobs = QueryJobs(JobIds(sub));
-  if (!jobs.ok()) return jobs.status();
-  std::set<std::string> active;
-  for (const auto& j : *jobs) {
-    if (IsFinishedJobState(j.state)) continue;
-    active.insert(j.array_job_id.empty() ? j.job_id : j.array_job_id);
-  }
-  if (states != nullptr) *states = *jobs;
-  return std::vector<std::string>(active.begin(), active.end());
+  const TaskFiles files{[&](uint32_t u) { return layout.UnitLog(u); },
+                        [&](uint32_t u) { return layout.UnitFailedMarker(u); },
+                        layout.log_dir(),
+                        "shard"};
+  return cli::CollectFailures(files, sub, complete, jobs);
 }
 
 }  // namespace
@@ -235,29 +133,9 @@ void SlurmFlags::Add(CLI::App& app) {
 
 int RunGenerateOnSlurm(const SlurmGenerateRequest& request, const SlurmFlags& flags) {
   const std::string cmd = "generate";
-  SlurmOptions options;
-  options.partition = flags.partition;
-  options.max_parallel = flags.max_parallel;
-  options.time_limit = flags.time;
-  options.mem_per_task = flags.mem;
-  options.cpus_per_task = flags.cpus_per_task;
-  options.sbatch_args = flags.sbatch_args;
-  if (!flags.time.empty() && !IsValidSlurmTime(flags.time)) {
-    return Fail(cmd,
-                Status(StatusCode::kInvalidArgument,
-                       "--time '" + flags.time +
-                           "': not a Slurm time (M, M:S, H:M:S, D-H, D-H:M or D-H:M:S)"));
-  }
-  if (!flags.setup_file.empty()) {
-    auto setup = ReadFileToString(flags.setup_file);
-    if (!setup.ok()) return Fail(cmd, setup.status());
-    options.setup = *setup;
-  }
-  if (!options.Check()) {
-    return Fail(cmd,
-                Status(StatusCode::kInvalidArgument,
-                       "bad Slurm options (--partition, --mem, --sbatch-arg: see above)"));
-  }
+  auto slurm_options = OptionsFromFlags(flags);
+  if (!slurm_options.ok()) return Fail(cmd, slurm_options.status());
+  SlurmOptions& options = *slurm_options;
 
   SlurmGenerateLayout layout;
   {
@@ -286,26 +164,11 @@ int RunGenerateOnSlurm(const SlurmGenerateRequest& request, const SlurmFlags& fl
 
   // A previous submission still running must finish (or be cancelled) first: two tasks on the
   // same unit would do the same work twice.
-  std::error_code ec;
-  SlurmSubmission previous;
-  bool have_previous = false;
-  std::vector<SlurmJobState> previous_states;
-  if (!flags.dry_run && fs::exists(layout.jobs_file(), ec)) {
-    auto prev = ReadSubmissionRecord(layout.jobs_file());
+  PreviousSubmission previous;
+  if (!flags.dry_run) {
+    auto prev = CheckPreviousSubmission(layout.jobs_file(), "for " + layout.db_dir.string());
     if (!prev.ok()) return Fail(cmd, prev.status());
-    previous = *prev;
-    have_previous = true;
-    auto active = ActiveJobs(previous, &previous_states);
-    if (!active.ok()) return Fail(cmd, active.status());
-    if (!active->empty()) {
-      return Fail(cmd,
-                  Status(StatusCode::kInvalidArgument,
-                         "Slurm jobs " + JoinIds(*active, ", ") + " of an earlier submission " +
-                             "for " + layout.db_dir.string() +
-                             " are still queued or running; wait for them (squeue -j " +
-                             JoinIds(*active) + ") or cancel them (scancel " +
-                             JoinIds(*active, " ") + ") and run this again"));
-    }
+    previous = std::move(*prev);
   }
 
   auto complete = CompleteUnits(layout.run_dir, layout.db_dir, request.convert);
@@ -314,8 +177,8 @@ int RunGenerateOnSlurm(const SlurmGenerateRequest& request, const SlurmFlags& fl
                                     [&](uint32_t u) { return (*complete)[u]; });
   // Failures are reported for the previous submission of this database only (RUN_DIR may be
   // shared by several databases through --work).
-  if (have_previous && previous.db_dir == layout.db_dir.string()) {
-    for (const auto& f : CollectFailures(layout, previous, *complete, previous_states)) {
+  if (previous.exists && previous.sub.db_dir == layout.db_dir.string()) {
+    for (const auto& f : CollectFailures(layout, previous.sub, *complete, previous.states)) {
       std::fprintf(
           stderr, "handdb %s: earlier Slurm run: %s\n", cmd.c_str(), FormatUnitFailure(f).c_str());
     }
@@ -346,6 +209,7 @@ int RunGenerateOnSlurm(const SlurmGenerateRequest& request, const SlurmFlags& fl
     options.max_array_size = *max_array;
   }
   // Failure markers of units about to be resubmitted describe an old attempt.
+  std::error_code ec;
   for (uint32_t u : pending) fs::remove(layout.UnitFailedMarker(u), ec);
   auto sub = SubmitGenerateJobs(layout, options, pending, flags.dry_run);
   if (!sub.ok()) return Fail(cmd, sub.status());
@@ -415,24 +279,9 @@ int RunGenerateOnSlurm(const SlurmGenerateRequest& request, const SlurmFlags& fl
   std::vector<SlurmJobState> states;
   {
     Progress progress("slurm", pending.size(), !request.quiet, "tasks");
-    uint64_t shown = 0;
-    while (true) {
-      auto active = ActiveJobs(*sub, &states);
-      if (!active.ok()) return Fail(cmd, active.status());
-      uint64_t finished = 0;
-      for (const auto& j : states) {
-        if (!j.array_job_id.empty() && j.array_task_id >= 0 && IsFinishedJobState(j.state)) {
-          ++finished;
-        }
-      }
-      finished = std::min<uint64_t>(finished, pending.size());
-      if (finished > shown) {
-        progress.Add(finished - shown);
-        shown = finished;
-      }
-      if (active->empty()) break;
-      std::this_thread::sleep_for(std::chrono::duration<double>(flags.poll_seconds));
-    }
+    auto waited = WaitForJobs(*sub, pending.size(), flags.poll_seconds, progress);
+    if (!waited.ok()) return Fail(cmd, waited.status());
+    states = std::move(*waited);
   }
   auto after = CompleteUnits(layout.run_dir, layout.db_dir, request.convert);
   if (!after.ok()) return Fail(cmd, after.status());
@@ -440,10 +289,7 @@ int RunGenerateOnSlurm(const SlurmGenerateRequest& request, const SlurmFlags& fl
   for (const auto& f : failures) {
     std::fprintf(stderr, "handdb %s: %s\n", cmd.c_str(), FormatUnitFailure(f).c_str());
   }
-  std::string final_state = "unknown";
-  for (const auto& j : states) {
-    if (j.job_id == sub->final_job_id) final_state = j.state;
-  }
+  const std::string final_state = FinalJobState(*sub, states);
   const ValidationReport report = ValidateDatabase(layout.db_dir, ValidateOptions{});
   const bool ok = failures.empty() && report.ok();
   if (request.as_json) {
