@@ -11,36 +11,11 @@ set -euo pipefail
 HANDDB="$(realpath "${1:?usage: generate_test.sh HANDDB_EXE SOURCE_DIR}")"
 SRC="$(realpath "${2:?usage: generate_test.sh HANDDB_EXE SOURCE_DIR}")"
 PY=/usr/bin/python3
+# shellcheck source=tests/slurm/lib.sh
+source "$SRC/tests/slurm/lib.sh"
 
-for tool in slurmctld slurmd munged sbatch scontrol; do
-  command -v "$tool" >/dev/null || { echo "SKIP: $tool not installed (scripts/deps.sh)"; exit 77; }
-done
-command -v "${HANDDB_BLENDER:-blender}" >/dev/null || { echo "SKIP: blender not installed"; exit 77; }
-# slurmd launches jobs as their owner, which needs root (CI runs as root).
-[ "$(id -u)" -eq 0 ] || { echo "SKIP: a local slurmd needs root"; exit 77; }
-
-t_start=$(date +%s)
-step() { echo "--- [$(( $(date +%s) - t_start ))s] $*"; }
-die() { echo "FAIL: $*" >&2; exit 1; }
-
-work="$(mktemp -d "${TMPDIR:-/tmp}/handdb-slurm-test.XXXXXX")"
-cluster=""
-cleanup() {
-  local rc=$?
-  if [ -n "$cluster" ]; then "$SRC/scripts/slurm_local.sh" stop "$cluster" || true; fi
-  if [ "$rc" -eq 0 ]; then
-    rm -rf "$work"
-  else
-    echo "test failed (exit $rc); files kept in $work (Slurm logs: $work/cluster/log)" >&2
-  fi
-}
-trap cleanup EXIT
-trap 'exit 130' INT TERM HUP
-
-step "start Slurm"
-cluster="$work/cluster"
-"$SRC/scripts/slurm_local.sh" start "$cluster" >/dev/null
-export SLURM_CONF="$cluster/slurm.conf"
+slurm_test_require
+slurm_test_start handdb-slurm-test
 
 # 2 shapes x 2 directions, one render per unit: 4 units, 4 array tasks.
 cat >"$work/config.json" <<JSON
