@@ -8,7 +8,7 @@
 
 #include "format/atomic_file.h"
 #include "format/json_schema.h"
-#include "query/search_testing.h"
+#include "query/evaluate_testing.h"
 
 namespace handdb {
 namespace {
@@ -16,23 +16,10 @@ namespace {
 namespace fs = std::filesystem;
 using json = nlohmann::json;
 
-constexpr uint32_t kViews = 40;
-constexpr uint32_t kRolls = 12;
-
-std::shared_ptr<const Database> MakeDb() {
-  return std::make_shared<const Database>(testing::SyntheticDatabase(kViews, 200, kRolls, 10));
-}
-
-std::vector<Point2f> RolledPoints(const Database& db, view_id_t v, roll_id_t r) {
-  std::vector<Point2f> out;
-  RollPoints(db.points(v), RollAngle(r, kRolls), &out);
-  return out;
-}
-
 // A test set of 9 views: database views at rank 1, views whose query shows another database view
 // (a deeper search finds the rank), a truth no database shape is near, and a failed input.
 struct Case {
-  std::shared_ptr<const Database> db = MakeDb();
+  std::shared_ptr<const Database> db = testing::EvalDatabase();
   Searcher searcher{db};
   TestSet set;
   std::vector<std::pair<view_id_t, roll_id_t>> query_of;  // per test view: the edges it shows
@@ -44,11 +31,7 @@ struct Case {
     const std::pair<view_id_t, roll_id_t> query[] = {
         {3, 0}, {17, 5}, {30, 7}, {29, 11}, {8, 0}, {9, 0}, {12, 4}, {2, 3}, {33, 1}};
     for (uint32_t i = 0; i < 9; ++i) {
-      TestView t;
-      t.id = 100 + i;
-      t.basic = i % 3 == 0;
-      t.shape_name = "v" + std::to_string(truth[i].first);
-      t.truth = PoseFromLabel(db->label(truth[i].first), RollAngle(truth[i].second, kRolls));
+      TestView t = testing::ViewOf(*db, 100 + i, truth[i].first, truth[i].second, i % 3 == 0);
       if (i == 4) {
         for (auto& j : t.truth.joint_angles) j += 2.0f;  // unreachable
       }
@@ -61,7 +44,7 @@ struct Case {
     points = [this](const TestView& t) -> Result<std::vector<Point2f>> {
       if (t.id == 105) return Status(StatusCode::kNoHand, "photo: no hand found");
       const auto [v, r] = query_of[t.id - 100];
-      return RolledPoints(*db, v, r);
+      return testing::RolledView(*db, v, r);
     };
   }
 };

@@ -6,33 +6,10 @@
 #include <memory>
 
 #include "format/json_schema.h"
-#include "query/search_testing.h"
+#include "query/evaluate_testing.h"
 
 namespace handdb {
 namespace {
-
-constexpr uint32_t kViews = 40;
-constexpr uint32_t kRolls = 12;
-
-std::shared_ptr<const Database> MakeDb() {
-  return std::make_shared<const Database>(testing::SyntheticDatabase(kViews, 200, kRolls, 10));
-}
-
-std::vector<Point2f> RolledPoints(const Database& db, view_id_t v, roll_id_t r) {
-  std::vector<Point2f> out;
-  RollPoints(db.points(v), RollAngle(r, kRolls), &out);
-  return out;
-}
-
-// A test view whose truth is the pose of database view (v, r).
-TestView ViewOf(const Database& db, uint32_t id, view_id_t v, roll_id_t r, bool basic) {
-  TestView t;
-  t.id = id;
-  t.basic = basic;
-  t.shape_name = "v" + std::to_string(v);
-  t.truth = PoseFromLabel(db.label(v), RollAngle(r, kRolls));
-  return t;
-}
 
 EvaluationOptions FastOptions() {
   EvaluationOptions o;
@@ -44,7 +21,7 @@ EvaluationOptions FastOptions() {
 }
 
 TEST(Evaluate, DatabaseViewsAreFoundAtRankOne) {
-  auto db = MakeDb();
+  auto db = testing::EvalDatabase();
   Searcher searcher(db);
   TestSet set;
   struct Source {
@@ -53,10 +30,10 @@ TEST(Evaluate, DatabaseViewsAreFoundAtRankOne) {
   };
   std::vector<Source> sources = {{3, 0}, {17, 5}, {29, 11}};
   for (uint32_t i = 0; i < sources.size(); ++i) {
-    set.views.push_back(ViewOf(*db, i, sources[i].v, sources[i].r, i == 0));
+    set.views.push_back(testing::ViewOf(*db, i, sources[i].v, sources[i].r, i == 0));
   }
   auto points = [&](const TestView& t) -> Result<std::vector<Point2f>> {
-    return RolledPoints(*db, sources[t.id].v, sources[t.id].r);
+    return testing::RolledView(*db, sources[t.id].v, sources[t.id].r);
   };
   auto report = Evaluate(searcher, set, QueryInput::kClean, points, FastOptions());
   ASSERT_TRUE(report.ok()) << report.status().ToString();
@@ -89,13 +66,13 @@ TEST(Evaluate, DatabaseViewsAreFoundAtRankOne) {
 }
 
 TEST(Evaluate, RanksBeyondTheFirstSearchAreExact) {
-  auto db = MakeDb();
+  auto db = testing::EvalDatabase();
   Searcher searcher(db);
   // Truth: view 5 at roll 2; query: the edges of view 30 at roll 7, so the correct match sits
   // somewhere down the list. The reference: the brute-force ordering of every (view, roll).
   TestSet set;
-  set.views.push_back(ViewOf(*db, 0, 5, 2, false));
-  const std::vector<Point2f> query = RolledPoints(*db, 30, 7);
+  set.views.push_back(testing::ViewOf(*db, 0, 5, 2, false));
+  const std::vector<Point2f> query = testing::RolledView(*db, 30, 7);
   auto points = [&](const TestView&) -> Result<std::vector<Point2f>> { return query; };
   EvaluationOptions options = FastOptions();
   auto report = Evaluate(searcher, set, QueryInput::kClean, points, options);
@@ -125,15 +102,15 @@ TEST(Evaluate, RanksBeyondTheFirstSearchAreExact) {
 }
 
 TEST(Evaluate, UnreachableTruthAndFailedInputsLandInTheLastBin) {
-  auto db = MakeDb();
+  auto db = testing::EvalDatabase();
   Searcher searcher(db);
   TestSet set;
-  set.views.push_back(ViewOf(*db, 0, 8, 0, false));
+  set.views.push_back(testing::ViewOf(*db, 0, 8, 0, false));
   for (auto& j : set.views[0].truth.joint_angles) j += 2.0f;  // no database shape is near
-  set.views.push_back(ViewOf(*db, 1, 9, 0, true));
+  set.views.push_back(testing::ViewOf(*db, 1, 9, 0, true));
   auto points = [&](const TestView& t) -> Result<std::vector<Point2f>> {
     if (t.id == 1) return Status(StatusCode::kNoHand, "photo: no hand found");
-    return RolledPoints(*db, 8, 0);
+    return testing::RolledView(*db, 8, 0);
   };
   auto report = Evaluate(searcher, set, QueryInput::kPhoto, points, FastOptions());
   ASSERT_TRUE(report.ok());
