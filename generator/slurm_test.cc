@@ -40,6 +40,31 @@ std::string Slurp(const fs::path& p) {
   return s.str();
 }
 
+// A stand-in for handdb in `dir`: prints its arguments as [a][b]... and exits with $RC (0 unset).
+fs::path EchoArgsProgram(const fs::path& dir) {
+  const fs::path path = dir / "echo-args";
+  EXPECT_TRUE(WriteFileAtomic(path, "#!/bin/sh\nprintf '[%s]' \"$@\"; echo; exit ${RC:-0}\n").ok());
+  fs::permissions(path, fs::perms::owner_all);
+  return path;
+}
+
+// Runs array script `script` with argument `base` (the chunk's base) as Slurm runs task `task` of
+// array job `job`, with extra environment `env` ("NAME=VALUE"). Returns the exit code (-1: no run).
+int RunArrayTask(const fs::path& script,
+                 const std::string& job,
+                 const std::string& base,
+                 const std::string& task,
+                 const std::vector<std::string>& env = {}) {
+  std::vector<std::string> argv = {"env"};
+  argv.insert(argv.end(), env.begin(), env.end());
+  argv.insert(
+      argv.end(),
+      {"SLURM_ARRAY_JOB_ID=" + job, "SLURM_ARRAY_TASK_ID=" + task, "bash", script.string(), base});
+  auto r = RunCommand(argv);
+  EXPECT_TRUE(r.ok()) << r.status().ToString();
+  return r.ok() ? r->exit_code : -1;
+}
+
 TEST(Slurm, FormatArrayRanges) {
   EXPECT_EQ(FormatArrayRanges(std::vector<uint32_t>{}), "");
   EXPECT_EQ(FormatArrayRanges(std::vector<uint32_t>{5}), "5");
@@ -199,14 +224,7 @@ TEST(Slurm, ArrayScriptRecordsFailureAndClearsItOnSuccess) {
   auto dry = SubmitGenerateJobs(layout, options, {7}, /*dry_run=*/true);
   ASSERT_TRUE(dry.ok()) << dry.status().ToString();
   auto run_task = [&](const std::string& base, const std::string& task) {
-    auto r = RunCommand({"env",
-                         "SLURM_ARRAY_JOB_ID=99",
-                         "SLURM_ARRAY_TASK_ID=" + task,
-                         "bash",
-                         layout.array_script().string(),
-                         base});
-    EXPECT_TRUE(r.ok());
-    return r.ok() ? r->exit_code : -1;
+    return RunArrayTask(layout.array_script(), "99", base, task);
   };
   // Base 5 + task 2 = unit 7.
   EXPECT_EQ(run_task("5", "2"), 1);
@@ -232,21 +250,11 @@ TEST(Slurm, ArrayScriptRecordsFailureAndClearsItOnSuccess) {
 // The per-task commands get the render and convert arguments as separate words, spaces kept.
 TEST(Slurm, ArrayScriptPassesArgumentsVerbatim) {
   TempDir tmp;
-  const fs::path echo_args = tmp.path() / "echo-args";
-  ASSERT_TRUE(WriteFileAtomic(echo_args, "#!/bin/sh\nprintf '[%s]' \"$@\"; echo\n").ok());
-  fs::permissions(echo_args, fs::perms::owner_all);
-  auto layout = LayoutIn(tmp.path(), echo_args);
+  auto layout = LayoutIn(tmp.path(), EchoArgsProgram(tmp.path()));
   layout.render_args = {"--blender", "/opt/my blender/blender"};
   layout.convert_args = {"--occlusion-edges", "off", "--skip-bad"};
   ASSERT_TRUE(SubmitGenerateJobs(layout, SlurmOptions{}, {3}, true).ok());
-  auto r = RunCommand({"env",
-                       "SLURM_ARRAY_JOB_ID=5",
-                       "SLURM_ARRAY_TASK_ID=3",
-                       "bash",
-                       layout.array_script().string(),
-                       "0"});
-  ASSERT_TRUE(r.ok());
-  EXPECT_EQ(r->exit_code, 0);
+  ASSERT_EQ(RunArrayTask(layout.array_script(), "5", "0", "3"), 0);
   const std::string log = Slurp(layout.UnitLog(3));
   const std::string run_dir = layout.run_dir.string();
   EXPECT_NE(log.find("[unit][render][" + run_dir + "/plan.json][--unit][3][--out][" + run_dir +
@@ -258,7 +266,7 @@ TEST(Slurm, ArrayScriptPassesArgumentsVerbatim) {
             std::string::npos)
       << log;
   // The final job passes the convert arguments too.
-  r = RunCommand({"env", "SLURM_JOB_ID=6", "bash", layout.final_script().string()});
+  auto r = RunCommand({"env", "SLURM_JOB_ID=6", "bash", layout.final_script().string()});
   ASSERT_TRUE(r.ok());
   EXPECT_EQ(r->exit_code, 0);
   EXPECT_NE(r->out.find("[unit][finalize][" + run_dir + "][--out][" + layout.db_dir.string() +
@@ -271,12 +279,8 @@ TEST(Slurm, ArrayScriptPassesArgumentsVerbatim) {
 // directory; a failure leaves a marker naming the task; the merge job runs the merge words.
 TEST(Slurm, EvaluateScriptsRunTaskAndMergeWords) {
   TempDir tmp;
-  const fs::path echo_args = tmp.path() / "echo-args";
-  ASSERT_TRUE(
-      WriteFileAtomic(echo_args, "#!/bin/sh\nprintf '[%s]' \"$@\"; echo; exit ${RC:-0}\n").ok());
-  fs::permissions(echo_args, fs::perms::owner_all);
   SlurmEvaluateLayout layout;
-  layout.handdb = echo_args;
+  layout.handdb = EchoArgsProgram(tmp.path());
   layout.submit_dir = tmp.path() / "my cwd";
   layout.work_dir = tmp.path() / "work";
   layout.task_args = {"unit", "evaluate", "db dir", "ts", "--tasks", "3"};
@@ -295,15 +299,7 @@ TEST(Slurm, EvaluateScriptsRunTaskAndMergeWords) {
   EXPECT_NE(array.find("#SBATCH --job-name=handdb-eval\n"), std::string::npos);
 
   auto run_task = [&](const std::string& base, const std::string& task, const std::string& rc) {
-    auto r = RunCommand({"env",
-                         "RC=" + rc,
-                         "SLURM_ARRAY_JOB_ID=8",
-                         "SLURM_ARRAY_TASK_ID=" + task,
-                         "bash",
-                         layout.array_script().string(),
-                         base});
-    EXPECT_TRUE(r.ok());
-    return r.ok() ? r->exit_code : -1;
+    return RunArrayTask(layout.array_script(), "8", base, task, {"RC=" + rc});
   };
   // Base 1 + task 1 = task 2.
   EXPECT_EQ(run_task("1", "1", "3"), 1);
