@@ -13,7 +13,6 @@
 #include "cli/slurm_cli.h"
 #include "format/atomic_file.h"
 #include "format/json_schema.h"
-#include "format/progress.h"
 #include "generator/slurm.h"
 #include "query/eval_parts.h"
 #include "query/searcher.h"
@@ -251,16 +250,11 @@ int RunEvaluateOnSlurm(const EvaluateSlurmRequest& request, const SlurmFlags& fl
   }
 
   // --wait: poll until every job has ended, finished tasks as progress.
-  std::vector<SlurmJobState> states;
-  {
-    Progress progress("slurm", pending.size(), !request.quiet, "tasks");
-    auto waited = WaitForJobs(*sub, pending.size(), flags.poll_seconds, progress);
-    if (!waited.ok()) return Fail(cmd, waited.status());
-    states = std::move(*waited);
-  }
+  auto states = WaitForJobs(*sub, pending.size(), flags.poll_seconds, !request.quiet);
+  if (!states.ok()) return Fail(cmd, states.status());
   auto after = CompleteParts(layout.work_dir, *fp, selected, tasks, num_criteria);
   if (!after.ok()) return Fail(cmd, after.status());
-  const auto failures = TaskFailures(layout, *sub, *after, states);
+  const auto failures = TaskFailures(layout, *sub, *after, *states);
   for (const auto& line : failures) std::fprintf(stderr, "handdb %s: %s\n", cmd, line.c_str());
   if (!failures.empty()) {
     return Fail(cmd,
@@ -271,7 +265,7 @@ int RunEvaluateOnSlurm(const EvaluateSlurmRequest& request, const SlurmFlags& fl
   }
   auto report = ReadFileToString(layout.report_text());
   if (!report.ok()) {
-    const std::string final_state = FinalJobState(*sub, states);
+    const std::string final_state = FinalJobState(*sub, *states);
     const std::string why = MergeError(layout);
     return Fail(cmd,
                 Status(StatusCode::kExternalToolFailed,

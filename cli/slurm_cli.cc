@@ -8,6 +8,7 @@
 #include <thread>
 
 #include "format/atomic_file.h"
+#include "format/progress.h"
 
 namespace handdb::cli {
 namespace {
@@ -131,7 +132,8 @@ Result<PreviousSubmission> CheckPreviousSubmission(const fs::path& jobs_file,
 Result<std::vector<SlurmJobState>> WaitForJobs(const SlurmSubmission& sub,
                                                uint64_t num_tasks,
                                                double poll_seconds,
-                                               Progress& progress) {
+                                               bool show_progress) {
+  Progress progress("slurm", num_tasks, show_progress, "tasks");
   std::vector<SlurmJobState> states;
   uint64_t shown = 0;
   while (true) {

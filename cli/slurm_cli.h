@@ -11,7 +11,6 @@
 #include <vector>
 
 #include "cli/slurm_commands.h"
-#include "format/progress.h"
 #include "format/status.h"
 #include "generator/slurm.h"
 
@@ -52,12 +51,12 @@ struct PreviousSubmission {
 Result<PreviousSubmission> CheckPreviousSubmission(const std::filesystem::path& jobs_file,
                                                    const std::string& of_what);
 
-// Polls Slurm every `poll_seconds` until every job of `sub` has ended, adding finished array
-// tasks (at most `num_tasks`) to `progress`. Returns the last job states.
+// --wait: polls Slurm every `poll_seconds` until every job of `sub` has ended, showing finished
+// array tasks (of `num_tasks`) as progress. Returns the last job states.
 Result<std::vector<SlurmJobState>> WaitForJobs(const SlurmSubmission& sub,
                                                uint64_t num_tasks,
                                                double poll_seconds,
-                                               Progress& progress);
+                                               bool show_progress);
 
 // The state of `sub`'s final job in `states` ("unknown" when Slurm no longer reports it).
 std::string FinalJobState(const SlurmSubmission& sub, const std::vector<SlurmJobState>& states);

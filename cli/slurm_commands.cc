@@ -10,7 +10,6 @@
 #include "cli/slurm_cli.h"
 #include "format/atomic_file.h"
 #include "format/manifest.h"
-#include "format/progress.h"
 #include "format/validator.h"
 #include "generator/plan.h"
 #include "generator/render_driver.h"
@@ -276,20 +275,15 @@ int RunGenerateOnSlurm(const SlurmGenerateRequest& request, const SlurmFlags& fl
   }
 
   // --wait: poll Slurm until every job has ended, showing finished tasks as progress.
-  std::vector<SlurmJobState> states;
-  {
-    Progress progress("slurm", pending.size(), !request.quiet, "tasks");
-    auto waited = WaitForJobs(*sub, pending.size(), flags.poll_seconds, progress);
-    if (!waited.ok()) return Fail(cmd, waited.status());
-    states = std::move(*waited);
-  }
+  auto states = WaitForJobs(*sub, pending.size(), flags.poll_seconds, !request.quiet);
+  if (!states.ok()) return Fail(cmd, states.status());
   auto after = CompleteUnits(layout.run_dir, layout.db_dir, request.convert);
   if (!after.ok()) return Fail(cmd, after.status());
-  const auto failures = CollectFailures(layout, *sub, *after, states);
+  const auto failures = CollectFailures(layout, *sub, *after, *states);
   for (const auto& f : failures) {
     std::fprintf(stderr, "handdb %s: %s\n", cmd.c_str(), FormatUnitFailure(f).c_str());
   }
-  const std::string final_state = FinalJobState(*sub, states);
+  const std::string final_state = FinalJobState(*sub, *states);
   const ValidationReport report = ValidateDatabase(layout.db_dir, ValidateOptions{});
   const bool ok = failures.empty() && report.ok();
   if (request.as_json) {
