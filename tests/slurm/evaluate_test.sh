@@ -11,12 +11,9 @@
 #      the file; a dry run prints the array and the afterok merge job.
 # Usage: evaluate_test.sh HANDDB_EXE SOURCE_DIR   (exit 77 = skipped)
 set -euo pipefail
-HANDDB="$(realpath "${1:?usage: evaluate_test.sh HANDDB_EXE SOURCE_DIR}")"
-SRC="$(realpath "${2:?usage: evaluate_test.sh HANDDB_EXE SOURCE_DIR}")"
-PY=/usr/bin/python3
 # shellcheck source=tests/slurm/lib.sh
-source "$SRC/tests/slurm/lib.sh"
-
+source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
+slurm_test_args "$@"
 slurm_test_require
 slurm_test_start handdb-slurm-eval-test
 

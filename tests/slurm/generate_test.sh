@@ -8,12 +8,9 @@
 #   3. an array task killed while it runs (scancel) is reported; the re-run completes only it.
 # Usage: generate_test.sh HANDDB_EXE SOURCE_DIR   (exit 77 = skipped)
 set -euo pipefail
-HANDDB="$(realpath "${1:?usage: generate_test.sh HANDDB_EXE SOURCE_DIR}")"
-SRC="$(realpath "${2:?usage: generate_test.sh HANDDB_EXE SOURCE_DIR}")"
-PY=/usr/bin/python3
 # shellcheck source=tests/slurm/lib.sh
-source "$SRC/tests/slurm/lib.sh"
-
+source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
+slurm_test_args "$@"
 slurm_test_require
 slurm_test_start handdb-slurm-test
 

@@ -1,7 +1,15 @@
 # Sourced by the Slurm integration tests (generate_test.sh, evaluate_test.sh): the skip checks,
 # step/die, and a real single-node Slurm (scripts/slurm_local.sh: munged, slurmctld, slurmd on
 # loopback, all state in the test's temp dir) that is stopped on every exit path.
-# Needs SRC (the source tree) to be set.
+
+# slurm_test_args HANDDB_EXE SOURCE_DIR: sets HANDDB and SRC (absolute) and PY.
+slurm_test_args() {
+  local usage
+  usage="usage: $(basename "$0") HANDDB_EXE SOURCE_DIR"
+  HANDDB="$(realpath "${1:?$usage}")"
+  SRC="$(realpath "${2:?$usage}")"
+  PY=/usr/bin/python3
+}
 
 t_start=$(date +%s)
 step() { echo "--- [$(( $(date +%s) - t_start ))s] $*"; }
