@@ -1,8 +1,10 @@
+# shellcheck shell=bash
 # Sourced by the Slurm integration tests (generate_test.sh, evaluate_test.sh): the skip checks,
 # step/die, and a real single-node Slurm (scripts/slurm_local.sh: munged, slurmctld, slurmd on
 # loopback, all state in the test's temp dir) that is stopped on every exit path.
 
-# slurm_test_args HANDDB_EXE SOURCE_DIR: sets HANDDB and SRC (absolute) and PY.
+# slurm_test_args HANDDB_EXE SOURCE_DIR: sets HANDDB and SRC (absolute) and PY, for the test.
+# shellcheck disable=SC2034
 slurm_test_args() {
   local usage
   usage="usage: $(basename "$0") HANDDB_EXE SOURCE_DIR"
