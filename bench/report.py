@@ -131,6 +131,7 @@ def eval_summary(report):
         "table1_main": table_row(report, "main")["counts"],
         "table1_same_shape": table_row(report, "same-shape")["counts"],
         "same_shape_views": table_row(report, "same-shape")["total"],
+        "same_shape_none_in_database": table_row(report, "same-shape").get("no_correct_in_database"),
         "success_main": {n: success_rate(report, "main", n) for n in (1, 10, 100)},
         "success_same_shape": {n: success_rate(report, "same-shape", n) for n in (1, 10, 100)},
         "chance_main": chance,
@@ -283,7 +284,10 @@ def main():
             continue
         ss1 = s["success_same_shape"][1]
         ss10 = s["success_same_shape"][10]
-        if ss1 is not None:
+        if ss1 is not None and s["same_shape_none_in_database"] == s["same_shape_views"]:
+            rows.append(f"| {title}: same-shape success | not applicable: none of the "
+                        f"{s['same_shape_views']} basic-shape test shapes is in this database | – | – |")
+        elif ss1 is not None:
             rows.append(f"| {title}: same-shape success@1 / @10 (paper's rule, {s['same_shape_views']} "
                         f"basic-shape views) | {pct(ss1)} / {pct(ss10)} | – | – |")
         s1 = s["success_main"][1]
