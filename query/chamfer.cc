@@ -5,12 +5,8 @@
 #include <cstdint>
 #include <limits>
 
-#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
-#include <immintrin.h>
-#define HANDDB_HAVE_AVX2_PATH 1
-#endif
-
 #include "format/status.h"
+#include "query/simd.h"
 
 namespace handdb {
 namespace {
@@ -40,10 +36,6 @@ __attribute__((target("avx2"))) int32_t NearestSquaredAvx2(PointQ q,
   return *std::min_element(lanes, lanes + 8);
 }
 
-bool HaveAvx2() {
-  static const bool have = __builtin_cpu_supports("avx2");
-  return have;
-}
 #endif
 
 int16_t RoundToQ(float v_px) {

@@ -6,12 +6,8 @@
 #include <cstdlib>
 #include <limits>
 
-#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
-#include <immintrin.h>
-#define HANDDB_HAVE_AVX2_PATH 1
-#endif
-
 #include "format/status.h"
+#include "query/simd.h"
 
 namespace handdb {
 
@@ -63,16 +59,12 @@ __attribute__((target("avx2"))) size_t RowToUnitsAvx2(const int32_t* d2,
   }
   return i;
 }
-bool HaveAvx2ForRows() {
-  static const bool have = __builtin_cpu_supports("avx2");
-  return have;
-}
 #endif
 
 void RowToUnits(const int32_t* d2, size_t n, double scale, uint16_t* out) {
   size_t i = 0;
 #ifdef HANDDB_HAVE_AVX2_PATH
-  if (HaveAvx2ForRows()) i = RowToUnitsAvx2(d2, n, scale, out);
+  if (HaveAvx2()) i = RowToUnitsAvx2(d2, n, scale, out);
 #endif
   for (; i < n; ++i) {
     const double units = std::floor(std::sqrt(static_cast<double>(d2[i])) * scale);
@@ -274,10 +266,6 @@ __attribute__((target("avx2"))) double SumLowerBoundsAvx2(const PointQ* pts,
   return sum;
 }
 
-bool HaveAvx2() {
-  static const bool have = __builtin_cpu_supports("avx2");
-  return have;
-}
 #endif
 
 }  // namespace
