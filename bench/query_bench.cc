@@ -110,9 +110,9 @@ MemoryBreakdown ReadMemoryBreakdown() {
   while (std::fgets(line, sizeof(line), f) != nullptr) {
     unsigned long lo = 0, hi = 0;
     char path[4096] = "";
-    if (std::sscanf(line, "%lx-%lx %*s %*s %*s %*s %4095s", &lo, &hi, path) >= 2 &&
-        std::strchr(line, '-') != nullptr && std::strncmp(line, "Rss:", 4) != 0 && line[0] != ' ' &&
-        std::sscanf(line, "%lx-%lx", &lo, &hi) == 2 && hi > lo) {
+    // A mapping's header line ("lo-hi perms offset dev inode [path]"); field lines ("Rss: ...")
+    // never parse as two hex numbers joined by '-'.
+    if (std::sscanf(line, "%lx-%lx %*s %*s %*s %*s %4095s", &lo, &hi, path) >= 2) {
       const std::string p = path;
       if (p.size() > 4 && p.compare(p.size() - 4, 4, ".hdb") == 0) {
         kind = kDb;
