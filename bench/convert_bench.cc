@@ -19,8 +19,8 @@
 #include <thread>
 #include <vector>
 
-#include "format/atomic_file.h"
-#include "format/json_schema.h"
+#include "base/atomic_file.h"
+#include "base/json_schema.h"
 #include "format/manifest.h"
 #include "generator/converter.h"
 #include "generator/exr_io.h"

@@ -5,7 +5,7 @@
 #include <cstdio>
 
 #include "cli/commands.h"
-#include "format/status.h"
+#include "base/status.h"
 
 namespace handdb::cli {
 

@@ -11,9 +11,9 @@
 #include "cli/commands.h"
 #include "cli/evaluate_cli.h"
 #include "cli/slurm_cli.h"
-#include "format/atomic_file.h"
-#include "format/json_schema.h"
-#include "generator/slurm.h"
+#include "base/atomic_file.h"
+#include "base/json_schema.h"
+#include "cluster/slurm.h"
 #include "query/eval_parts.h"
 #include "query/searcher.h"
 

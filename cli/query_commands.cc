@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "cli/commands.h"
-#include "format/json_schema.h"
+#include "base/json_schema.h"
 #include "format/manifest.h"
 #include "format/roll.h"
 #include "generator/converter.h"

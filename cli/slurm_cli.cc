@@ -7,8 +7,8 @@
 #include <set>
 #include <thread>
 
-#include "format/atomic_file.h"
-#include "format/progress.h"
+#include "base/atomic_file.h"
+#include "base/progress.h"
 
 namespace handdb::cli {
 namespace {

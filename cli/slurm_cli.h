@@ -11,8 +11,8 @@
 #include <vector>
 
 #include "cli/slurm_commands.h"
-#include "format/status.h"
-#include "generator/slurm.h"
+#include "base/status.h"
+#include "cluster/slurm.h"
 
 namespace handdb::cli {
 

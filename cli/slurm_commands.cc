@@ -8,12 +8,12 @@
 #include "cli/commands.h"
 #include "cli/evaluate_cli.h"
 #include "cli/slurm_cli.h"
-#include "format/atomic_file.h"
+#include "base/atomic_file.h"
 #include "format/manifest.h"
 #include "format/validator.h"
 #include "generator/plan.h"
 #include "generator/render_driver.h"
-#include "generator/slurm.h"
+#include "cluster/slurm.h"
 
 namespace handdb::cli {
 namespace {

@@ -2,7 +2,7 @@
 
 #include <set>
 
-#include "format/json_schema.h"
+#include "base/json_schema.h"
 
 namespace handdb {
 

@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "format/shard_writer.h"
-#include "format/status.h"
+#include "base/status.h"
 #include "format/view.h"
 
 namespace handdb {

@@ -5,8 +5,8 @@
 
 #include <filesystem>
 
-#include "format/atomic_file.h"
-#include "format/json_schema.h"
+#include "base/atomic_file.h"
+#include "base/json_schema.h"
 
 namespace handdb {
 namespace {

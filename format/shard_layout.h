@@ -14,7 +14,7 @@
 #include <string>
 #include <vector>
 
-#include "format/status.h"
+#include "base/status.h"
 #include "format/view.h"
 
 namespace handdb::shard {

@@ -8,7 +8,7 @@
 #include <random>
 #include <set>
 
-#include "format/atomic_file.h"
+#include "base/atomic_file.h"
 #include "format/shard_layout.h"
 #include "format/shard_testing.h"
 #include "format/shard_writer.h"

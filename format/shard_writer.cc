@@ -3,7 +3,7 @@
 #include <cmath>
 #include <vector>
 
-#include "format/atomic_file.h"
+#include "base/atomic_file.h"
 #include "format/shard_layout.h"
 
 namespace handdb {

@@ -18,7 +18,7 @@
 #include <unordered_map>
 
 #include "format/manifest.h"
-#include "format/progress.h"
+#include "base/progress.h"
 #include "format/shard_layout.h"
 
 namespace handdb {

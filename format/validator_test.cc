@@ -5,7 +5,7 @@
 
 #include <filesystem>
 
-#include "format/atomic_file.h"
+#include "base/atomic_file.h"
 #include "format/manifest.h"
 #include "format/shard_layout.h"
 #include "format/shard_reader.h"

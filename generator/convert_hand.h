@@ -9,7 +9,7 @@
 #include <utility>
 #include <vector>
 
-#include "format/status.h"
+#include "base/status.h"
 
 namespace handdb {
 

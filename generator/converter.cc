@@ -15,17 +15,17 @@
 #include <system_error>
 #include <thread>
 
-#include "format/atomic_file.h"
-#include "format/json_schema.h"
+#include "base/atomic_file.h"
+#include "base/json_schema.h"
 #include "format/manifest.h"
-#include "format/progress.h"
+#include "base/progress.h"
 #include "format/shard_reader.h"
 #include "format/shard_writer.h"
 #include "generator/convert_hand.h"
 #include "generator/exr_io.h"
 #include "generator/normalise.h"
 #include "generator/plan.h"
-#include "generator/sha256.h"
+#include "base/sha256.h"
 #include "handdb_version.h"
 
 namespace handdb {
@@ -447,7 +447,7 @@ bool KeepExistingShard(UnitState* st, bool skip_bad) {
   return true;
 }
 
-// Temp files a killed run left behind (format/atomic_file.h names them "<target>.tmp-*"): those
+// Temp files a killed run left behind (base/atomic_file.h names them "<target>.tmp-*"): those
 // of the shards this run writes and, when it writes the manifest, the manifest's. Nothing else in
 // DB_DIR is touched.
 void RemoveStaleTempFiles(const fs::path& db_dir,

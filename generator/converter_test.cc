@@ -8,8 +8,8 @@
 #include <map>
 #include <string>
 
-#include "format/atomic_file.h"
-#include "format/json_schema.h"
+#include "base/atomic_file.h"
+#include "base/json_schema.h"
 #include "format/manifest.h"
 #include "format/roll.h"
 #include "format/shard_reader.h"

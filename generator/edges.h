@@ -15,7 +15,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "format/status.h"
+#include "base/status.h"
 #include "format/view.h"
 
 namespace handdb {

@@ -10,7 +10,7 @@
 #include <system_error>
 #include <vector>
 
-#include "format/atomic_file.h"
+#include "base/atomic_file.h"
 
 namespace handdb {
 namespace {

@@ -7,7 +7,7 @@
 #include <filesystem>
 #include <string>
 
-#include "format/status.h"
+#include "base/status.h"
 #include "generator/edges.h"
 
 namespace handdb {

@@ -7,7 +7,7 @@
 #include <fstream>
 #include <string>
 
-#include "format/atomic_file.h"
+#include "base/atomic_file.h"
 #include "generator/synthetic_hand.h"
 
 namespace handdb {

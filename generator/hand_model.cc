@@ -5,9 +5,9 @@
 #include <set>
 #include <sstream>
 
-#include "format/atomic_file.h"
-#include "format/json_schema.h"
-#include "generator/sha256.h"
+#include "base/atomic_file.h"
+#include "base/json_schema.h"
+#include "base/sha256.h"
 
 namespace handdb {
 namespace {

@@ -10,7 +10,7 @@
 #include <utility>
 #include <vector>
 
-#include "format/status.h"
+#include "base/status.h"
 #include "generator/plan.h"
 
 namespace handdb {

@@ -10,7 +10,7 @@
 #include <span>
 #include <vector>
 
-#include "format/status.h"
+#include "base/status.h"
 #include "format/view.h"
 #include "generator/edges.h"
 

@@ -4,7 +4,7 @@
 #include <cstdio>
 #include <cstdlib>
 
-#include "format/json_schema.h"
+#include "base/json_schema.h"
 #include "generator/hand_model.h"
 #include "generator/random.h"
 #include "generator/shape_sampler.h"

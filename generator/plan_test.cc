@@ -3,8 +3,8 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
-#include "format/atomic_file.h"
-#include "format/json_schema.h"
+#include "base/atomic_file.h"
+#include "base/json_schema.h"
 
 namespace handdb {
 namespace {

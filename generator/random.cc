@@ -2,7 +2,7 @@
 
 #include <cmath>
 
-#include "format/status.h"
+#include "base/status.h"
 
 namespace handdb {
 namespace {

@@ -18,11 +18,11 @@
 #include <sstream>
 #include <thread>
 
-#include "format/atomic_file.h"
-#include "format/progress.h"
+#include "base/atomic_file.h"
+#include "base/progress.h"
 #include "generator/hand_model.h"
 #include "generator/plan.h"
-#include "generator/sha256.h"
+#include "base/sha256.h"
 
 extern char** environ;
 

@@ -14,8 +14,8 @@
 #include <fstream>
 #include <thread>
 
-#include "format/atomic_file.h"
-#include "format/json_schema.h"
+#include "base/atomic_file.h"
+#include "base/json_schema.h"
 #include "generator/plan.h"
 
 namespace handdb {

@@ -1,6 +1,6 @@
 #include "generator/sobol.h"
 
-#include "format/status.h"
+#include "base/status.h"
 
 namespace handdb {
 namespace {

@@ -13,9 +13,9 @@
 #include <mutex>
 #include <thread>
 
-#include "format/atomic_file.h"
-#include "format/json_schema.h"
-#include "format/progress.h"
+#include "base/atomic_file.h"
+#include "base/json_schema.h"
+#include "base/progress.h"
 #include "generator/hand_model.h"
 #include "generator/random.h"
 #include "generator/render_driver.h"

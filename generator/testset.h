@@ -25,7 +25,7 @@
 #include <string>
 #include <vector>
 
-#include "format/status.h"
+#include "base/status.h"
 #include "generator/plan.h"
 
 namespace handdb {

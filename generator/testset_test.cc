@@ -8,7 +8,7 @@
 #include <map>
 #include <set>
 
-#include "format/json_schema.h"
+#include "base/json_schema.h"
 #include "generator/hand_model.h"
 
 namespace handdb {

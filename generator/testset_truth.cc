@@ -6,8 +6,8 @@
 #include <cmath>
 #include <thread>
 
-#include "format/json_schema.h"
-#include "format/progress.h"
+#include "base/json_schema.h"
+#include "base/progress.h"
 #include "generator/converter.h"
 #include "generator/exr_io.h"
 #include "generator/testset.h"

@@ -8,7 +8,7 @@
 #include <tuple>
 #include <utility>
 
-#include "format/status.h"
+#include "base/status.h"
 
 namespace handdb {
 

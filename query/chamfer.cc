@@ -5,7 +5,7 @@
 #include <cstdint>
 #include <limits>
 
-#include "format/status.h"
+#include "base/status.h"
 #include "query/simd.h"
 
 namespace handdb {

@@ -6,7 +6,7 @@
 #include <cstdlib>
 #include <limits>
 
-#include "format/status.h"
+#include "base/status.h"
 #include "query/simd.h"
 
 namespace handdb {

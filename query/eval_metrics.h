@@ -24,7 +24,7 @@
 #include <string_view>
 #include <vector>
 
-#include "format/status.h"
+#include "base/status.h"
 #include "format/view.h"
 
 namespace handdb {

@@ -5,7 +5,7 @@
 #include <cstdio>
 #include <limits>
 
-#include "format/json_schema.h"
+#include "base/json_schema.h"
 #include "format/shard_layout.h"
 
 namespace handdb {

@@ -17,7 +17,7 @@
 #include <string>
 #include <vector>
 
-#include "format/status.h"
+#include "base/status.h"
 #include "query/evaluate.h"
 
 namespace handdb {

@@ -6,8 +6,8 @@
 #include <cmath>
 #include <memory>
 
-#include "format/atomic_file.h"
-#include "format/json_schema.h"
+#include "base/atomic_file.h"
+#include "base/json_schema.h"
 #include "query/evaluate_testing.h"
 
 namespace handdb {

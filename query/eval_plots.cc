@@ -7,7 +7,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "format/atomic_file.h"
+#include "base/atomic_file.h"
 
 namespace handdb {
 namespace {

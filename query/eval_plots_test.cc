@@ -8,7 +8,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <random>
 
-#include "format/atomic_file.h"
+#include "base/atomic_file.h"
 
 namespace handdb {
 namespace {

@@ -7,8 +7,8 @@
 #include <limits>
 #include <sstream>
 
-#include "format/json_schema.h"
-#include "format/progress.h"
+#include "base/json_schema.h"
+#include "base/progress.h"
 #include "query/eval_plots.h"
 
 namespace handdb {

@@ -26,7 +26,7 @@
 #include <vector>
 
 #include "format/roll.h"
-#include "format/status.h"
+#include "base/status.h"
 #include "query/eval_metrics.h"
 #include "query/searcher.h"
 

@@ -5,7 +5,7 @@
 #include <cmath>
 #include <memory>
 
-#include "format/json_schema.h"
+#include "base/json_schema.h"
 #include "query/evaluate_testing.h"
 
 namespace handdb {

@@ -22,7 +22,7 @@
 #include <vector>
 
 #include "format/roll.h"
-#include "format/status.h"
+#include "base/status.h"
 #include "format/view.h"
 #include "generator/edges.h"
 

@@ -16,7 +16,7 @@
 #include <span>
 #include <string_view>
 
-#include "format/status.h"
+#include "base/status.h"
 #include "format/view.h"
 
 namespace handdb {

@@ -18,7 +18,7 @@
 #include <vector>
 
 #include "format/roll.h"
-#include "format/status.h"
+#include "base/status.h"
 #include "format/view.h"
 #include "query/database.h"
 #include "query/kdtree.h"

@@ -17,7 +17,7 @@
 #include <sstream>
 #include <string>
 
-#include "format/json_schema.h"
+#include "base/json_schema.h"
 #include "generator/plan.h"
 #include "generator/testset.h"
 

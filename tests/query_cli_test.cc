@@ -15,7 +15,7 @@
 #include <sstream>
 #include <string>
 
-#include "format/json_schema.h"
+#include "base/json_schema.h"
 #include "format/manifest.h"
 #include "format/roll.h"
 #include "format/shard_writer.h"

@@ -1,4 +1,4 @@
-#include "generator/slurm.h"
+#include "cluster/slurm.h"
 
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -7,7 +7,7 @@
 #include <fstream>
 #include <sstream>
 
-#include "format/atomic_file.h"
+#include "base/atomic_file.h"
 
 namespace handdb {
 namespace {

@@ -1,7 +1,7 @@
 // A validator for the JSON Schema 2020-12 subset listed in json_schema.h. Schemas are parsed once
 // from the embedded text, checked for unsupported keywords up front (a programming error, so it
 // throws), and cached for the life of the process.
-#include "format/json_schema.h"
+#include "base/json_schema.h"
 
 #include <algorithm>
 #include <cmath>
@@ -12,7 +12,7 @@
 #include <set>
 #include <sstream>
 
-#include "format/atomic_file.h"
+#include "base/atomic_file.h"
 
 namespace handdb {
 namespace schemas {

@@ -1,4 +1,4 @@
-#include "format/progress.h"
+#include "base/progress.h"
 
 #include <unistd.h>
 

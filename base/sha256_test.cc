@@ -1,11 +1,11 @@
-#include "generator/sha256.h"
+#include "base/sha256.h"
 
 #include <gtest/gtest.h>
 #include <unistd.h>
 
 #include <string>
 
-#include "format/atomic_file.h"
+#include "base/atomic_file.h"
 
 namespace handdb {
 namespace {

@@ -1,4 +1,4 @@
-#include "format/atomic_file.h"
+#include "base/atomic_file.h"
 
 #include <gtest/gtest.h>
 

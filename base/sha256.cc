@@ -1,4 +1,4 @@
-#include "generator/sha256.h"
+#include "base/sha256.h"
 
 #include <cerrno>
 #include <cstring>

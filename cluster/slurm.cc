@@ -1,4 +1,4 @@
-#include "generator/slurm.h"
+#include "cluster/slurm.h"
 
 #include <fcntl.h>
 #include <poll.h>
@@ -14,7 +14,7 @@
 #include <regex>
 #include <sstream>
 
-#include "format/atomic_file.h"
+#include "base/atomic_file.h"
 
 extern char** environ;
 
