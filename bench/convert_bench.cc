@@ -22,10 +22,10 @@
 #include "base/atomic_file.h"
 #include "base/json_schema.h"
 #include "format/manifest.h"
-#include "generator/converter.h"
-#include "generator/exr_io.h"
-#include "generator/plan.h"
-#include "generator/synthetic_hand.h"
+#include "generator/convert/converter.h"
+#include "edges/exr_io.h"
+#include "generator/plan/plan.h"
+#include "edges/synthetic_hand.h"
 
 namespace handdb {
 namespace {
@@ -252,7 +252,7 @@ int main(int argc, char** argv) {
     Measure("real renders", render_dir, scratch);
   } else {
     std::printf(
-        "synthetic hands (generator/synthetic_hand.h), %d shapes x %d directions\n", shapes, dirs);
+        "synthetic hands (edges/synthetic_hand.h), %d shapes x %d directions\n", shapes, dirs);
     ExrWriteOptions blender_like;
     blender_like.combined_pass = true;
     MakeSyntheticRenderDir(scratch / "run-blender-layout", shapes, dirs, blender_like);

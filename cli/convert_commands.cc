@@ -21,9 +21,9 @@
 #include "format/roll.h"
 #include "format/validator.h"
 #include "format/view.h"
-#include "generator/converter.h"
-#include "generator/plan.h"
-#include "generator/render_driver.h"
+#include "generator/convert/converter.h"
+#include "generator/plan/plan.h"
+#include "generator/render/render_driver.h"
 #include "query/database.h"
 
 namespace handdb::cli {

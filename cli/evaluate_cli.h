@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "cli/slurm_commands.h"
-#include "query/evaluate.h"
+#include "evaluate/evaluate.h"
 
 namespace handdb::cli {
 

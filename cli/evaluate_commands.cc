@@ -18,11 +18,11 @@
 #include "base/atomic_file.h"
 #include "base/json_schema.h"
 #include "format/manifest.h"
-#include "generator/converter.h"
-#include "generator/exr_io.h"
-#include "generator/testset.h"
-#include "query/evaluate.h"
-#include "query/image_edges.h"
+#include "generator/convert/converter.h"
+#include "edges/exr_io.h"
+#include "generator/testset/testset.h"
+#include "evaluate/evaluate.h"
+#include "query/input/image_edges.h"
 #include "query/searcher.h"
 
 namespace handdb::cli {

@@ -14,7 +14,7 @@
 #include "base/atomic_file.h"
 #include "base/json_schema.h"
 #include "cluster/slurm.h"
-#include "query/eval_parts.h"
+#include "evaluate/parts.h"
 #include "query/searcher.h"
 
 namespace handdb::cli {

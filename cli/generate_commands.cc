@@ -10,8 +10,8 @@
 
 #include "cli/cli_util.h"
 #include "cli/commands.h"
-#include "generator/plan.h"
-#include "generator/render_driver.h"
+#include "generator/plan/plan.h"
+#include "generator/render/render_driver.h"
 
 namespace handdb::cli {
 namespace {

@@ -11,11 +11,11 @@
 #include "base/json_schema.h"
 #include "format/manifest.h"
 #include "format/roll.h"
-#include "generator/converter.h"
+#include "generator/convert/converter.h"
 #include "handdb_version.h"
-#include "query/image_edges.h"
+#include "query/input/image_edges.h"
 #include "query/searcher.h"
-#include "query/sheet.h"
+#include "query/input/sheet.h"
 
 namespace handdb::cli {
 namespace {

@@ -11,8 +11,8 @@
 #include "base/atomic_file.h"
 #include "format/manifest.h"
 #include "format/validator.h"
-#include "generator/plan.h"
-#include "generator/render_driver.h"
+#include "generator/plan/plan.h"
+#include "generator/render/render_driver.h"
 #include "cluster/slurm.h"
 
 namespace handdb::cli {

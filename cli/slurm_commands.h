@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "generator/converter.h"
+#include "generator/convert/converter.h"
 
 namespace handdb::cli {
 

@@ -18,8 +18,8 @@
 #include <string>
 
 #include "base/json_schema.h"
-#include "generator/plan.h"
-#include "generator/testset.h"
+#include "generator/plan/plan.h"
+#include "generator/testset/testset.h"
 
 namespace handdb {
 namespace {

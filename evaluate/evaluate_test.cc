@@ -1,0 +1,169 @@
+#include "evaluate/evaluate.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <memory>
+
+#include "base/json_schema.h"
+#include "evaluate/evaluate_testing.h"
+
+namespace handdb {
+namespace {
+
+EvaluationOptions FastOptions() {
+  EvaluationOptions o;
+  o.first_k = 10;
+  o.num_threads = 1;
+  o.progress = false;
+  o.success_n = {1, 10};
+  return o;
+}
+
+TEST(Evaluate, DatabaseViewsAreFoundAtRankOne) {
+  auto db = testing::EvalDatabase();
+  Searcher searcher(db);
+  TestSet set;
+  struct Source {
+    view_id_t v;
+    roll_id_t r;
+  };
+  std::vector<Source> sources = {{3, 0}, {17, 5}, {29, 11}};
+  for (uint32_t i = 0; i < sources.size(); ++i) {
+    set.views.push_back(testing::ViewOf(*db, i, sources[i].v, sources[i].r, i == 0));
+  }
+  auto points = [&](const TestView& t) -> Result<std::vector<Point2f>> {
+    return testing::RolledView(*db, sources[t.id].v, sources[t.id].r);
+  };
+  auto report = Evaluate(searcher, set, QueryInput::kClean, points, FastOptions());
+  ASSERT_TRUE(report.ok()) << report.status().ToString();
+  ASSERT_EQ(report->views.size(), 3u);
+  for (const auto& v : report->views) {
+    EXPECT_EQ(v.ranks[0], 1) << "test " << v.test_id;
+    ASSERT_TRUE(v.top1.has_value());
+    EXPECT_EQ(v.top1->view_id, sources[v.test_id].v);
+    EXPECT_EQ(v.top1->roll, sources[v.test_id].r);
+    EXPECT_NEAR(v.top1_keypoint_error, 0.0, 1e-5);
+    EXPECT_NEAR(v.best10_keypoint_error, 0.0, 1e-5);
+    EXPECT_FALSE(v.deep_search);
+    EXPECT_GE(v.num_correct, 1);  // at least the view itself
+  }
+  ASSERT_EQ(report->chance_success.size(), 2u);
+  EXPECT_GT(report->chance_success[0], 0.0);
+  EXPECT_LT(report->chance_success[0], report->chance_success[1]);
+  EXPECT_LT(report->chance_success[1], 0.5);
+  // Table 1 of the main criterion: all three at rank 1; same-shape applies to the basic view only.
+  EXPECT_EQ(report->tables[0].counts[0], 3);
+  EXPECT_EQ(report->tables[0].total(), 3);
+  EXPECT_EQ(report->tables[1].total(), 1);
+  EXPECT_EQ(report->views[1].ranks[1], -1);
+  EXPECT_EQ(report->success[0].rate, 1.0);
+  EXPECT_GT(report->queries_per_second, 0.0);
+
+  const nlohmann::json doc = ReportToJson(*report);
+  EXPECT_TRUE(ValidateJson(doc, "evaluation.schema.json", "report").ok());
+  EXPECT_NE(ReportToText(*report).find("Table 1"), std::string::npos);
+}
+
+TEST(Evaluate, RanksBeyondTheFirstSearchAreExact) {
+  auto db = testing::EvalDatabase();
+  Searcher searcher(db);
+  // Truth: view 5 at roll 2; query: the edges of view 30 at roll 7, so the correct match sits
+  // somewhere down the list. The reference: the brute-force ordering of every (view, roll).
+  TestSet set;
+  set.views.push_back(testing::ViewOf(*db, 0, 5, 2, false));
+  const std::vector<Point2f> query = testing::RolledView(*db, 30, 7);
+  auto points = [&](const TestView&) -> Result<std::vector<Point2f>> { return query; };
+  EvaluationOptions options = FastOptions();
+  auto report = Evaluate(searcher, set, QueryInput::kClean, points, options);
+  ASSERT_TRUE(report.ok());
+
+  SearchOptions all;
+  all.top_k = static_cast<int>(db->num_virtual_views());
+  all.brute_force = true;
+  all.num_threads = 1;
+  auto reference = searcher.Search(query, all);
+  ASSERT_TRUE(reference.ok());
+  const auto criteria = MakeCriteria(options);
+  CorrectnessJudge judge(set.views[0].truth, false, set.axes, criteria[0].options);
+  int64_t expected = kNoCorrectMatch;
+  for (size_t i = 0; i < reference->size(); ++i) {
+    if (judge.IsCorrect(PoseFromLabel((*reference)[i].label, 0))) {
+      expected = static_cast<int64_t>(i) + 1;
+      break;
+    }
+  }
+  ASSERT_NE(expected, kNoCorrectMatch);  // view 5 itself is correct
+  ASSERT_GT(expected, options.first_k) << "the case must need the deeper search";
+  EXPECT_EQ(report->views[0].ranks[0], expected);
+  EXPECT_TRUE(report->views[0].deep_search);
+  EXPECT_EQ(report->deep_searches, 1);
+  EXPECT_EQ(report->tables[0].counts[RankBin(expected)], 1);
+}
+
+TEST(Evaluate, UnreachableTruthAndFailedInputsLandInTheLastBin) {
+  auto db = testing::EvalDatabase();
+  Searcher searcher(db);
+  TestSet set;
+  set.views.push_back(testing::ViewOf(*db, 0, 8, 0, false));
+  for (auto& j : set.views[0].truth.joint_angles) j += 2.0f;  // no database shape is near
+  set.views.push_back(testing::ViewOf(*db, 1, 9, 0, true));
+  auto points = [&](const TestView& t) -> Result<std::vector<Point2f>> {
+    if (t.id == 1) return Status(StatusCode::kNoHand, "photo: no hand found");
+    return testing::RolledView(*db, 8, 0);
+  };
+  auto report = Evaluate(searcher, set, QueryInput::kPhoto, points, FastOptions());
+  ASSERT_TRUE(report.ok());
+  EXPECT_EQ(report->views[0].ranks[0], kNoCorrectMatch);
+  EXPECT_EQ(report->views[0].num_correct, 0);
+  EXPECT_FALSE(report->views[0].deep_search) << "no correct pair exists: nothing to search for";
+  EXPECT_EQ(report->views[1].ranks[0], kNoCorrectMatch);
+  EXPECT_EQ(report->views[1].error, "photo: no hand found");
+  EXPECT_EQ(report->failed_inputs, 1);
+  EXPECT_EQ(report->tables[0].counts[kNumRankBins - 1], 2);
+  EXPECT_EQ(report->views_without_correct[0], 1);  // the unreachable one, not the failed input
+  EXPECT_EQ(report->tables[0].total(), 2);
+  EXPECT_TRUE(std::isnan(report->views[1].top1_keypoint_error));
+  EXPECT_EQ(report->top1_keypoint_error.count, 1);
+  EXPECT_TRUE(ValidateJson(ReportToJson(*report), "evaluation.schema.json", "report").ok());
+}
+
+TEST(ChanceBaseline, HypergeometricKnownValues) {
+  EXPECT_DOUBLE_EQ(ChanceOfCorrectInTopN(10, 0, 5), 0.0);
+  EXPECT_NEAR(ChanceOfCorrectInTopN(10, 1, 1), 0.1, 1e-12);
+  EXPECT_NEAR(ChanceOfCorrectInTopN(10, 1, 3), 0.3, 1e-12);
+  EXPECT_NEAR(ChanceOfCorrectInTopN(4, 2, 2), 1.0 - (2.0 / 4) * (1.0 / 3), 1e-12);
+  EXPECT_DOUBLE_EQ(ChanceOfCorrectInTopN(10, 1, 10), 1.0);
+  EXPECT_DOUBLE_EQ(ChanceOfCorrectInTopN(10, 9, 2), 1.0);  // only one wrong item
+}
+
+TEST(EvaluationOptions, Check) {
+  EvaluationOptions o;
+  EXPECT_TRUE(o.Check());
+  o.first_k = 5;  // the best of the top 10 needs 10
+  EXPECT_FALSE(o.Check());
+  o = EvaluationOptions();
+  o.max_rank = 50;  // below first_k
+  EXPECT_FALSE(o.Check());
+  o = EvaluationOptions();
+  o.stride = 0;
+  EXPECT_FALSE(o.Check());
+  o = EvaluationOptions();
+  o.success_n = {2000};
+  EXPECT_FALSE(o.Check());
+}
+
+TEST(Criteria, MainSameShapeAndTheDGrid) {
+  EvaluationOptions o;
+  o.d_grid_deg = {10, 20};
+  const auto c = MakeCriteria(o);
+  ASSERT_EQ(c.size(), 4u);
+  EXPECT_EQ(c[0].name, "main");
+  EXPECT_TRUE(c[1].options.same_shape);
+  EXPECT_TRUE(c[1].basic_only);
+  EXPECT_EQ(c[2].name, "d=10");
+  EXPECT_EQ(c[3].options.max_joint_distance_deg, 20);
+}
+
+}  // namespace
+}  // namespace handdb

@@ -1,0 +1,32 @@
+// The small synthetic database and the test views that the evaluation tests
+// (evaluate/evaluate_test.cc, evaluate/parts_test.cc) score against, so that both test one setup.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "format/roll.h"
+#include "query/database.h"
+#include "evaluate/metrics.h"
+#include "evaluate/evaluate.h"
+#include "query/search_testing.h"
+
+namespace handdb::testing {
+
+// 40 synthetic views (10 per shape) of about 200 points, 12 rolls.
+inline std::shared_ptr<const Database> EvalDatabase() {
+  return std::make_shared<const Database>(SyntheticDatabase(40, 200, 12, 10));
+}
+
+// A test view whose truth is the pose of database view (v, r).
+inline TestView ViewOf(const Database& db, uint32_t id, view_id_t v, roll_id_t r, bool basic) {
+  TestView t;
+  t.id = id;
+  t.basic = basic;
+  t.shape_name = "v" + std::to_string(v);
+  t.truth = PoseFromLabel(db.label(v), RollAngle(r, db.num_rolls()));
+  return t;
+}
+
+}  // namespace handdb::testing

@@ -1,0 +1,311 @@
+#include "evaluate/parts.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+
+#include "base/json_schema.h"
+#include "format/shard_layout.h"
+
+namespace handdb {
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+namespace {
+
+json NumberOrNull(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
+
+double NumberOrNaN(const json& j) {
+  return j.is_null() ? std::numeric_limits<double>::quiet_NaN() : j.get<double>();
+}
+
+json ViewToJson(const ViewOutcome& v) {
+  json j = {{"index", v.testset_index},
+            {"id", v.test_id},
+            {"basic", v.basic},
+            {"shape_name", v.shape_name},
+            {"ranks", v.ranks},
+            {"correct_pairs", v.correct_pairs},
+            {"num_correct", v.num_correct},
+            {"top1_keypoint_error", NumberOrNull(v.top1_keypoint_error)},
+            {"best10_keypoint_error", NumberOrNull(v.best10_keypoint_error)},
+            {"input_seconds", v.input_seconds},
+            {"search_seconds", v.search_seconds},
+            {"deep_search", v.deep_search},
+            {"query_points", v.num_query_points}};
+  if (!v.error.empty()) j["error"] = v.error;
+  if (v.top1) {
+    const CorrectnessDetail& d = v.top1->detail;
+    j["top1"] = {{"view_id", v.top1->view_id},
+                 {"roll", v.top1->roll},
+                 {"distance", v.top1->distance},
+                 {"shape_name", v.top1->shape_name},
+                 {"joint_distance_deg", d.joint_distance_deg},
+                 {"direction_deg", d.direction_deg},
+                 {"roll_deg", d.roll_deg},
+                 {"shape_ok", d.shape_ok},
+                 {"direction_ok", d.direction_ok},
+                 {"roll_ok", d.roll_ok}};
+  }
+  return j;
+}
+
+ViewOutcome ViewFromJson(const json& j) {
+  ViewOutcome v;
+  v.testset_index = j.at("index").get<uint32_t>();
+  v.test_id = j.at("id").get<uint32_t>();
+  v.basic = j.at("basic").get<bool>();
+  v.shape_name = j.at("shape_name").get<std::string>();
+  if (j.contains("error")) v.error = j.at("error").get<std::string>();
+  v.ranks = j.at("ranks").get<std::vector<int64_t>>();
+  v.correct_pairs = j.at("correct_pairs").get<std::vector<int64_t>>();
+  v.num_correct = j.at("num_correct").get<int64_t>();
+  v.top1_keypoint_error = NumberOrNaN(j.at("top1_keypoint_error"));
+  v.best10_keypoint_error = NumberOrNaN(j.at("best10_keypoint_error"));
+  v.input_seconds = j.at("input_seconds").get<double>();
+  v.search_seconds = j.at("search_seconds").get<double>();
+  v.deep_search = j.at("deep_search").get<bool>();
+  v.num_query_points = j.at("query_points").get<size_t>();
+  if (j.contains("top1")) {
+    const json& t = j.at("top1");
+    MatchBrief m;
+    m.view_id = t.at("view_id").get<view_id_t>();
+    m.roll = t.at("roll").get<roll_id_t>();
+    m.distance = t.at("distance").get<double>();
+    m.shape_name = t.at("shape_name").get<std::string>();
+    m.detail.joint_distance_deg = t.at("joint_distance_deg").get<double>();
+    m.detail.direction_deg = t.at("direction_deg").get<double>();
+    m.detail.roll_deg = t.at("roll_deg").get<double>();
+    m.detail.shape_ok = t.at("shape_ok").get<bool>();
+    m.detail.direction_ok = t.at("direction_ok").get<bool>();
+    m.detail.roll_ok = t.at("roll_ok").get<bool>();
+    v.top1 = m;
+  }
+  return v;
+}
+
+// The first key of two objects whose values differ, for messages ("first_k: 100 vs 50").
+std::string FirstDifference(const json& part, const json& expected) {
+  for (const auto& [key, value] : expected.items()) {
+    if (!part.contains(key)) return key + ": missing";
+    if (part.at(key) != value) return key + ": " + part.at(key).dump() + " vs " + value.dump();
+  }
+  for (const auto& [key, value] : part.items()) {
+    if (!expected.contains(key)) return key + ": not an option of this evaluation";
+  }
+  return "";
+}
+
+}  // namespace
+
+json ScoringOptionsToJson(const EvaluationOptions& options) {
+  const CorrectnessOptions& c = options.correctness;
+  return {{"joint_distance", std::string(JointDistanceKindName(c.joint_distance))},
+          {"max_joint_distance_deg", c.max_joint_distance_deg},
+          {"max_direction_deg", c.max_direction_deg},
+          {"max_roll_deg", c.max_roll_deg},
+          {"roll_compare", c.roll_compare == RollCompare::kAligned ? "aligned" : "label"},
+          {"same_shape", c.same_shape},
+          {"d_grid_deg", options.d_grid_deg},
+          {"success_n", options.success_n},
+          {"first_k", options.first_k},
+          {"max_rank", options.max_rank},
+          {"max_views", options.max_views},
+          {"stride", options.stride}};
+}
+
+EvaluationFingerprint MakeEvaluationFingerprint(const std::string& database_manifest_xxh3,
+                                                const std::string& testset_xxh3,
+                                                QueryInput input,
+                                                const EvaluationOptions& options,
+                                                uint32_t num_tasks) {
+  EvaluationFingerprint f;
+  f.inputs = {{"database_manifest_xxh3", database_manifest_xxh3},
+              {"testset_xxh3", testset_xxh3},
+              {"input", QueryInputName(input)},
+              {"options", ScoringOptionsToJson(options)},
+              {"tasks", num_tasks}};
+  const std::string text = f.inputs.dump();
+  f.value = shard::ChecksumHex(shard::Checksum(text.data(), text.size()));
+  return f;
+}
+
+Result<EvaluationFingerprint> ComputeEvaluationFingerprint(const fs::path& db_dir,
+                                                           const TestSet& testset,
+                                                           QueryInput input,
+                                                           const EvaluationOptions& options,
+                                                           uint32_t num_tasks) {
+  auto manifest = shard::FileChecksum((db_dir / "manifest.json").string());
+  if (!manifest.ok()) return manifest.status();
+  auto ts = shard::FileChecksum(testset.file.string());
+  if (!ts.ok()) return ts.status();
+  return MakeEvaluationFingerprint(
+      shard::ChecksumHex(*manifest), shard::ChecksumHex(*ts), input, options, num_tasks);
+}
+
+std::vector<uint32_t> TaskSlice(std::span<const uint32_t> selected,
+                                uint32_t task,
+                                uint32_t num_tasks) {
+  THROW_CHECK_GE(num_tasks, 1u);
+  std::vector<uint32_t> slice;
+  for (size_t k = task; k < selected.size(); k += num_tasks) slice.push_back(selected[k]);
+  return slice;
+}
+
+fs::path PartPath(const fs::path& work_dir, uint32_t task) {
+  char name[32];
+  std::snprintf(name, sizeof name, "part-%05u.json", task);
+  return work_dir / "parts" / name;
+}
+
+json PartToJson(const EvaluationPart& part) {
+  json views = json::array();
+  for (const auto& v : part.views) views.push_back(ViewToJson(v));
+  return {{"format", "handdb-evaluation-part"},
+          {"version", 1},
+          {"fingerprint", part.fingerprint.value},
+          {"inputs", part.fingerprint.inputs},
+          {"task", part.task},
+          {"tasks", part.num_tasks},
+          {"threads", part.threads},
+          {"started_at", part.started_at},
+          {"finished_at", part.finished_at},
+          {"views", views}};
+}
+
+Result<EvaluationPart> PartFromJson(const json& doc, const std::string& where) {
+  try {
+    EvaluationPart part;
+    part.fingerprint.value = doc.at("fingerprint").get<std::string>();
+    part.fingerprint.inputs = doc.at("inputs");
+    part.task = doc.at("task").get<uint32_t>();
+    part.num_tasks = doc.at("tasks").get<uint32_t>();
+    part.threads = doc.at("threads").get<int>();
+    part.started_at = doc.at("started_at").get<double>();
+    part.finished_at = doc.at("finished_at").get<double>();
+    for (const auto& v : doc.at("views")) part.views.push_back(ViewFromJson(v));
+    return part;
+  } catch (const json::exception& e) {
+    return Status(StatusCode::kSchemaViolation, where + ": " + e.what());
+  }
+}
+
+Status WritePart(const fs::path& path, const EvaluationPart& part) {
+  const json doc = PartToJson(part);
+  HANDDB_RETURN_IF_ERROR(ValidateJson(doc, "evaluation_part.schema.json", path.string()));
+  std::error_code ec;
+  fs::create_directories(path.parent_path(), ec);
+  if (ec) {
+    return Status(StatusCode::kIoError,
+                  path.parent_path().string() + ": cannot create: " + ec.message());
+  }
+  return WriteJsonFileAtomic(path, doc);
+}
+
+Result<EvaluationPart> ReadPart(const fs::path& path, const PartExpectation& expect) {
+  auto doc = ReadJsonFile(path, "evaluation_part.schema.json");
+  if (!doc.ok()) return doc.status();
+  auto part = PartFromJson(*doc, path.string());
+  if (!part.ok()) return part.status();
+  const json& got = part->fingerprint.inputs;
+  const json& want = expect.fingerprint.inputs;
+  const std::string file = path.string();
+  auto mismatch = [&](const std::string& what) {
+    return Status(StatusCode::kInvalidArgument,
+                  file + ": a part of another evaluation: " + what +
+                      "; delete it (or use another --work directory) and run again");
+  };
+  if (got.value("database_manifest_xxh3", "") != want.at("database_manifest_xxh3")) {
+    return mismatch("made from another database (manifest xxh3 " +
+                    got.value("database_manifest_xxh3", "?") + ", this one's is " +
+                    want.at("database_manifest_xxh3").get<std::string>() + ")");
+  }
+  if (got.value("testset_xxh3", "") != want.at("testset_xxh3")) {
+    return mismatch("made from another test set (testset.json xxh3 " +
+                    got.value("testset_xxh3", "?") + ", this one's is " +
+                    want.at("testset_xxh3").get<std::string>() + ")");
+  }
+  if (got.at("input") != want.at("input")) {
+    return mismatch("made with --input " + got.at("input").get<std::string>() + ", not " +
+                    want.at("input").get<std::string>());
+  }
+  if (got.at("options") != want.at("options")) {
+    return mismatch("made with other evaluation options (" +
+                    FirstDifference(got.at("options"), want.at("options")) + ")");
+  }
+  if (got.at("tasks") != want.at("tasks") || part->num_tasks != want.at("tasks").get<uint32_t>()) {
+    return mismatch("made for a split into " + std::to_string(part->num_tasks) + " tasks, not " +
+                    want.at("tasks").dump());
+  }
+  if (part->fingerprint.value != expect.fingerprint.value) {
+    return mismatch("fingerprint " + part->fingerprint.value + ", expected " +
+                    expect.fingerprint.value);
+  }
+  if (part->task != expect.task) {
+    return Status(StatusCode::kInvalidArgument,
+                  file + ": holds task " + std::to_string(part->task) + ", expected task " +
+                      std::to_string(expect.task));
+  }
+  if (part->views.size() != expect.slice.size()) {
+    return Status(StatusCode::kInvalidArgument,
+                  file + ": " + std::to_string(part->views.size()) + " views, task " +
+                      std::to_string(expect.task) + " has " + std::to_string(expect.slice.size()));
+  }
+  for (size_t k = 0; k < part->views.size(); ++k) {
+    const ViewOutcome& v = part->views[k];
+    if (v.testset_index != expect.slice[k]) {
+      return Status(StatusCode::kInvalidArgument,
+                    file + ": views[" + std::to_string(k) + "] is test view " +
+                        std::to_string(v.testset_index) + ", expected " +
+                        std::to_string(expect.slice[k]));
+    }
+    if (v.ranks.size() != expect.num_criteria || v.correct_pairs.size() != expect.num_criteria) {
+      return Status(StatusCode::kInvalidArgument,
+                    file + ": views[" + std::to_string(k) + "]: " + std::to_string(v.ranks.size()) +
+                        " ranks and " + std::to_string(v.correct_pairs.size()) +
+                        " correct-pair counts, expected " + std::to_string(expect.num_criteria) +
+                        " (one per criterion)");
+    }
+  }
+  return part;
+}
+
+Status MergeParts(const fs::path& work_dir,
+                  const EvaluationFingerprint& fingerprint,
+                  std::span<const uint32_t> selected,
+                  EvaluationReport* report) {
+  const uint32_t num_tasks = fingerprint.inputs.at("tasks").get<uint32_t>();
+  report->views.clear();
+  report->views.reserve(selected.size());
+  double first_start = std::numeric_limits<double>::infinity();
+  double last_finish = -std::numeric_limits<double>::infinity();
+  int threads = 0;
+  for (uint32_t task = 0; task < num_tasks; ++task) {
+    PartExpectation expect;
+    expect.fingerprint = fingerprint;
+    expect.task = task;
+    expect.slice = TaskSlice(selected, task, num_tasks);
+    expect.num_criteria = report->criteria.size();
+    const fs::path path = PartPath(work_dir, task);
+    auto part = ReadPart(path, expect);
+    if (!part.ok()) {
+      if (part.status().code() == StatusCode::kNotFound) {
+        return Status(StatusCode::kNotFound,
+                      path.string() + ": missing (task " + std::to_string(task) + " of " +
+                          std::to_string(num_tasks) + " has not written its part)");
+      }
+      return part.status();
+    }
+    first_start = std::min(first_start, part->started_at);
+    last_finish = std::max(last_finish, part->finished_at);
+    threads = std::max(threads, part->threads);
+    for (auto& v : part->views) report->views.push_back(std::move(v));
+  }
+  if (threads > 0) report->threads = threads;
+  FinishReport(report);
+  report->wall_seconds = num_tasks > 0 ? std::max(0.0, last_finish - first_start) : 0;
+  return Status::Ok();
+}
+
+}  // namespace handdb

@@ -1,0 +1,814 @@
+#include "generator/convert/converter.h"
+
+#include <OpenImageIO/imageio.h>
+#include <xxhash.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <exception>
+#include <functional>
+#include <map>
+#include <mutex>
+#include <optional>
+#include <set>
+#include <system_error>
+#include <thread>
+
+#include "base/atomic_file.h"
+#include "base/json_schema.h"
+#include "format/manifest.h"
+#include "base/progress.h"
+#include "format/shard_reader.h"
+#include "format/shard_writer.h"
+#include "generator/hand/convert_hand.h"
+#include "edges/exr_io.h"
+#include "edges/normalise.h"
+#include "generator/plan/plan.h"
+#include "base/sha256.h"
+#include "handdb_version.h"
+
+namespace handdb {
+namespace {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+constexpr int kShardMetadataVersion = 1;
+
+// ---------------------------------------------------------------------------------------------
+// Sidecar parsing: every field checked for presence and type, messages name the field.
+
+Status FieldError(const std::string& what, const std::string& field, const std::string& problem) {
+  return Status(StatusCode::kSchemaViolation, what + ": field '" + field + "': " + problem);
+}
+
+Result<double> GetNumber(const json& doc, const std::string& what, const char* field) {
+  auto it = doc.find(field);
+  if (it == doc.end()) return FieldError(what, field, "missing");
+  if (!it->is_number()) return FieldError(what, field, "not a number");
+  const double v = it->get<double>();
+  if (!std::isfinite(v)) return FieldError(what, field, "not finite");
+  return v;
+}
+
+Result<uint32_t> GetId(const json& doc, const std::string& what, const char* field) {
+  auto it = doc.find(field);
+  if (it == doc.end()) return FieldError(what, field, "missing");
+  if (!it->is_number_unsigned() || it->get<uint64_t>() > UINT32_MAX) {
+    return FieldError(what, field, "not a non-negative 32-bit integer (value: " + it->dump() + ")");
+  }
+  return it->get<uint32_t>();
+}
+
+Result<std::string> GetString(const json& doc,
+                              const std::string& what,
+                              const char* field,
+                              bool required) {
+  auto it = doc.find(field);
+  if (it == doc.end()) {
+    if (required) return FieldError(what, field, "missing");
+    return std::string();
+  }
+  if (!it->is_string()) return FieldError(what, field, "not a string");
+  return it->get<std::string>();
+}
+
+// Fills `out` from a JSON array of `n` finite numbers.
+Status GetNumbers(
+    const json& doc, const std::string& what, const std::string& field, size_t n, double* out) {
+  if (!doc.is_array() || doc.size() != n) {
+    return FieldError(what, field, "expected an array of " + std::to_string(n) + " numbers");
+  }
+  for (size_t i = 0; i < n; ++i) {
+    if (!doc[i].is_number() || !std::isfinite(doc[i].get<double>())) {
+      return FieldError(what, field + "[" + std::to_string(i) + "]", "not a finite number");
+    }
+    out[i] = doc[i].get<double>();
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
+Result<Sidecar> ParseSidecar(const json& doc, const std::string& what) {
+  if (!doc.is_object()) return Status(StatusCode::kSchemaViolation, what + ": not a JSON object");
+  Sidecar s;
+#define HANDDB_ASSIGN(dst, expr)                    \
+  do {                                              \
+    auto handdb_r_ = (expr);                        \
+    if (!handdb_r_.ok()) return handdb_r_.status(); \
+    dst = std::move(handdb_r_.value());             \
+  } while (0)
+  HANDDB_ASSIGN(s.render_id, GetId(doc, what, "render_id"));
+  HANDDB_ASSIGN(s.unit, GetId(doc, what, "unit"));
+  HANDDB_ASSIGN(s.shape_id, GetId(doc, what, "shape_id"));
+  HANDDB_ASSIGN(s.dir_id, GetId(doc, what, "dir_id"));
+  HANDDB_ASSIGN(s.view_theta, GetNumber(doc, what, "view_theta"));
+  HANDDB_ASSIGN(s.view_phi, GetNumber(doc, what, "view_phi"));
+  HANDDB_ASSIGN(s.camera_roll, GetNumber(doc, what, "camera_roll"));
+  uint32_t resolution = 0;
+  HANDDB_ASSIGN(resolution, GetId(doc, what, "resolution"));
+  if (resolution == 0 || resolution > 65536) {
+    return FieldError(
+        what, "resolution", "out of range (value: " + std::to_string(resolution) + ")");
+  }
+  s.resolution = static_cast<int>(resolution);
+  HANDDB_ASSIGN(s.blender_version, GetString(doc, what, "blender_version", true));
+  HANDDB_ASSIGN(s.script_version, GetString(doc, what, "script_version", false));
+  HANDDB_ASSIGN(s.hand_model_sha256, GetString(doc, what, "hand_model_sha256", false));
+#undef HANDDB_ASSIGN
+  for (const char* f : {"joint_angles", "view_direction", "keypoints_px"}) {
+    if (!doc.contains(f)) return FieldError(what, f, "missing");
+  }
+  HANDDB_RETURN_IF_ERROR(GetNumbers(
+      doc["joint_angles"], what, "joint_angles", kNumJointAngles, s.joint_angles.data()));
+  HANDDB_RETURN_IF_ERROR(
+      GetNumbers(doc["view_direction"], what, "view_direction", 3, s.view_direction.data()));
+  const json& kp = doc["keypoints_px"];
+  if (!kp.is_array() || kp.size() != kNumKeypoints) {
+    return FieldError(what,
+                      "keypoints_px",
+                      "expected an array of " + std::to_string(kNumKeypoints) + " [u, v, depth]");
+  }
+  for (int k = 0; k < kNumKeypoints; ++k) {
+    HANDDB_RETURN_IF_ERROR(GetNumbers(
+        kp[k], what, "keypoints_px[" + std::to_string(k) + "]", 3, s.keypoints_px[k].data()));
+  }
+  return s;
+}
+
+Result<Sidecar> ReadSidecar(const fs::path& path) {
+  auto doc = ReadJsonFile(path, "render_sidecar.schema.json");
+  if (!doc.ok()) return doc.status();
+  return ParseSidecar(*doc, path.string());
+}
+
+Result<CanonicalView> ConvertView(const LabelImage& image,
+                                  const Sidecar& sidecar,
+                                  const ViewConversionOptions& options,
+                                  const std::string& what) {
+  THROW_CHECK(options.Check());
+  const EdgeResult edges = ExtractEdges(image, options.joint_pairs, options.edges);
+  if (edges.num_hand_pixels == 0) {
+    return Status(StatusCode::kNoHand, what + ": no hand pixels (empty view)");
+  }
+  if (edges.touches_border) {
+    return Status(StatusCode::kOutOfRange,
+                  what + ": the hand touches the image border (cropped silhouette)");
+  }
+  auto norm = ComputeNormalisation(edges.silhouette);
+  if (!norm.ok()) return Status(norm.status().code(), what + ": " + norm.status().message());
+
+  CanonicalView view;
+  view.points = NormalisePixels(edges.edges, *norm);
+  ViewLabel& label = view.label;
+  label.render_id = sidecar.render_id;
+  label.shape_id = sidecar.shape_id;
+  label.dir_id = sidecar.dir_id;
+  for (int i = 0; i < kNumJointAngles; ++i) {
+    label.joint_angles[i] = static_cast<float>(sidecar.joint_angles[i]);
+  }
+  for (int i = 0; i < 3; ++i)
+    label.view_direction[i] = static_cast<float>(sidecar.view_direction[i]);
+  label.view_theta = static_cast<float>(sidecar.view_theta);
+  label.view_phi = static_cast<float>(sidecar.view_phi);
+  label.camera_roll = static_cast<float>(sidecar.camera_roll);
+  for (int k = 0; k < kNumKeypoints; ++k) {
+    label.keypoints[k] = NormaliseKeypoint(sidecar.keypoints_px[k], *norm);
+  }
+  label.source_diameter_px = static_cast<float>(norm->diameter);
+  label.scale = static_cast<float>(norm->scale);
+  label.source_centre_px = {static_cast<float>(norm->centre_x), static_cast<float>(norm->centre_y)};
+  return view;
+}
+
+bool ConvertOptions::Check() const {
+  CHECK_OPTION(num_threads == -1 || num_threads >= 1);
+  CHECK_OPTION(edges.Check());
+  return true;
+}
+
+std::string ShardFileName(uint32_t unit_id) {
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "shard-%05u.hdb", unit_id);
+  return buf;
+}
+
+Result<ViewConversionOptions> ViewConversionOptionsFromMetadata(const json& metadata,
+                                                                const std::string& what) {
+  const json* edges = nullptr;
+  if (metadata.is_object() && metadata.contains("conversion") &&
+      metadata["conversion"].is_object() && metadata["conversion"].contains("edges")) {
+    edges = &metadata["conversion"]["edges"];
+  }
+  if (edges == nullptr || edges->is_null()) {
+    return Status(StatusCode::kNotFound,
+                  what + ": metadata does not record the edge options (conversion.edges)");
+  }
+  auto bad = [&](const std::string& problem) {
+    return Status(StatusCode::kBadJson, what + ": conversion.edges: " + problem);
+  };
+  if (!edges->is_object()) return bad("not an object");
+  ViewConversionOptions options;
+  const auto occlusion = edges->find("occlusion_edges");
+  if (occlusion == edges->end() || !occlusion->is_boolean()) {
+    return bad("occlusion_edges missing or not a boolean");
+  }
+  options.edges.occlusion_edges = occlusion->get<bool>();
+  const auto jump = edges->find("depth_jump");
+  if (jump == edges->end() || !jump->is_number()) return bad("depth_jump missing or not a number");
+  options.edges.depth_jump = jump->get<double>();
+  if (!options.edges.Check()) return bad("depth_jump must be finite and positive");
+  if (const auto pairs = edges->find("joint_pairs"); pairs != edges->end()) {
+    if (!pairs->is_array()) return bad("joint_pairs not an array");
+    JointPairs table;
+    for (const json& pair : *pairs) {
+      if (!pair.is_array() || pair.size() != 2 || !pair[0].is_number_integer() ||
+          !pair[1].is_number_integer()) {
+        return bad("joint_pairs entry " + pair.dump() + " is not a pair of link ids");
+      }
+      const int a = pair[0].get<int>();
+      const int b = pair[1].get<int>();
+      if (a < 1 || a > kNumLinks || b < 1 || b > kNumLinks || a == b) {
+        return bad("joint_pairs entry " + pair.dump() + " is not a pair of link ids 1.." +
+                   std::to_string(kNumLinks));
+      }
+      table.Add(a, b);
+    }
+    options.joint_pairs = table;
+  }
+  return options;
+}
+
+namespace {
+
+// ---------------------------------------------------------------------------------------------
+// Converting a render directory.
+
+struct RunContext {
+  fs::path render_dir;
+  Plan plan;
+  std::string plan_sha256;
+  ConvertHandInfo hand;
+  ViewConversionOptions view_options;
+  ExrReadOptions exr_options;
+};
+
+struct ConvertedRender {
+  CanonicalView view;
+  std::string blender_version;
+  std::string script_version;
+};
+
+std::string RelativeRenderFile(uint32_t unit, uint32_t render_id, const char* ext) {
+  return "units/" + UnitDirName(unit) + "/" + RenderFileStem(render_id) + ext;
+}
+
+std::string Hex16(uint64_t v) {
+  char buf[17];
+  std::snprintf(buf, sizeof(buf), "%016llx", static_cast<unsigned long long>(v));
+  return buf;
+}
+
+Result<ConvertedRender> ConvertRender(const RunContext& ctx,
+                                      const PlanUnit& unit,
+                                      const PlanRender& r) {
+  const fs::path sidecar_path = ctx.render_dir / RelativeRenderFile(unit.id, r.render_id, ".json");
+  const fs::path exr_path = ctx.render_dir / RelativeRenderFile(unit.id, r.render_id, ".exr");
+  auto sidecar = ReadSidecar(sidecar_path);
+  if (!sidecar.ok()) return sidecar.status();
+  const std::string what = sidecar_path.string();
+  auto mismatch = [&](const char* field, const std::string& got, const std::string& want) {
+    return Status(StatusCode::kSchemaViolation,
+                  what + ": " + field + " " + got + " disagrees with the plan (" + want + ")");
+  };
+  if (sidecar->render_id != r.render_id) {
+    return mismatch("render_id", std::to_string(sidecar->render_id), std::to_string(r.render_id));
+  }
+  if (sidecar->unit != unit.id) {
+    return mismatch("unit", std::to_string(sidecar->unit), std::to_string(unit.id));
+  }
+  if (sidecar->shape_id != r.shape_id) {
+    return mismatch("shape_id", std::to_string(sidecar->shape_id), std::to_string(r.shape_id));
+  }
+  if (sidecar->dir_id != r.dir_id) {
+    return mismatch("dir_id", std::to_string(sidecar->dir_id), std::to_string(r.dir_id));
+  }
+  if (sidecar->resolution != ctx.plan.resolution) {
+    return mismatch(
+        "resolution", std::to_string(sidecar->resolution), std::to_string(ctx.plan.resolution));
+  }
+  if (!sidecar->hand_model_sha256.empty() &&
+      sidecar->hand_model_sha256 != ctx.plan.hand_model_sha256) {
+    return mismatch("hand_model_sha256", sidecar->hand_model_sha256, ctx.plan.hand_model_sha256);
+  }
+  auto image = ReadLabelExr(exr_path, ctx.exr_options);
+  if (!image.ok()) return image.status();
+  auto view = ConvertView(*image, *sidecar, ctx.view_options, exr_path.string());
+  if (!view.ok()) return view.status();
+  return ConvertedRender{
+      std::move(view).value(), sidecar->blender_version, sidecar->script_version};
+}
+
+json JointPairsJson(const ConvertHandInfo& hand) {
+  json pairs = json::array();
+  for (const auto& [a, b] : hand.joint_pairs) pairs.push_back({a, b});
+  return pairs;
+}
+
+// What a shard's content depends on besides the render files themselves. A shard whose
+// metadata carries the same key (and valid checksums) is kept on a rerun.
+json ConversionKey(const RunContext& ctx, uint32_t unit_id, const EdgeOptions& edges) {
+  return {
+      {"unit", unit_id},
+      {"plan_sha256", ctx.plan_sha256},
+      {"tool_version", HANDDB_VERSION},
+      {"edges",
+       {{"rule",
+         "4-neighbour label change; joint pairs dropped unless occlusion; silhouette always; "
+         "the nearer pixel of a border is the edge pixel; points at pixel centres"},
+        {"occlusion_edges", edges.occlusion_edges},
+        {"depth_jump", edges.depth_jump},
+        {"depth_jump_unit", "scene units of the Depth pass"},
+        {"joint_pairs", JointPairsJson(ctx.hand)}}},
+      {"normalisation",
+       {{"diameter_px", kNormalisedDiameter},
+        {"centre", "area centroid of the silhouette convex hull"},
+        {"point_scale", kPointScale}}},
+  };
+}
+
+json HandModelJson(const ConvertHandInfo& hand) {
+  json limits = json::array();
+  for (const auto& [lo, hi] : hand.dof_limits) limits.push_back({lo, hi});
+  return {{"name", hand.name}, {"sha256", hand.sha256}, {"joint_limits", limits}};
+}
+
+json LabelNamesJson(const ConvertHandInfo& hand) {
+  json dofs = hand.dof_names;
+  return {
+      {"joint_angles", {{"names", dofs}, {"unit", "rad"}}},
+      {"view_direction", {{"unit", "unit vector, hand frame, towards the camera"}}},
+      {"view_theta", {{"unit", "rad"}}},
+      {"view_phi", {{"unit", "rad"}}},
+      {"camera_roll", {{"unit", "rad"}}},
+      {"keypoints",
+       {{"names", hand.keypoint_names},
+        {"unit", "normalised px; x right, y down, z away from the camera from the look-at plane"}}},
+      {"points",
+       {{"unit", "1/16 normalised px"}, {"frame", "origin at the silhouette hull centroid"}}},
+      {"source_diameter_px", {{"unit", "rendered px"}}},
+      {"scale", {{"unit", "normalised px per rendered px"}}},
+      {"source_centre_px", {{"unit", "rendered px"}}},
+  };
+}
+
+json GenerationJson(const RunContext& ctx) {
+  json gen = {{"seed", ctx.plan.seed},
+              {"plan_sha256", ctx.plan_sha256},
+              {"resolution", ctx.plan.resolution},
+              {"ortho_scale", ctx.plan.ortho_scale},
+              {"rolls", ctx.plan.rolls},
+              {"unit_size", ctx.plan.unit_size}};
+  gen["config"] = ctx.plan.doc.contains("config") ? ctx.plan.doc["config"] : json::object();
+  return gen;
+}
+
+// Shape names by id (the query side shows them): [{id, name}].
+json ShapesJson(const Plan& plan) {
+  json shapes = json::array();
+  for (const PlanShape& shape : plan.shapes) {
+    shapes.push_back({{"id", shape.id}, {"name", shape.name}});
+  }
+  return shapes;
+}
+
+json SkippedJson(const std::vector<SkippedView>& skipped) {
+  json out = json::array();
+  for (const auto& s : skipped) {
+    out.push_back({{"render_id", s.render_id}, {"file", s.file}, {"reason", s.reason}});
+  }
+  return out;
+}
+
+std::string JoinVersions(const std::set<std::string>& versions) {
+  std::string out;
+  for (const auto& v : versions) out += (out.empty() ? "" : ", ") + v;
+  return out;
+}
+
+struct UnitState {
+  const PlanUnit* unit = nullptr;
+  fs::path shard_path;
+  bool kept = false;
+  json key;
+  // Per render of the unit (checking pass).
+  std::vector<std::optional<CanonicalView>> views;
+  std::vector<bool> dropped;  // converted fine but not kept in memory
+  std::vector<Status> errors;
+  std::set<std::string> blender_versions;
+  std::set<std::string> script_versions;
+  std::vector<SkippedView> skipped;
+  ManifestShard manifest_shard;
+};
+
+// A shard already in DB_DIR that is complete, intact and made from the same inputs with the
+// same options. Fills the manifest entry and the skipped views it recorded.
+bool KeepExistingShard(UnitState* st, bool skip_bad) {
+  std::error_code ec;
+  if (!fs::is_regular_file(st->shard_path, ec)) return false;
+  auto reader = ShardReader::Open(st->shard_path);
+  if (!reader.ok() || !reader->VerifyChecksums().ok()) return false;
+  const json meta = json::parse(reader->metadata_json(), nullptr, /*allow_exceptions=*/false);
+  if (!meta.is_object() || !meta.contains("conversion") || meta["conversion"] != st->key) {
+    return false;
+  }
+  if (!meta.contains("skipped") || !meta["skipped"].is_array()) return false;
+  if (!skip_bad && !meta["skipped"].empty()) return false;
+  if (reader->num_views() + meta["skipped"].size() != st->unit->renders.size()) return false;
+  for (const json& s : meta["skipped"]) {
+    if (!s.is_object() || !s.contains("render_id") || !s["render_id"].is_number_unsigned() ||
+        !s.contains("file") || !s["file"].is_string() || !s.contains("reason") ||
+        !s["reason"].is_string()) {
+      return false;
+    }
+    st->skipped.push_back({s["render_id"].get<uint32_t>(),
+                           st->unit->id,
+                           s["file"].get<std::string>(),
+                           s["reason"].get<std::string>()});
+  }
+  const std::span<const uint8_t> bytes = reader->bytes();
+  st->manifest_shard.file = st->shard_path.filename().string();
+  st->manifest_shard.views = reader->num_views();
+  st->manifest_shard.points = reader->all_points().size();
+  st->manifest_shard.bytes = bytes.size();
+  st->manifest_shard.xxh3 = Hex16(XXH3_64bits(bytes.data(), bytes.size()));
+  return true;
+}
+
+// Temp files a killed run left behind (base/atomic_file.h names them "<target>.tmp-*"): those
+// of the shards this run writes and, when it writes the manifest, the manifest's. Nothing else in
+// DB_DIR is touched.
+void RemoveStaleTempFiles(const fs::path& db_dir,
+                          const std::vector<UnitState>& units,
+                          bool writes_manifest) {
+  std::set<std::string> prefixes;
+  for (const UnitState& st : units) {
+    if (!st.kept) prefixes.insert(st.shard_path.filename().string() + ".tmp-");
+  }
+  if (writes_manifest) prefixes.insert(std::string(kManifestFileName) + ".tmp-");
+  std::error_code ec;
+  for (fs::directory_iterator it(db_dir, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    const size_t dot = name.find(".tmp-");
+    if (dot == std::string::npos) continue;
+    if (prefixes.count(name.substr(0, dot + 5)) == 0) continue;
+    std::error_code rm_ec;
+    fs::remove(it->path(), rm_ec);  // best effort: a leftover temp file is harmless
+  }
+}
+
+// Runs fn(i) for i in [0, n) on `threads` threads. Stops early on cancel; rethrows the first
+// exception (a broken invariant) on the calling thread.
+Status ParallelFor(size_t n,
+                   int threads,
+                   const std::atomic<bool>* cancel,
+                   const std::function<Status(size_t)>& fn) {
+  std::atomic<size_t> next{0};
+  std::atomic<bool> stop{false};
+  std::mutex mu;
+  Status first_error;
+  std::exception_ptr exception;
+  auto worker = [&] {
+    while (!stop.load()) {
+      if (cancel != nullptr && cancel->load()) {
+        std::lock_guard<std::mutex> lock(mu);
+        if (first_error.ok()) first_error = Status(StatusCode::kCancelled, "cancelled");
+        stop = true;
+        return;
+      }
+      const size_t i = next.fetch_add(1);
+      if (i >= n) return;
+      try {
+        Status s = fn(i);
+        if (!s.ok()) {
+          std::lock_guard<std::mutex> lock(mu);
+          if (first_error.ok()) first_error = std::move(s);
+          stop = true;
+        }
+      } catch (...) {
+        std::lock_guard<std::mutex> lock(mu);
+        if (!exception) exception = std::current_exception();
+        stop = true;
+      }
+    }
+  };
+  const int nt = static_cast<int>(std::min<size_t>(static_cast<size_t>(std::max(threads, 1)), n));
+  if (nt <= 1) {
+    worker();
+  } else {
+    std::vector<std::thread> pool;
+    for (int t = 0; t < nt; ++t) pool.emplace_back(worker);
+    for (auto& t : pool) t.join();
+  }
+  if (exception) std::rethrow_exception(exception);
+  return first_error;
+}
+
+// The skipped-view record of a failed render: file relative to the render dir, reason without
+// the path prefix (so shards do not depend on where the render dir is).
+SkippedView MakeSkipped(const RunContext& ctx,
+                        uint32_t unit,
+                        uint32_t render_id,
+                        const Status& status) {
+  SkippedView s;
+  s.render_id = render_id;
+  s.unit = unit;
+  s.file = RelativeRenderFile(unit, render_id, ".exr");
+  std::string reason = status.message();
+  for (const char* ext : {".exr", ".json"}) {
+    const std::string prefix =
+        (ctx.render_dir / RelativeRenderFile(unit, render_id, ext)).string() + ": ";
+    if (reason.rfind(prefix, 0) == 0) {
+      reason = reason.substr(prefix.size());
+      s.file = RelativeRenderFile(unit, render_id, ext);
+    }
+  }
+  s.reason = std::string(StatusCodeName(status.code())) + ": " + reason;
+  return s;
+}
+
+}  // namespace
+
+namespace {
+
+// ConvertRenderDir, or with `complete` only the check which shards would be kept.
+Result<ConvertSummary> ConvertOrCheck(const fs::path& render_dir,
+                                      const fs::path& db_dir,
+                                      const ConvertOptions& options,
+                                      std::vector<SkippedView>* bad,
+                                      std::vector<bool>* complete) {
+  THROW_CHECK(options.Check());
+  const auto start = std::chrono::steady_clock::now();
+  const int threads = options.num_threads > 0
+                          ? options.num_threads
+                          : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+
+  // Inputs: plan, hand model, completeness of every unit.
+  RunContext ctx;
+  ctx.render_dir = render_dir;
+  const fs::path plan_path = render_dir / "plan.json";
+  {
+    auto plan = ReadPlan(plan_path);
+    if (!plan.ok()) return plan.status();
+    ctx.plan = std::move(plan).value();
+    auto sha = Sha256File(plan_path);
+    if (!sha.ok()) return sha.status();
+    ctx.plan_sha256 = *sha;
+  }
+  {
+    const fs::path hand_path = ResolvePlanPath(ctx.plan.hand_model_path);
+    auto hand = LoadConvertHandInfo(hand_path);
+    if (!hand.ok()) return hand.status();
+    if (hand->sha256 != ctx.plan.hand_model_sha256) {
+      return Status(StatusCode::kSizeMismatch,
+                    hand_path.string() + ": hand model changed since the plan was made (sha256 " +
+                        hand->sha256 + ", plan has " + ctx.plan.hand_model_sha256 + ")");
+    }
+    ctx.hand = std::move(hand).value();
+  }
+  ctx.view_options.edges = options.edges;
+  ctx.view_options.joint_pairs = JointPairs();
+  for (const auto& [a, b] : ctx.hand.joint_pairs) ctx.view_options.joint_pairs.Add(a, b);
+  ctx.exr_options.expected_width = ctx.plan.resolution;
+  ctx.exr_options.expected_height = ctx.plan.resolution;
+  // Parallelism is across views; OpenEXR's own pool would only add hand-offs on small images.
+  OIIO::attribute("exr_threads", -1);
+
+  std::vector<UnitState> units(ctx.plan.units.size());
+  std::vector<bool> selected(units.size(), options.units.empty());
+  for (uint32_t id : options.units) {
+    if (id >= units.size()) {
+      return Status(StatusCode::kOutOfRange,
+                    plan_path.string() + ": no unit " + std::to_string(id) + " (the plan has " +
+                        std::to_string(units.size()) + ")");
+    }
+    selected[id] = true;
+  }
+  for (size_t u = 0; u < units.size(); ++u) {
+    UnitState& st = units[u];
+    st.unit = &ctx.plan.units[u];
+    st.shard_path = db_dir / ShardFileName(st.unit->id);
+    st.key = ConversionKey(ctx, st.unit->id, options.edges);
+    if (!selected[u] || complete != nullptr) continue;
+    const fs::path unit_dir = render_dir / "units" / UnitDirName(st.unit->id);
+    std::error_code ec;
+    if (!fs::exists(unit_dir / "DONE", ec)) {
+      return Status(StatusCode::kNotFound,
+                    unit_dir.string() +
+                        ": render unit is incomplete (no DONE marker); render it "
+                        "first (handdb render)");
+    }
+  }
+
+  // Shards already done on an earlier run.
+  HANDDB_RETURN_IF_ERROR(ParallelFor(units.size(), threads, options.cancel, [&](size_t u) {
+    if (selected[u]) units[u].kept = KeepExistingShard(&units[u], options.skip_bad);
+    return Status::Ok();
+  }));
+  if (complete != nullptr) {
+    complete->assign(units.size(), false);
+    for (size_t u = 0; u < units.size(); ++u) (*complete)[u] = units[u].kept;
+    return ConvertSummary{};
+  }
+  // Units outside options.units are left as they are.
+  for (size_t u = 0; u < units.size(); ++u) {
+    if (!selected[u]) units[u].kept = true;
+  }
+
+  // Checking pass: convert every view of the units to (re)write, keep results in memory up to
+  // the budget, collect every bad view.
+  struct Task {
+    size_t unit;
+    size_t render;
+  };
+  std::vector<Task> tasks;
+  for (size_t u = 0; u < units.size(); ++u) {
+    UnitState& st = units[u];
+    if (st.kept) continue;
+    const size_t n = st.unit->renders.size();
+    st.views.resize(n);
+    st.dropped.assign(n, false);
+    st.errors.resize(n);
+    for (size_t r = 0; r < n; ++r) tasks.push_back({u, r});
+  }
+  std::atomic<uint64_t> memory{0};
+  std::mutex version_mu;
+  {
+    Progress progress("convert", tasks.size(), options.progress, "views");
+    HANDDB_RETURN_IF_ERROR(ParallelFor(tasks.size(), threads, options.cancel, [&](size_t t) {
+      UnitState& st = units[tasks[t].unit];
+      const size_t r = tasks[t].render;
+      auto converted = ConvertRender(ctx, *st.unit, st.unit->renders[r]);
+      if (!converted.ok()) {
+        st.errors[r] = converted.status();
+      } else {
+        {
+          std::lock_guard<std::mutex> lock(version_mu);
+          st.blender_versions.insert(converted->blender_version);
+          if (!converted->script_version.empty())
+            st.script_versions.insert(converted->script_version);
+        }
+        const uint64_t bytes = converted->view.points.size() * sizeof(PointQ) + sizeof(ViewLabel);
+        if (memory.fetch_add(bytes) + bytes <= options.memory_budget_bytes) {
+          st.views[r] = std::move(converted->view);
+        } else {
+          st.dropped[r] = true;
+        }
+      }
+      progress.Add();
+      return Status::Ok();
+    }));
+  }
+
+  std::vector<SkippedView> all_bad;
+  Status first_bad;
+  for (UnitState& st : units) {
+    if (st.kept) continue;
+    for (size_t r = 0; r < st.errors.size(); ++r) {
+      if (st.errors[r].ok()) continue;
+      if (first_bad.ok()) first_bad = st.errors[r];
+      SkippedView s = MakeSkipped(ctx, st.unit->id, st.unit->renders[r].render_id, st.errors[r]);
+      st.skipped.push_back(s);
+      all_bad.push_back(std::move(s));
+    }
+  }
+  if (bad != nullptr) *bad = all_bad;
+  if (!all_bad.empty() && !options.skip_bad) {
+    std::string msg = first_bad.message();
+    if (all_bad.size() > 1)
+      msg += " (and " + std::to_string(all_bad.size() - 1) + " more bad views)";
+    return Status(first_bad.code(),
+                  msg + "; nothing written (use --skip-bad to leave bad views out)");
+  }
+
+  // Writing pass. The old manifest goes first: while shards are replaced no manifest may list
+  // a shard whose checksum is about to change.
+  std::error_code ec;
+  fs::create_directories(db_dir, ec);
+  if (ec) return Status(StatusCode::kIoError, db_dir.string() + ": cannot create: " + ec.message());
+  const bool any_to_write =
+      std::any_of(units.begin(), units.end(), [](const UnitState& st) { return !st.kept; });
+  if (any_to_write && fs::exists(db_dir / kManifestFileName, ec)) {
+    fs::remove(db_dir / kManifestFileName, ec);
+    if (ec) {
+      return Status(StatusCode::kIoError,
+                    (db_dir / kManifestFileName).string() + ": cannot remove: " + ec.message());
+    }
+    HANDDB_RETURN_IF_ERROR(SyncDirectory(db_dir));
+  }
+  std::vector<size_t> to_write;
+  for (size_t u = 0; u < units.size(); ++u) {
+    if (!units[u].kept) to_write.push_back(u);
+  }
+  RemoveStaleTempFiles(db_dir, units, options.units.empty());
+  const json generation = GenerationJson(ctx);
+  const json hand_json = HandModelJson(ctx.hand);
+  const json label_names = LabelNamesJson(ctx.hand);
+  const json shapes = ShapesJson(ctx.plan);
+  HANDDB_RETURN_IF_ERROR(ParallelFor(to_write.size(), threads, options.cancel, [&](size_t i) {
+    UnitState& st = units[to_write[i]];
+    json meta = {{"format", "handdb-shard-metadata"},
+                 {"version", kShardMetadataVersion},
+                 {"unit", st.unit->id},
+                 {"conversion", st.key},
+                 {"generation", generation},
+                 {"hand_model", hand_json},
+                 {"tool", {{"name", "handdb"}, {"version", HANDDB_VERSION}}},
+                 {"blender_version", JoinVersions(st.blender_versions)},
+                 {"script_version", JoinVersions(st.script_versions)},
+                 {"rolls", ctx.plan.rolls},
+                 {"labels", label_names},
+                 {"shapes", shapes},
+                 {"skipped", SkippedJson(st.skipped)}};
+    ShardWriterOptions wopt;
+    wopt.metadata_json = meta.dump();
+    ShardWriter writer;
+    HANDDB_RETURN_IF_ERROR(writer.Open(st.shard_path, wopt));
+    for (size_t r = 0; r < st.errors.size(); ++r) {
+      if (!st.errors[r].ok()) continue;
+      if (st.dropped[r]) {
+        auto again = ConvertRender(ctx, *st.unit, st.unit->renders[r]);
+        if (!again.ok()) return again.status();  // the file changed since the checking pass
+        HANDDB_RETURN_IF_ERROR(writer.AddView(again->view.label, again->view.points));
+      } else {
+        HANDDB_RETURN_IF_ERROR(writer.AddView(st.views[r]->label, st.views[r]->points));
+        st.views[r].reset();
+      }
+    }
+    auto summary = writer.Finish();
+    if (!summary.ok()) return summary.status();
+    st.manifest_shard.file = st.shard_path.filename().string();
+    st.manifest_shard.views = summary->num_views;
+    st.manifest_shard.points = summary->num_points;
+    st.manifest_shard.bytes = summary->file_size;
+    st.manifest_shard.xxh3 = summary->checksum;
+    return Status::Ok();
+  }));
+
+  // The manifest, last: exactly the complete shards, in unit order.
+  Manifest manifest;
+  manifest.tool_version = HANDDB_VERSION;
+  manifest.rolls = static_cast<uint32_t>(ctx.plan.rolls);
+  manifest.metadata = {
+      {"generation", generation},
+      {"hand_model", hand_json},
+      {"conversion",
+       {{"edges", units.empty() ? json() : units[0].key["edges"]},
+        {"normalisation", units.empty() ? json() : units[0].key["normalisation"]}}},
+      {"labels", label_names},
+      {"shapes", shapes}};
+  ConvertSummary summary;
+  summary.units_total =
+      static_cast<uint32_t>(options.units.empty() ? units.size() : options.units.size());
+  summary.rolls = manifest.rolls;
+  for (size_t u = 0; u < units.size(); ++u) {
+    if (!selected[u]) continue;
+    UnitState& st = units[u];
+    manifest.shards.push_back(st.manifest_shard);
+    (st.kept ? summary.shards_kept : summary.shards_written)++;
+    summary.views += st.manifest_shard.views;
+    summary.points += st.manifest_shard.points;
+    summary.bytes += st.manifest_shard.bytes;
+    for (const SkippedView& s : st.skipped) {
+      manifest.skipped.push_back({s.render_id, s.file, s.reason});
+      summary.skipped.push_back(s);
+    }
+  }
+  manifest.UpdateTotals();
+  // The manifest lists every shard: only a run over all units writes it.
+  if (options.units.empty()) HANDDB_RETURN_IF_ERROR(WriteManifest(db_dir, manifest));
+  summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return summary;
+}
+
+}  // namespace
+
+Result<ConvertSummary> ConvertRenderDir(const fs::path& render_dir,
+                                        const fs::path& db_dir,
+                                        const ConvertOptions& options,
+                                        std::vector<SkippedView>* bad) {
+  return ConvertOrCheck(render_dir, db_dir, options, bad, nullptr);
+}
+
+Result<std::vector<bool>> FindCompleteShards(const fs::path& render_dir,
+                                             const fs::path& db_dir,
+                                             const ConvertOptions& options) {
+  std::vector<bool> complete;
+  auto checked = ConvertOrCheck(render_dir, db_dir, options, nullptr, &complete);
+  if (!checked.ok()) return checked.status();
+  return complete;
+}
+
+}  // namespace handdb

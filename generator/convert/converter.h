@@ -1,0 +1,130 @@
+// `handdb convert`: a render directory (docs/conventions.md "Files and directories") becomes a
+// database: one shard per render unit plus the manifest (written last, listing exactly the
+// complete shards). docs/conversion.md describes the edge rule, the normalisation and the roll
+// convention.
+//
+// Every input of a unit is validated before its shard is written. Without skip_bad, any bad view
+// (missing/unreadable/truncated EXR, no label channel, labels out of range, wrong size, hand
+// touching the border or empty, sidecar missing or disagreeing with the plan) stops the run
+// before anything is written; with skip_bad the view is left out and recorded in the shard
+// metadata and the manifest's `skipped`. Resumable and idempotent: a shard already present and
+// valid for its unit (checksums, same plan, same options) is kept; shards are byte-identical
+// across runs and thread counts.
+#pragma once
+
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "base/status.h"
+#include "format/view.h"
+#include "edges/edges.h"
+
+namespace handdb {
+
+// The fields of a render sidecar the converter uses (docs/conventions.md "Sidecar JSON").
+struct Sidecar {
+  uint32_t render_id = 0;
+  uint32_t unit = 0;
+  uint32_t shape_id = 0;
+  uint32_t dir_id = 0;
+  std::array<double, kNumJointAngles> joint_angles{};
+  std::array<double, 3> view_direction{};
+  double view_theta = 0;
+  double view_phi = 0;
+  double camera_roll = 0;
+  int resolution = 0;
+  std::array<std::array<double, 3>, kNumKeypoints> keypoints_px{};
+  std::string blender_version;
+  std::string script_version;
+  std::string hand_model_sha256;
+};
+
+// Errors (kBadJson, kSchemaViolation) name `what` and the field.
+Result<Sidecar> ParseSidecar(const nlohmann::json& doc, const std::string& what);
+Result<Sidecar> ReadSidecar(const std::filesystem::path& path);
+
+struct ViewConversionOptions {
+  EdgeOptions edges;
+  JointPairs joint_pairs = DefaultJointPairs();
+  bool Check() const { return edges.Check(); }
+};
+
+struct CanonicalView {
+  ViewLabel label;
+  std::vector<PointQ> points;  // normalised frame, sorted by (y, x), no duplicates
+};
+
+// One rendered view -> canonical view. `what` names the image in messages. Errors: kNoHand (no
+// hand pixels), kOutOfRange (hand touches the image border).
+Result<CanonicalView> ConvertView(const LabelImage& image,
+                                  const Sidecar& sidecar,
+                                  const ViewConversionOptions& options,
+                                  const std::string& what);
+
+struct ConvertOptions {
+  int num_threads = -1;  // -1: all cores
+  bool skip_bad = false;
+  EdgeOptions edges;
+  bool progress = true;
+  // Converted units are kept in memory between the checking pass and the writing pass up to this
+  // many bytes; units beyond it are converted again when written (same result, more time).
+  uint64_t memory_budget_bytes = uint64_t{2} << 30;
+  const std::atomic<bool>* cancel = nullptr;  // optional: stop early with kCancelled
+  // Convert only these units (empty: all); the others are neither checked nor touched, and no
+  // manifest is written (the per-unit step of a Slurm array task, `handdb unit convert`).
+  std::vector<uint32_t> units;
+  bool Check() const;
+};
+
+struct SkippedView {
+  uint32_t render_id = 0;
+  uint32_t unit = 0;
+  std::string file;    // relative to the render dir, e.g. "units/u00007/r000123.exr"
+  std::string reason;  // the Status message
+};
+
+struct ConvertSummary {
+  uint32_t units_total = 0;
+  uint32_t shards_written = 0;
+  uint32_t shards_kept = 0;  // already present and valid
+  uint64_t views = 0;        // canonical views in the database
+  uint64_t points = 0;
+  uint64_t bytes = 0;  // total shard bytes
+  uint32_t rolls = 0;
+  std::vector<SkippedView> skipped;
+  double seconds = 0;
+};
+
+// Converts RENDER_DIR (plan.json + units/) into DB_DIR (shards + manifest.json). Every unit of
+// the plan must be complete (units/uNNNNN/DONE). On a bad view without skip_bad returns the first
+// error (in render-id order) with "(and N more bad views)" appended, writing nothing; all bad
+// views are also returned in *bad when given.
+Result<ConvertSummary> ConvertRenderDir(const std::filesystem::path& render_dir,
+                                        const std::filesystem::path& db_dir,
+                                        const ConvertOptions& options,
+                                        std::vector<SkippedView>* bad = nullptr);
+
+// Per unit of RENDER_DIR's plan: whether DB_DIR already holds its complete shard, i.e. one that
+// ConvertRenderDir with these options would keep (present, intact, same inputs and options).
+// Renders need not be complete. This is what `handdb generate --slurm` resubmits from.
+Result<std::vector<bool>> FindCompleteShards(const std::filesystem::path& render_dir,
+                                             const std::filesystem::path& db_dir,
+                                             const ConvertOptions& options);
+
+// "shard-00007.hdb"
+std::string ShardFileName(uint32_t unit_id);
+
+// The view conversion a database was made with, read back from its manifest metadata
+// (`conversion.edges`: occlusion_edges, depth_jump, joint_pairs, as ConvertRenderDir writes
+// them), so that a clean label query is converted exactly like the database (handdb evaluate).
+// kNotFound when the metadata does not record the edge options; kBadJson when they are malformed.
+// `what` (e.g. the manifest path) starts the messages.
+Result<ViewConversionOptions> ViewConversionOptionsFromMetadata(const nlohmann::json& metadata,
+                                                                const std::string& what);
+
+}  // namespace handdb

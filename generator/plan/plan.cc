@@ -1,0 +1,494 @@
+#include "generator/plan/plan.h"
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+
+#include "base/json_schema.h"
+#include "generator/hand/hand_model.h"
+#include "generator/sampling/random.h"
+#include "generator/sampling/shape_sampler.h"
+#include "generator/sampling/view_sampler.h"
+#include "handdb_version.h"
+
+namespace handdb {
+namespace {
+
+using nlohmann::json;
+namespace fs = std::filesystem;
+
+constexpr const char* kDefaultHandModel = "configs/hands/webxr_generic_right.json";
+constexpr const char* kDefaultLibrary = "configs/shapes/basic.json";
+
+// A relative config path: next to the config first, then under the repository root.
+Result<fs::path> ResolveConfigPath(const std::string& value,
+                                   const fs::path& config_path,
+                                   const char* field) {
+  const fs::path p(value);
+  std::error_code ec;
+  if (p.is_absolute()) {
+    if (fs::exists(p, ec)) return p;
+    return Status(StatusCode::kNotFound,
+                  config_path.string() + ": " + field + ": " + value + ": no such file");
+  }
+  const fs::path next_to_config = config_path.parent_path() / p;
+  if (fs::exists(next_to_config, ec)) return next_to_config;
+  const fs::path in_repo = RepoRoot() / p;
+  if (fs::exists(in_repo, ec)) return in_repo;
+  return Status(StatusCode::kNotFound,
+                config_path.string() + ": " + field + ": " + value + ": no such file (looked in " +
+                    next_to_config.parent_path().string() + " and " + RepoRoot().string() + ")");
+}
+
+// Repository-relative when inside the repository, else absolute (see plan.h).
+std::string PathForPlan(const fs::path& resolved) {
+  std::error_code ec;
+  const fs::path abs = fs::weakly_canonical(fs::absolute(resolved), ec);
+  const fs::path root = fs::weakly_canonical(fs::absolute(RepoRoot()), ec);
+  const fs::path rel = abs.lexically_relative(root);
+  if (!rel.empty() && *rel.begin() != "..") return rel.generic_string();
+  return abs.generic_string();
+}
+
+double Round(double x) {
+  // Directions come from sin/cos and PCA samples from sums of products: rounding to 1e-15 hides
+  // last-ulp differences between libm versions and FMA contraction, so plans stay byte-identical.
+  return std::round(x * 1e15) / 1e15;
+}
+
+json NumbersJson(const double* begin, const double* end) {
+  json out = json::array();
+  for (const double* p = begin; p != end; ++p) out.push_back(Round(*p));
+  return out;
+}
+
+json JointsJson(const JointVector& j) { return NumbersJson(j.data(), j.data() + j.size()); }
+
+struct SampledShapes {
+  std::vector<ShapeSample> samples;
+  json report;
+  uint64_t clamped = 0;
+};
+
+Result<SampledShapes> SampleShapes(const json& spec,
+                                   const fs::path& config_path,
+                                   const HandModel& model,
+                                   uint64_t seed) {
+  const std::string cfg = config_path.string();
+  const std::string method = spec.at("method").get<std::string>();
+  auto bad = [&](const std::string& msg) {
+    return Status(StatusCode::kInvalidArgument, cfg + ": shapes: " + msg);
+  };
+  auto allow_only = [&](std::initializer_list<const char*> keys) -> Status {
+    for (const auto& [key, value] : spec.items()) {
+      bool ok = key == "method";
+      for (const char* k : keys) ok = ok || key == k;
+      if (!ok) return bad("'" + key + "' does not apply to method '" + method + "'");
+    }
+    return Status::Ok();
+  };
+  const JointLimits limits = model.limits();
+  Result<fs::path> library_path = ResolveConfigPath(
+      spec.value("library", std::string(kDefaultLibrary)), config_path, "shapes.library");
+  if (!library_path.ok()) return library_path.status();
+  Result<std::vector<NamedShape>> library = LoadShapes(*library_path, limits);
+  if (!library.ok()) return library.status();
+
+  SampledShapes out;
+  out.report = {{"method", method}, {"library", PathForPlan(*library_path)}};
+  std::vector<std::string> names = spec.value("names", std::vector<std::string>{});
+  const uint32_t count = spec.value("count", 0u);
+
+  if (method == "basic" || method == "pairs") {
+    if (method == "basic") {
+      HANDDB_RETURN_IF_ERROR(allow_only({"library", "names", "count"}));
+    } else {
+      HANDDB_RETURN_IF_ERROR(allow_only({"library", "names", "count", "k", "include_endpoints"}));
+    }
+    if (!names.empty() && count != 0) return bad("give either 'names' or 'count', not both");
+    Result<std::vector<ShapeSample>> basic = SampleBasic(*library, names, count);
+    if (!basic.ok()) return bad(basic.status().message());
+    if (method == "basic") {
+      out.samples = std::move(*basic);
+    } else {
+      if (basic->size() < 2) return bad("pairs needs at least 2 basic shapes");
+      const int k = spec.value("k", 1);
+      const bool endpoints = spec.value("include_endpoints", false);
+      out.samples = SamplePairs(*basic, k, endpoints);
+      out.report["k"] = k;
+      out.report["include_endpoints"] = endpoints;
+      out.report["basic_shapes"] = basic->size();
+    }
+    out.report["count"] = out.samples.size();
+    out.report["clamped"] = 0;
+    return out;
+  }
+
+  // pca / grid: a PCA basis of the source set.
+  if (method == "pca") {
+    HANDDB_RETURN_IF_ERROR(
+        allow_only({"library", "source", "components", "count", "sampling", "scale", "max_sigma"}));
+    if (count == 0) return bad("pca needs 'count' (number of samples)");
+  } else {
+    HANDDB_RETURN_IF_ERROR(allow_only({"library", "source", "components", "levels", "span"}));
+    if (!spec.contains("levels")) return bad("grid needs 'levels'");
+  }
+  std::vector<NamedShape> source_shapes;
+  std::string source_name = PathForPlan(*library_path);
+  if (spec.contains("source")) {
+    Result<fs::path> source_path =
+        ResolveConfigPath(spec["source"].get<std::string>(), config_path, "shapes.source");
+    if (!source_path.ok()) return source_path.status();
+    Result<std::vector<NamedShape>> source = LoadShapes(*source_path, limits);
+    if (!source.ok()) return source.status();
+    source_shapes = std::move(*source);
+    source_name = PathForPlan(*source_path);
+  } else {
+    source_shapes = *library;
+  }
+  std::vector<JointVector> set;
+  for (const auto& s : source_shapes) set.push_back(s.joints);
+  const int k = spec.value("components", std::min(8, static_cast<int>(set.size()) - 1));
+  Result<PcaBasis> basis = ComputePca(set, k);
+  if (!basis.ok()) return bad(basis.status().message());
+  out.report["source"] = source_name;
+  out.report["components"] = k;
+  out.report["explained_variance"] = basis->explained;
+  out.report["stddev"] = std::vector<double>(basis->stddev.data(), basis->stddev.data() + k);
+  if (method == "pca") {
+    PcaSamplerOptions opts;
+    opts.count = count;
+    const std::string sampling = spec.value("sampling", std::string("sobol"));
+    opts.sampling =
+        sampling == "gaussian" ? CoefficientSampling::kGaussian : CoefficientSampling::kSobol;
+    opts.scale = spec.value("scale", 1.0);
+    opts.max_sigma = spec.value("max_sigma", 3.0);
+    opts.seed = seed;
+    out.samples = SamplePca(*basis, opts, limits, &out.clamped);
+    out.report["sampling"] = sampling;
+    out.report["scale"] = opts.scale;
+    out.report["max_sigma"] = opts.max_sigma;
+  } else {
+    std::vector<int> levels;
+    if (spec["levels"].is_array()) {
+      levels = spec["levels"].get<std::vector<int>>();
+    } else {
+      levels.assign(static_cast<size_t>(k), spec["levels"].get<int>());
+    }
+    const double span = spec.value("span", 2.0);
+    Result<std::vector<ShapeSample>> grid = SampleGrid(*basis, levels, span, limits, &out.clamped);
+    if (!grid.ok()) return bad(grid.status().message());
+    out.samples = std::move(*grid);
+    out.report["levels"] = levels;
+    out.report["span"] = span;
+  }
+  out.report["count"] = out.samples.size();
+  out.report["clamped"] = out.clamped;
+  return out;
+}
+
+Result<std::vector<Eigen::Vector3d>> SampleViews(const json& spec,
+                                                 const fs::path& config_path,
+                                                 json* report) {
+  const std::string cfg = config_path.string();
+  const std::string method = spec.at("method").get<std::string>();
+  std::vector<Eigen::Vector3d> dirs;
+  if (method == "fibonacci") {
+    if (spec.contains("subdivisions")) {
+      return Status(StatusCode::kInvalidArgument,
+                    cfg + ": views: 'subdivisions' is for method 'icosahedron'");
+    }
+    dirs = FibonacciDirections(spec.value("count", 86));
+  } else {
+    int k = spec.value("subdivisions", -1);
+    if (spec.contains("count")) {
+      const int from_count = IcosahedronSubdivisionsForCount(spec["count"].get<int>());
+      if (from_count < 0) {
+        return Status(StatusCode::kInvalidArgument,
+                      cfg + ": views: icosahedron count " + spec["count"].dump() +
+                          " is not 10*4^k+2 (12, 42, 162, 642, 2562, ...)");
+      }
+      if (k >= 0 && k != from_count) {
+        return Status(StatusCode::kInvalidArgument,
+                      cfg + ": views: count and subdivisions disagree");
+      }
+      k = from_count;
+    }
+    if (k < 0) k = 1;
+    dirs = IcosahedronDirections(k);
+    (*report)["subdivisions"] = k;
+  }
+  const int probes = static_cast<int>(std::clamp<size_t>(40 * dirs.size(), 20000, 200000));
+  const CoveringRadius cover = ComputeCoveringRadius(dirs, probes);
+  (*report)["method"] = method;
+  (*report)["count"] = dirs.size();
+  (*report)["covering_radius_deg"] = std::round(cover.radians * 180.0 / M_PI * 1e6) / 1e6;
+  return dirs;
+}
+
+}  // namespace
+
+fs::path RepoRoot() {
+  if (const char* env = std::getenv("HANDDB_SOURCE_DIR"); env != nullptr && *env != '\0')
+    return env;
+  return HANDDB_SOURCE_DIR;
+}
+
+fs::path ResolvePlanPath(const std::string& path_in_plan) {
+  const fs::path p(path_in_plan);
+  if (p.is_absolute()) return p;
+  return RepoRoot() / p;
+}
+
+std::string UnitDirName(uint32_t unit_id) {
+  char buf[16];
+  std::snprintf(buf, sizeof(buf), "u%05u", unit_id);
+  return buf;
+}
+
+std::string RenderFileStem(uint32_t render_id) {
+  char buf[16];
+  std::snprintf(buf, sizeof(buf), "r%06u", render_id);
+  return buf;
+}
+
+Result<json> MakePlan(const json& config, const fs::path& config_path, PlanSummary* summary) {
+  HANDDB_RETURN_IF_ERROR(ValidateJson(config, "config.schema.json", config_path.string()));
+  const std::string cfg = config_path.string();
+  const uint64_t seed = config.at("seed").get<uint64_t>();
+
+  Result<fs::path> hand_path = ResolveConfigPath(
+      config.value("hand_model", std::string(kDefaultHandModel)), config_path, "hand_model");
+  if (!hand_path.ok()) return hand_path.status();
+  Result<HandModel> model = LoadHandModel(*hand_path);
+  if (!model.ok()) return model.status();
+
+  Result<SampledShapes> shapes = SampleShapes(config.at("shapes"), config_path, *model, seed);
+  if (!shapes.ok()) return shapes.status();
+  json views_report = json::object();
+  Result<std::vector<Eigen::Vector3d>> dirs =
+      SampleViews(config.at("views"), config_path, &views_report);
+  if (!dirs.ok()) return dirs.status();
+
+  const json render_cfg = config.value("render", json::object());
+  const int resolution = render_cfg.value("resolution", 256);
+  double ortho_scale = render_cfg.value("ortho_scale", model->ortho_scale);
+  if (!(ortho_scale > 0)) {
+    return Status(StatusCode::kInvalidArgument,
+                  cfg + ": render.ortho_scale missing and the hand model gives none");
+  }
+  const int rolls = config.value("rolls", 48);
+  const uint32_t unit_size = config.value("unit_size", 256u);
+
+  const uint64_t num_shapes = shapes->samples.size();
+  const uint64_t num_dirs = dirs->size();
+  const uint64_t num_renders = num_shapes * num_dirs;
+  if (num_renders > 100'000'000ull) {
+    return Status(StatusCode::kInvalidArgument,
+                  cfg + ": " + std::to_string(num_renders) + " renders: more than 100,000,000");
+  }
+
+  json plan = json::object();
+  plan["format"] = "handdb-plan";
+  plan["version"] = kPlanFormatVersion;
+  plan["tool"] = {{"name", "handdb"}, {"version", HANDDB_VERSION}};
+  plan["seed"] = seed;
+  plan["config"] = config;
+  plan["hand_model"] = {
+      {"path", PathForPlan(*hand_path)}, {"sha256", model->sha256}, {"name", model->name}};
+  if (!model->asset_sha256.empty()) plan["hand_model"]["asset_sha256"] = model->asset_sha256;
+  plan["render"] = {{"resolution", resolution}, {"ortho_scale", ortho_scale}, {"engine", "cycles"}};
+  plan["rolls"] = rolls;
+  plan["unit_size"] = unit_size;
+  plan["sampling"] = {{"shapes", shapes->report}, {"views", views_report}};
+
+  json shape_list = json::array();
+  for (uint64_t i = 0; i < num_shapes; ++i) {
+    const ShapeSample& s = shapes->samples[i];
+    json js = {{"id", i},
+               {"name", s.name},
+               {"joints", JointsJson(s.joints)},
+               {"coeffs", NumbersJson(s.coeffs.data(), s.coeffs.data() + s.coeffs.size())}};
+    if (s.clamped) js["clamped"] = true;
+    shape_list.push_back(std::move(js));
+  }
+  std::vector<std::array<double, 3>> dir_values;
+  json dir_list = json::array();
+  for (uint64_t i = 0; i < num_dirs; ++i) {
+    const Eigen::Vector3d& d = (*dirs)[i];
+    const std::array<double, 3> v = {Round(d.x()), Round(d.y()), Round(d.z())};
+    dir_values.push_back(v);
+    dir_list.push_back({{"id", i},
+                        {"direction", v},
+                        {"theta", Round(std::acos(std::clamp(d.z(), -1.0, 1.0)))},
+                        {"phi", Round(std::atan2(d.y(), d.x()))}});
+  }
+  json units = json::array();
+  for (uint64_t first = 0; first < num_renders; first += unit_size) {
+    const uint64_t unit_id = units.size();
+    const uint64_t last = std::min(num_renders, first + unit_size);
+    json renders = json::array();
+    for (uint64_t r = first; r < last; ++r) {
+      const uint64_t shape = r / num_dirs;
+      const uint64_t dir = r % num_dirs;
+      renders.push_back({{"render_id", r},
+                         {"shape_id", shape},
+                         {"dir_id", dir},
+                         {"joints", shape_list[shape]["joints"]},
+                         {"direction", dir_values[dir]},
+                         {"roll", 0.0},
+                         {"seed", DeriveSeed(seed, unit_id, r - first)}});
+    }
+    units.push_back({{"id", unit_id}, {"renders", std::move(renders)}});
+  }
+  plan["totals"] = {{"shapes", num_shapes},
+                    {"directions", num_dirs},
+                    {"renders", num_renders},
+                    {"views", num_renders * static_cast<uint64_t>(rolls)},
+                    {"units", units.size()}};
+  plan["shapes"] = std::move(shape_list);
+  plan["directions"] = std::move(dir_list);
+  plan["units"] = std::move(units);
+
+  if (summary != nullptr) {
+    summary->shapes = num_shapes;
+    summary->directions = num_dirs;
+    summary->rolls = static_cast<uint64_t>(rolls);
+    summary->renders = num_renders;
+    summary->views = num_renders * static_cast<uint64_t>(rolls);
+    summary->units = plan["units"].size();
+    summary->clamped_shapes = shapes->clamped;
+    summary->covering_radius_deg = views_report["covering_radius_deg"].get<double>();
+    summary->shapes_method = shapes->report["method"].get<std::string>();
+    summary->views_method = views_report["method"].get<std::string>();
+  }
+  return plan;
+}
+
+Status WritePlanFromConfig(const fs::path& config_path,
+                           const fs::path& plan_path,
+                           PlanSummary* summary) {
+  Result<json> config = ReadJsonFile(config_path, "config.schema.json");
+  if (!config.ok()) return config.status();
+  Result<json> plan = MakePlan(*config, config_path, summary);
+  if (!plan.ok()) return plan.status();
+  // The plan we write must be one we would accept.
+  Result<Plan> parsed = ParsePlan(*plan, plan_path.string());
+  THROW_CHECK_MSG(parsed.ok(),
+                  "handdb plan produced an invalid plan: " << parsed.status().message());
+  return WriteJsonFileAtomic(plan_path, *plan);
+}
+
+Result<Plan> ParsePlan(const json& doc, const std::string& what) {
+  HANDDB_RETURN_IF_ERROR(ValidateJson(doc, "render_plan.schema.json", what));
+  auto bad = [&](const std::string& msg) {
+    return Status(StatusCode::kSchemaViolation, what + ": " + msg);
+  };
+  Plan plan;
+  plan.seed = doc["seed"].get<uint64_t>();
+  plan.hand_model_path = doc["hand_model"]["path"].get<std::string>();
+  plan.hand_model_sha256 = doc["hand_model"]["sha256"].get<std::string>();
+  plan.resolution = doc["render"]["resolution"].get<int>();
+  plan.ortho_scale = doc["render"]["ortho_scale"].get<double>();
+  plan.rolls = doc["rolls"].get<int>();
+  plan.unit_size = doc["unit_size"].get<uint32_t>();
+
+  const json& shapes = doc["shapes"];
+  for (size_t i = 0; i < shapes.size(); ++i) {
+    PlanShape s;
+    s.id = shapes[i]["id"].get<uint32_t>();
+    if (s.id != i)
+      return bad("/shapes/" + std::to_string(i) + "/id: " + std::to_string(s.id) + ", expected " +
+                 std::to_string(i));
+    s.name = shapes[i]["name"].get<std::string>();
+    for (int j = 0; j < kNumJoints; ++j) s.joints[j] = shapes[i]["joints"][j].get<double>();
+    s.coeffs = shapes[i]["coeffs"].get<std::vector<double>>();
+    plan.shapes.push_back(std::move(s));
+  }
+  const json& dirs = doc["directions"];
+  for (size_t i = 0; i < dirs.size(); ++i) {
+    PlanDirection d;
+    d.id = dirs[i]["id"].get<uint32_t>();
+    if (d.id != i)
+      return bad("/directions/" + std::to_string(i) + "/id: " + std::to_string(d.id) +
+                 ", expected " + std::to_string(i));
+    for (int k = 0; k < 3; ++k) d.direction[k] = dirs[i]["direction"][k].get<double>();
+    const double norm =
+        std::sqrt(d.direction[0] * d.direction[0] + d.direction[1] * d.direction[1] +
+                  d.direction[2] * d.direction[2]);
+    if (std::abs(norm - 1.0) > 1e-6) {
+      return bad("/directions/" + std::to_string(i) + "/direction: norm " + std::to_string(norm) +
+                 " is not 1");
+    }
+    d.theta = dirs[i]["theta"].get<double>();
+    d.phi = dirs[i]["phi"].get<double>();
+    plan.directions.push_back(d);
+  }
+  const uint64_t num_dirs = plan.directions.size();
+  const uint64_t num_renders = plan.num_renders();
+  uint64_t next_render = 0;
+  const json& units = doc["units"];
+  for (size_t u = 0; u < units.size(); ++u) {
+    const std::string where = "/units/" + std::to_string(u);
+    PlanUnit unit;
+    unit.id = units[u]["id"].get<uint32_t>();
+    if (unit.id != u)
+      return bad(where + "/id: " + std::to_string(unit.id) + ", expected " + std::to_string(u));
+    const json& renders = units[u]["renders"];
+    if (renders.size() > plan.unit_size) {
+      return bad(where + ": " + std::to_string(renders.size()) + " renders, unit_size is " +
+                 std::to_string(plan.unit_size));
+    }
+    for (size_t i = 0; i < renders.size(); ++i) {
+      const json& jr = renders[i];
+      const std::string rw = where + "/renders/" + std::to_string(i);
+      PlanRender r;
+      r.render_id = jr["render_id"].get<uint32_t>();
+      r.shape_id = jr["shape_id"].get<uint32_t>();
+      r.dir_id = jr["dir_id"].get<uint32_t>();
+      r.roll = jr["roll"].get<double>();
+      r.seed = jr.value("seed", uint64_t{0});
+      if (r.render_id != next_render) {
+        return bad(rw + "/render_id: " + std::to_string(r.render_id) + ", expected " +
+                   std::to_string(next_render));
+      }
+      if (r.shape_id != next_render / num_dirs || r.dir_id != next_render % num_dirs) {
+        return bad(rw + ": shape_id " + std::to_string(r.shape_id) + ", dir_id " +
+                   std::to_string(r.dir_id) + " do not match render_id " +
+                   std::to_string(r.render_id) + " (shape-major)");
+      }
+      for (int j = 0; j < kNumJoints; ++j) {
+        if (jr["joints"][j].get<double>() != plan.shapes[r.shape_id].joints[j]) {
+          return bad(rw + "/joints/" + std::to_string(j) + ": differs from shape " +
+                     std::to_string(r.shape_id));
+        }
+      }
+      for (int k = 0; k < 3; ++k) {
+        if (jr["direction"][k].get<double>() != plan.directions[r.dir_id].direction[k]) {
+          return bad(rw + "/direction: differs from direction " + std::to_string(r.dir_id));
+        }
+      }
+      if (r.roll != 0.0) return bad(rw + "/roll: rolls are virtual, renders must have roll 0");
+      unit.renders.push_back(r);
+      ++next_render;
+    }
+    if (u + 1 < units.size() && unit.renders.size() != plan.unit_size) {
+      return bad(where + ": only the last unit may hold fewer than unit_size renders");
+    }
+    plan.units.push_back(std::move(unit));
+  }
+  if (next_render != num_renders) {
+    return bad("units cover " + std::to_string(next_render) + " renders, shapes x directions is " +
+               std::to_string(num_renders));
+  }
+  plan.doc = doc;
+  return plan;
+}
+
+Result<Plan> ReadPlan(const fs::path& plan_path) {
+  Result<json> doc = ReadJsonFile(plan_path, "");
+  if (!doc.ok()) return doc.status();
+  return ParsePlan(*doc, plan_path.string());
+}
+
+}  // namespace handdb

@@ -1,0 +1,483 @@
+#include "generator/testset/testset.h"
+
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <mutex>
+#include <thread>
+
+#include "base/atomic_file.h"
+#include "base/json_schema.h"
+#include "base/progress.h"
+#include "generator/hand/hand_model.h"
+#include "generator/sampling/random.h"
+#include "generator/render/render_driver.h"
+#include "generator/sampling/shape_sampler.h"
+#include "handdb_version.h"
+
+namespace handdb {
+namespace fs = std::filesystem;
+namespace {
+
+constexpr const char* kConfigSchema = "testset_config.schema.json";
+constexpr const char* kPlanSchema = "testset_plan.schema.json";
+
+std::string Numbered(const char* prefix, uint64_t i, int width) {
+  char buf[48];
+  std::snprintf(buf, sizeof buf, "%s%0*llu", prefix, width, static_cast<unsigned long long>(i));
+  return buf;
+}
+
+// A relative path in a config: next to the config first, then under the repository root.
+fs::path ResolveConfigPath(const fs::path& config_path, const std::string& p) {
+  const fs::path path(p);
+  if (path.is_absolute()) return path;
+  const fs::path beside = config_path.parent_path() / path;
+  if (fs::exists(beside)) return beside;
+  return RepoRoot() / path;
+}
+
+// Repository-relative when inside the repository (plans are then identical across checkouts).
+std::string PathForPlan(const fs::path& path) {
+  std::error_code ec;
+  const fs::path abs = fs::weakly_canonical(path, ec);
+  const fs::path root = fs::weakly_canonical(RepoRoot(), ec);
+  const fs::path rel = abs.lexically_relative(root);
+  if (!rel.empty() && *rel.begin() != "..") return rel.generic_string();
+  return abs.generic_string();
+}
+
+std::array<double, 3> Vec3FromJson(const nlohmann::json& j) {
+  return {j.at(0).get<double>(), j.at(1).get<double>(), j.at(2).get<double>()};
+}
+
+nlohmann::json JointsToJson(const JointVector& joints) {
+  nlohmann::json out = nlohmann::json::array();
+  for (double v : joints) out.push_back(v);
+  return out;
+}
+
+Status Invalid(const std::string& what, const std::string& message) {
+  return Status(StatusCode::kInvalidArgument, what + ": " + message);
+}
+
+}  // namespace
+
+uint32_t TestSetPlan::num_units() const {
+  if (items.empty() || unit_size == 0) return 0;
+  return static_cast<uint32_t>((items.size() + unit_size - 1) / unit_size);
+}
+
+std::vector<uint32_t> TestSetPlan::UnitItems(uint32_t unit) const {
+  std::vector<uint32_t> ids;
+  const uint64_t begin = static_cast<uint64_t>(unit) * unit_size;
+  const uint64_t end = std::min<uint64_t>(items.size(), begin + unit_size);
+  for (uint64_t i = begin; i < end; ++i) ids.push_back(static_cast<uint32_t>(i));
+  return ids;
+}
+
+Result<nlohmann::json> MakeTestSetPlan(const nlohmann::json& config,
+                                       const fs::path& config_path,
+                                       bool clutter) {
+  const std::string what = config_path.string();
+  HANDDB_RETURN_IF_ERROR(ValidateJson(config, kConfigSchema, what));
+
+  // Hand model: limits and hash from the loader, reference axes and scale from the JSON itself.
+  const fs::path hand_path =
+      ResolveConfigPath(config_path, config.at("hand_model").get<std::string>());
+  auto hand = LoadHandModel(hand_path);
+  if (!hand.ok()) return hand.status();
+  auto hand_doc = ReadJsonFile(hand_path, "hand_model.schema.json");
+  if (!hand_doc.ok()) return hand_doc.status();
+  const JointLimits limits = hand->limits();
+
+  const fs::path shapes_path =
+      ResolveConfigPath(config_path, config.at("shapes").get<std::string>());
+  auto library = LoadShapes(shapes_path, limits);
+  if (!library.ok()) return library.status();
+  std::vector<std::string> basic_names;
+  if (config.contains("basic_names"))
+    basic_names = config["basic_names"].get<std::vector<std::string>>();
+  auto basic = SampleBasic(*library, basic_names, 0);
+  if (!basic.ok()) return Status(basic.status().code(), what + ": " + basic.status().message());
+
+  const uint64_t seed = config.at("seed").get<uint64_t>();
+  const uint32_t count = config.at("count").get<uint32_t>();
+  const double basic_fraction = config.value("basic_fraction", 0.25);
+  const uint32_t num_basic = static_cast<uint32_t>(std::lround(basic_fraction * count));
+  const uint32_t num_pca = count - num_basic;
+
+  // PCA shapes: Gaussian (or Sobol) coefficients in the basis of a shape set, with a stream seed
+  // derived from the test-set seed so they never coincide with a database's Sobol points.
+  const nlohmann::json pca_cfg = config.value("pca", nlohmann::json::object());
+  std::vector<ShapeSample> pca_shapes;
+  nlohmann::json pca_report = nlohmann::json::object();
+  if (num_pca > 0) {
+    std::vector<JointVector> basis_set;
+    if (pca_cfg.contains("source")) {
+      const fs::path basis_path =
+          ResolveConfigPath(config_path, pca_cfg["source"].get<std::string>());
+      auto basis_shapes = LoadShapes(basis_path, limits);
+      if (!basis_shapes.ok()) return basis_shapes.status();
+      for (const auto& s : *basis_shapes) basis_set.push_back(s.joints);
+      pca_report["basis"] = PathForPlan(basis_path);
+    } else {
+      for (const auto& s : *library) basis_set.push_back(s.joints);
+      pca_report["basis"] = PathForPlan(shapes_path);
+    }
+    auto basis = ComputePca(basis_set, pca_cfg.value("components", 6));
+    if (!basis.ok()) return Invalid(what, basis.status().message());
+    PcaSamplerOptions options;
+    options.count = num_pca;
+    options.sampling = pca_cfg.value("sampling", std::string("gaussian")) == "sobol"
+                           ? CoefficientSampling::kSobol
+                           : CoefficientSampling::kGaussian;
+    options.scale = pca_cfg.value("scale", 1.0);
+    options.max_sigma = pca_cfg.value("max_sigma", 3.0);
+    options.seed = DeriveSeed(seed, kShapeStream, 0);
+    if (!options.Check()) return Invalid(what, "bad pca options");
+    uint64_t clamped = 0;
+    pca_shapes = SamplePca(*basis, options, limits, &clamped);
+    pca_report["components"] = basis->num_components();
+    pca_report["explained"] = basis->explained;
+    pca_report["sampling"] = options.sampling == CoefficientSampling::kSobol ? "sobol" : "gaussian";
+    pca_report["scale"] = options.scale;
+    pca_report["max_sigma"] = options.max_sigma;
+    pca_report["clamped"] = clamped;
+  }
+
+  const nlohmann::json render_cfg = config.value("render", nlohmann::json::object());
+  const int resolution = render_cfg.value("resolution", 256);
+  double ortho_scale = render_cfg.value("ortho_scale", 0.0);
+  if (ortho_scale <= 0) ortho_scale = hand->ortho_scale;
+  if (ortho_scale <= 0)
+    return Invalid(what, "render.ortho_scale is not set and the hand model gives none");
+  const uint32_t unit_size = config.value("unit_size", 50u);
+
+  const nlohmann::json photo_cfg = config.value("photo", nlohmann::json::object());
+  nlohmann::json photo = {
+      {"samples", photo_cfg.value("samples", PhotoSettings().samples)},
+      {"skin_rgb", photo_cfg.value("skin_rgb", PhotoSettings().skin_rgb)},
+      {"background_rgb", photo_cfg.value("background_rgb", PhotoSettings().background_rgb)},
+      {"clutter", clutter || photo_cfg.value("clutter", false)},
+  };
+
+  // Items: the first num_basic are basic shapes, picked by a seeded shuffle of the library that
+  // is repeated as often as needed (each shape about equally often); then the PCA samples. Every
+  // item's direction (uniform on the sphere) and roll (uniform) come from its own seed.
+  std::vector<uint32_t> basic_order;
+  {
+    Rng rng(DeriveSeed(seed, kTestViewStream, 0xBA51C));
+    while (basic_order.size() < num_basic) {
+      std::vector<uint32_t> perm(basic->size());
+      for (uint32_t i = 0; i < perm.size(); ++i) perm[i] = i;
+      for (size_t i = perm.size(); i > 1; --i) {
+        const size_t j = static_cast<size_t>(rng.Next() % i);
+        std::swap(perm[i - 1], perm[j]);
+      }
+      for (uint32_t p : perm) {
+        if (basic_order.size() < num_basic) basic_order.push_back(p);
+      }
+    }
+  }
+  nlohmann::json items = nlohmann::json::array();
+  for (uint32_t i = 0; i < count; ++i) {
+    const uint64_t item_seed = DeriveSeed(seed, kTestViewStream, i);
+    Rng rng(item_seed);
+    const double z = 2.0 * rng.Uniform() - 1.0;
+    const double phi = 2.0 * M_PI * rng.Uniform();
+    const double r = std::sqrt(std::max(0.0, 1.0 - z * z));
+    const std::array<double, 3> d = {r * std::cos(phi), r * std::sin(phi), z};
+    const double roll = 2.0 * M_PI * rng.Uniform();
+    nlohmann::json item = {
+        {"id", i},
+        {"unit", i / unit_size},
+        {"seed", item_seed},
+        {"direction", d},
+        {"theta", std::acos(std::clamp(d[2], -1.0, 1.0))},
+        {"phi", std::atan2(d[1], d[0])},
+        {"roll", roll},
+    };
+    if (i < num_basic) {
+      const ShapeSample& s = (*basic)[basic_order[i]];
+      item["basic"] = true;
+      item["shape_name"] = s.name;
+      item["joints"] = JointsToJson(s.joints);
+      item["coeffs"] = nlohmann::json::array();
+      item["clamped"] = false;
+    } else {
+      const ShapeSample& s = pca_shapes[i - num_basic];
+      item["basic"] = false;
+      item["shape_name"] = Numbered("pca-", i - num_basic, 5);
+      item["joints"] = JointsToJson(s.joints);
+      item["coeffs"] = s.coeffs;
+      item["clamped"] = s.clamped;
+    }
+    items.push_back(std::move(item));
+  }
+
+  nlohmann::json plan = {
+      {"format", "handdb-testset-plan"},
+      {"version", kTestSetFormatVersion},
+      {"name", config.value("name", std::string("testset"))},
+      {"seed", seed},
+      {"config", config},
+      {"hand_model", {{"path", PathForPlan(hand_path)}, {"sha256", hand->sha256}}},
+      {"forward_axis", hand_doc->at("forward_axis")},
+      {"palm_normal", hand_doc->at("palm_normal")},
+      {"render", {{"resolution", resolution}, {"ortho_scale", ortho_scale}}},
+      {"photo", photo},
+      {"unit_size", unit_size},
+      {"shapes",
+       {{"library", PathForPlan(shapes_path)},
+        {"basic", num_basic},
+        {"pca", num_pca},
+        {"pca_sampler", pca_report}}},
+      {"handdb_version", HANDDB_VERSION},
+      {"items", items},
+  };
+  HANDDB_RETURN_IF_ERROR(ValidateJson(plan, kPlanSchema, what + " (test-set plan)"));
+  return plan;
+}
+
+Result<TestSetPlan> ParseTestSetPlan(const nlohmann::json& doc, const std::string& what) {
+  HANDDB_RETURN_IF_ERROR(ValidateJson(doc, kPlanSchema, what));
+  TestSetPlan plan;
+  plan.doc = doc;
+  plan.name = doc.at("name").get<std::string>();
+  plan.seed = doc.at("seed").get<uint64_t>();
+  plan.hand_model_path = doc.at("hand_model").at("path").get<std::string>();
+  plan.hand_model_sha256 = doc.at("hand_model").at("sha256").get<std::string>();
+  plan.forward_axis = Vec3FromJson(doc.at("forward_axis"));
+  plan.palm_normal = Vec3FromJson(doc.at("palm_normal"));
+  plan.resolution = doc.at("render").at("resolution").get<int>();
+  plan.ortho_scale = doc.at("render").at("ortho_scale").get<double>();
+  plan.unit_size = doc.at("unit_size").get<uint32_t>();
+  const auto& photo = doc.at("photo");
+  plan.photo.samples = photo.at("samples").get<int>();
+  plan.photo.skin_rgb = Vec3FromJson(photo.at("skin_rgb"));
+  plan.photo.background_rgb = Vec3FromJson(photo.at("background_rgb"));
+  plan.photo.clutter = photo.at("clutter").get<bool>();
+  for (const auto& j : doc.at("items")) {
+    TestSetItem item;
+    item.id = j.at("id").get<uint32_t>();
+    item.unit = j.at("unit").get<uint32_t>();
+    const std::string where = what + ": item " + std::to_string(plan.items.size());
+    if (item.id != plan.items.size()) {
+      return Status(
+          StatusCode::kSchemaViolation,
+          where + ": id " + std::to_string(item.id) + " (ids must be 0, 1, 2, ... in order)");
+    }
+    if (item.unit != item.id / plan.unit_size) {
+      return Status(StatusCode::kSchemaViolation,
+                    where + ": unit " + std::to_string(item.unit) + " but unit_size " +
+                        std::to_string(plan.unit_size) + " puts it in unit " +
+                        std::to_string(item.id / plan.unit_size));
+    }
+    item.basic = j.at("basic").get<bool>();
+    item.shape_name = j.at("shape_name").get<std::string>();
+    for (int k = 0; k < kNumJoints; ++k) item.joints[k] = j.at("joints").at(k).get<double>();
+    item.coeffs = j.at("coeffs").get<std::vector<double>>();
+    item.clamped = j.at("clamped").get<bool>();
+    item.direction = Vec3FromJson(j.at("direction"));
+    const double norm = std::hypot(item.direction[0], item.direction[1], item.direction[2]);
+    if (std::abs(norm - 1.0) > 1e-6) {
+      return Status(StatusCode::kOutOfRange,
+                    where + ": direction has length " + std::to_string(norm) + ", expected 1");
+    }
+    item.theta = j.at("theta").get<double>();
+    item.phi = j.at("phi").get<double>();
+    item.roll = j.at("roll").get<double>();
+    item.seed = j.at("seed").get<uint64_t>();
+    plan.items.push_back(std::move(item));
+  }
+  return plan;
+}
+
+Result<TestSetPlan> ReadTestSetPlan(const fs::path& path) {
+  auto doc = ReadJsonFile(path, kPlanSchema);
+  if (!doc.ok()) return doc.status();
+  return ParseTestSetPlan(*doc, path.string());
+}
+
+fs::path TestSetLabelPath(const fs::path& dir, uint32_t unit, uint32_t id) {
+  return dir / "units" / UnitDirName(unit) / (RenderFileStem(id) + ".exr");
+}
+fs::path TestSetSidecarPath(const fs::path& dir, uint32_t unit, uint32_t id) {
+  return dir / "units" / UnitDirName(unit) / (RenderFileStem(id) + ".json");
+}
+fs::path TestSetPhotoPath(const fs::path& dir, uint32_t unit, uint32_t id) {
+  return dir / "photos" / UnitDirName(unit) / (RenderFileStem(id) + ".png");
+}
+
+bool TestSetRenderOptions::Check() const {
+  CHECK_OPTION_GE(jobs, 1);
+  return true;
+}
+
+namespace {
+
+bool UnitComplete(const fs::path& dir, uint32_t unit, bool photos) {
+  if (!fs::exists(dir / "units" / UnitDirName(unit) / "DONE")) return false;
+  return !photos || fs::exists(dir / "photos" / UnitDirName(unit) / "DONE");
+}
+
+std::string LastNonEmptyLine(const fs::path& log) {
+  std::ifstream in(log);
+  std::string line;
+  std::string last;
+  while (std::getline(in, line)) {
+    if (line.find_first_not_of(" \t\r") != std::string::npos) last = line;
+  }
+  return last;
+}
+
+// Runs argv with stdout and stderr appended to `log`; returns the exit code (or 128 + signal),
+// -1 when it could not start. Polls the two flags and kills the child when either turns true.
+int RunLogged(const std::vector<std::string>& argv,
+              const fs::path& log,
+              const std::atomic<bool>* stop,
+              const std::atomic<bool>* cancel) {
+  const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
+  if (fd < 0) return -1;
+  std::vector<char*> cargv;
+  for (const auto& a : argv) cargv.push_back(const_cast<char*>(a.c_str()));
+  cargv.push_back(nullptr);
+  const pid_t pid = ::fork();
+  if (pid < 0) {
+    ::close(fd);
+    return -1;
+  }
+  if (pid == 0) {
+    ::dup2(fd, STDOUT_FILENO);
+    ::dup2(fd, STDERR_FILENO);
+    ::execvp(cargv[0], cargv.data());
+    std::fprintf(stderr, "handdb-render: cannot run %s\n", cargv[0]);
+    ::_exit(127);
+  }
+  ::close(fd);
+  int status = 0;
+  while (true) {
+    const pid_t r = ::waitpid(pid, &status, WNOHANG);
+    if (r == pid) break;
+    if (r < 0) return -1;
+    if (stop->load() || (cancel != nullptr && cancel->load())) {
+      ::kill(pid, SIGTERM);
+      ::waitpid(pid, &status, 0);
+      return 128 + SIGTERM;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  if (WIFEXITED(status)) return WEXITSTATUS(status);
+  if (WIFSIGNALED(status)) return 128 + WTERMSIG(status);
+  return -1;
+}
+
+}  // namespace
+
+Result<TestSetRenderSummary> RenderTestSet(const fs::path& dir,
+                                           const TestSetRenderOptions& options) {
+  THROW_CHECK(options.Check());
+  const auto start = std::chrono::steady_clock::now();
+  auto plan = ReadTestSetPlan(dir / "testset_plan.json");
+  if (!plan.ok()) return plan.status();
+  auto blender = FindBlender(options.blender);
+  if (!blender.ok()) return blender.status();
+  fs::path scripts = options.scripts_dir;
+  if (scripts.empty()) {
+    const char* env = std::getenv("HANDDB_SCRIPTS_DIR");
+    scripts = env != nullptr && *env != '\0' ? fs::path(env) : RepoRoot() / "blender_scripts";
+  }
+  const fs::path script = scripts / "render_testset.py";
+  if (!fs::exists(script)) {
+    return Status(StatusCode::kNotFound, script.string() + ": Blender script not found");
+  }
+  const fs::path hand_path = ResolvePlanPath(plan->hand_model_path);
+  if (!fs::exists(hand_path)) {
+    return Status(StatusCode::kNotFound,
+                  hand_path.string() + ": hand model named by the plan not found");
+  }
+  std::error_code ec;
+  fs::create_directories(dir / "logs", ec);
+  if (ec) return Status(StatusCode::kIoError, (dir / "logs").string() + ": " + ec.message());
+
+  TestSetRenderSummary summary;
+  summary.units_total = plan->num_units();
+  std::vector<uint32_t> todo;
+  for (uint32_t u = 0; u < plan->num_units(); ++u) {
+    if (UnitComplete(dir, u, options.photos)) {
+      ++summary.units_skipped;
+    } else {
+      todo.push_back(u);
+    }
+  }
+  Progress progress("testset render", todo.size(), options.progress, "units");
+  std::mutex mu;
+  size_t next = 0;
+  Status failure;
+  std::atomic<bool> stop{false};
+  auto worker = [&]() {
+    while (true) {
+      uint32_t unit = 0;
+      {
+        std::lock_guard<std::mutex> lock(mu);
+        if (next >= todo.size() || !failure.ok()) return;
+        unit = todo[next++];
+      }
+      const fs::path log = dir / "logs" / (UnitDirName(unit) + ".log");
+      std::vector<std::string> argv = {blender->string(),
+                                       "-b",
+                                       "--factory-startup",
+                                       "-noaudio",
+                                       "-t",
+                                       "1",
+                                       "-P",
+                                       script.string(),
+                                       "--",
+                                       "--plan",
+                                       (dir / "testset_plan.json").string(),
+                                       "--unit",
+                                       std::to_string(unit),
+                                       "--out",
+                                       dir.string()};
+      if (!options.photos) argv.push_back("--no-photos");
+      const int code = RunLogged(argv, log, &stop, options.cancel);
+      if (code != 0 || !UnitComplete(dir, unit, options.photos)) {
+        std::lock_guard<std::mutex> lock(mu);
+        if (failure.ok() && !(options.cancel != nullptr && options.cancel->load())) {
+          failure =
+              Status(StatusCode::kExternalToolFailed,
+                     "unit " + std::to_string(unit) + " failed (exit code " + std::to_string(code) +
+                         "): " + LastNonEmptyLine(log) + "; log: " + log.string());
+        }
+        stop = true;
+        return;
+      }
+      {
+        std::lock_guard<std::mutex> lock(mu);
+        ++summary.units_rendered;
+      }
+      progress.Add();
+    }
+  };
+  std::vector<std::thread> threads;
+  const int jobs = std::max(1, std::min<int>(options.jobs, static_cast<int>(todo.size())));
+  for (int j = 0; j < jobs; ++j) threads.emplace_back(worker);
+  for (auto& t : threads) t.join();
+  progress.Finish();
+  if (options.cancel != nullptr && options.cancel->load()) {
+    return Status(StatusCode::kCancelled, "testset render cancelled; rerun to continue");
+  }
+  if (!failure.ok()) return failure;
+  summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return summary;
+}
+
+}  // namespace handdb

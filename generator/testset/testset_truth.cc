@@ -1,0 +1,143 @@
+// The ground truth of a rendered test set (generator/testset/testset.h): label renders converted exactly
+// as the database converter does. Kept apart from testset.cc, which includes the hand-model and
+// sampler headers.
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <thread>
+
+#include "base/json_schema.h"
+#include "base/progress.h"
+#include "generator/convert/converter.h"
+#include "edges/exr_io.h"
+#include "generator/testset/testset.h"
+#include "handdb_version.h"
+
+namespace handdb {
+namespace fs = std::filesystem;
+namespace {
+
+nlohmann::json JointsToJson(const JointVector& joints) {
+  nlohmann::json out = nlohmann::json::array();
+  for (double v : joints) out.push_back(v);
+  return out;
+}
+
+}  // namespace
+
+Status WriteTestSetGroundTruth(const fs::path& dir, int num_threads, bool progress_enabled) {
+  auto plan = ReadTestSetPlan(dir / "testset_plan.json");
+  if (!plan.ok()) return plan.status();
+  const size_t n = plan->items.size();
+  std::vector<nlohmann::json> items(n);
+  std::vector<Status> errors(n);
+  const ViewConversionOptions conversion;
+  ExrReadOptions read_options;
+  read_options.expected_width = plan->resolution;
+  read_options.expected_height = plan->resolution;
+  Progress progress("testset truth", n, progress_enabled, "views");
+  std::atomic<size_t> next{0};
+  auto worker = [&]() {
+    for (size_t i = next++; i < n; i = next++) {
+      const TestSetItem& item = plan->items[i];
+      const fs::path exr = TestSetLabelPath(dir, item.unit, item.id);
+      const fs::path sidecar_path = TestSetSidecarPath(dir, item.unit, item.id);
+      auto image = ReadLabelExr(exr, read_options);
+      if (!image.ok()) {
+        errors[i] = image.status();
+        continue;
+      }
+      auto sidecar = ReadSidecar(sidecar_path);
+      if (!sidecar.ok()) {
+        errors[i] = sidecar.status();
+        continue;
+      }
+      // The render must be of this item.
+      double joint_diff = 0;
+      for (int k = 0; k < kNumJoints; ++k) {
+        joint_diff = std::max(joint_diff, std::abs(sidecar->joint_angles[k] - item.joints[k]));
+      }
+      const double roll_diff = std::abs(std::remainder(sidecar->camera_roll - item.roll, 2 * M_PI));
+      if (sidecar->render_id != item.id || joint_diff > 1e-5 || roll_diff > 1e-5) {
+        errors[i] = Status(StatusCode::kSizeMismatch,
+                           sidecar_path.string() + ": sidecar does not match plan item " +
+                               std::to_string(item.id) + " (render_id " +
+                               std::to_string(sidecar->render_id) + ", joint difference " +
+                               std::to_string(joint_diff) + ", roll difference " +
+                               std::to_string(roll_diff) + ")");
+        continue;
+      }
+      auto view = ConvertView(*image, *sidecar, conversion, exr.string());
+      if (!view.ok()) {
+        errors[i] = view.status();
+        continue;
+      }
+      const ViewLabel& label = view->label;
+      nlohmann::json keypoints = nlohmann::json::array();
+      for (const auto& k : label.keypoints) keypoints.push_back({k[0], k[1], k[2]});
+      nlohmann::json j = {
+          {"id", item.id},
+          {"unit", item.unit},
+          {"basic", item.basic},
+          {"shape_name", item.shape_name},
+          {"joint_angles", JointsToJson(item.joints)},
+          {"view_direction", item.direction},
+          {"view_theta", item.theta},
+          {"view_phi", item.phi},
+          {"camera_roll", item.roll},
+          {"keypoints", keypoints},
+          {"normalisation",
+           {{"centre_px", {label.source_centre_px[0], label.source_centre_px[1]}},
+            {"diameter_px", label.source_diameter_px},
+            {"scale", label.scale}}},
+          {"num_edge_points", view->points.size()},
+          {"label", fs::relative(exr, dir).generic_string()},
+          {"sidecar", fs::relative(sidecar_path, dir).generic_string()},
+      };
+      const fs::path photo = TestSetPhotoPath(dir, item.unit, item.id);
+      if (fs::exists(photo)) j["photo"] = fs::relative(photo, dir).generic_string();
+      items[i] = std::move(j);
+      progress.Add();
+    }
+  };
+  std::vector<std::thread> threads;
+  const int threads_n =
+      num_threads > 0 ? num_threads : std::max(1u, std::thread::hardware_concurrency());
+  for (int t = 0; t < threads_n; ++t) threads.emplace_back(worker);
+  for (auto& t : threads) t.join();
+  progress.Finish();
+  size_t bad = 0;
+  Status first;
+  for (const Status& s : errors) {
+    if (!s.ok()) {
+      if (first.ok()) first = s;
+      ++bad;
+    }
+  }
+  if (!first.ok()) {
+    return Status(
+        first.code(),
+        first.message() +
+            (bad > 1 ? " (and " + std::to_string(bad - 1) + " more bad test views)" : ""));
+  }
+  nlohmann::json truth = {
+      {"format", "handdb-testset"},
+      {"version", kTestSetFormatVersion},
+      {"name", plan->name},
+      {"seed", plan->seed},
+      {"plan", "testset_plan.json"},
+      {"hand_model", plan->doc.at("hand_model")},
+      {"forward_axis", plan->forward_axis},
+      {"palm_normal", plan->palm_normal},
+      {"resolution", plan->resolution},
+      {"ortho_scale", plan->ortho_scale},
+      {"clutter", plan->photo.clutter},
+      {"handdb_version", HANDDB_VERSION},
+      {"items", items},
+  };
+  HANDDB_RETURN_IF_ERROR(
+      ValidateJson(truth, "testset.schema.json", (dir / "testset.json").string()));
+  return WriteJsonFileAtomic(dir / "testset.json", truth);
+}
+
+}  // namespace handdb

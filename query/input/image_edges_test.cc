@@ -1,0 +1,285 @@
+#include "query/input/image_edges.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <random>
+#include <string>
+
+#include "edges/edges.h"
+#include "edges/exr_io.h"
+#include "edges/normalise.h"
+#include "edges/synthetic_hand.h"
+#include "query/searcher.h"
+#include "query/input/sheet.h"
+
+namespace handdb {
+namespace {
+
+namespace fs = std::filesystem;
+
+class ImageEdgesTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("handdb-image-edges-" + std::to_string(::getpid()) + "-" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  static SyntheticHand Hand(double angle, double bend = 0.2) {
+    SyntheticHandParams p;
+    p.width = 320;
+    p.height = 300;
+    p.centre_x = 160;
+    p.centre_y = 165;
+    p.angle = angle;
+    p.bend = {bend, -bend, 0.1, bend / 2, -0.1};
+    return RenderSyntheticHand(p);
+  }
+
+  // A photo-like rendering: skin-coloured hand with darker lines between links, on a blue-grey
+  // background with mild noise.
+  fs::path WritePhoto(const LabelImage& li, const std::string& name, uint32_t seed = 1) {
+    cv::Mat img(li.height, li.width, CV_8UC3);
+    std::mt19937 rng(seed);
+    std::uniform_int_distribution<int> noise(-6, 6);
+    const EdgeResult e = ExtractEdges(li, DefaultJointPairs(), EdgeOptions{});
+    cv::Mat internal = cv::Mat::zeros(li.height, li.width, CV_8U);
+    for (const EdgePixel& p : e.edges) internal.at<uint8_t>(p.row, p.col) = 1;
+    for (int y = 0; y < li.height; ++y) {
+      for (int x = 0; x < li.width; ++x) {
+        const bool hand = li.label(x, y) != 0;
+        cv::Vec3i c = hand ? cv::Vec3i(120, 150, 210) : cv::Vec3i(140, 110, 90);  // BGR
+        if (hand && internal.at<uint8_t>(y, x)) c = cv::Vec3i(70, 95, 150);
+        for (int k = 0; k < 3; ++k) {
+          img.at<cv::Vec3b>(y, x)[k] = cv::saturate_cast<uint8_t>(c[k] + noise(rng));
+        }
+      }
+    }
+    const fs::path path = dir_ / name;
+    EXPECT_TRUE(cv::imwrite(path.string(), img));
+    return path;
+  }
+
+  fs::path WriteEdgeImage(const LabelImage& li, const std::string& name) {
+    cv::Mat img = cv::Mat::zeros(li.height, li.width, CV_8U);
+    for (const EdgePixel& p : ExtractEdges(li, DefaultJointPairs(), EdgeOptions{}).edges) {
+      img.at<uint8_t>(p.row, p.col) = 255;
+    }
+    const fs::path path = dir_ / name;
+    EXPECT_TRUE(cv::imwrite(path.string(), img));
+    return path;
+  }
+
+  fs::path dir_;
+};
+
+double Diameter(const std::vector<PointQ>& pts) {
+  double best = 0;
+  for (size_t i = 0; i < pts.size(); ++i) {
+    for (size_t j = i + 1; j < pts.size(); ++j) {
+      best = std::max(best, std::hypot(double(pts[i].x - pts[j].x), double(pts[i].y - pts[j].y)));
+    }
+  }
+  return best / kPointScale;
+}
+
+TEST_F(ImageEdgesTest, LabelEdgeAndPhotoInputsShareTheDatabaseNormalisation) {
+  const SyntheticHand hand = Hand(0.3);
+  const fs::path exr = dir_ / "hand.exr";
+  ASSERT_TRUE(WriteLabelExr(exr, hand.image).ok());
+  auto labels = LoadQueryEdges(exr, ImageEdgeOptions{});
+  ASSERT_TRUE(labels.ok()) << labels.status().ToString();
+  EXPECT_EQ(labels->kind, QueryInputKind::kLabels);
+  EXPECT_NEAR(Diameter(labels->points), 192.0, 0.2);
+
+  auto edges = LoadQueryEdges(WriteEdgeImage(hand.image, "edges.png"), ImageEdgeOptions{});
+  ASSERT_TRUE(edges.ok()) << edges.status().ToString();
+  EXPECT_EQ(edges->kind, QueryInputKind::kEdges);
+  // Same pixels, same normalisation: identical points.
+  EXPECT_EQ(edges->diameter_px, labels->diameter_px);
+  EXPECT_EQ(edges->centre_x, labels->centre_x);
+  EXPECT_EQ(edges->centre_y, labels->centre_y);
+  ASSERT_EQ(edges->points.size(), labels->points.size());
+
+  auto photo = LoadQueryEdges(WritePhoto(hand.image, "photo.png"), ImageEdgeOptions{});
+  ASSERT_TRUE(photo.ok()) << photo.status().ToString();
+  EXPECT_EQ(photo->kind, QueryInputKind::kPhoto);
+  // Skin segmentation recovers the silhouette: same normalisation (within a pixel).
+  EXPECT_NEAR(photo->diameter_px, labels->diameter_px, 1.5);
+  EXPECT_NEAR(photo->centre_x, labels->centre_x, 1.0);
+  EXPECT_NEAR(photo->centre_y, labels->centre_y, 1.0);
+  EXPECT_GT(photo->points.size(), labels->points.size() / 2);
+}
+
+TEST_F(ImageEdgesTest, LabelQueryUsesTheGivenEdgeOptions) {
+  SyntheticHandParams p;
+  p.folded = {false, true, true, false, false};  // two fingers folded over the palm
+  const SyntheticHand hand = RenderSyntheticHand(p);
+  const fs::path exr = dir_ / "folded.exr";
+  ASSERT_TRUE(WriteLabelExr(exr, hand.image).ok());
+  auto points = [&](const EdgeOptions& edges) {
+    ImageEdgeOptions o;
+    o.label_edges = edges;
+    auto q = LoadQueryEdges(exr, o);
+    EXPECT_TRUE(q.ok()) << q.status().ToString();
+    return q.ok() ? q->points : std::vector<PointQ>{};
+  };
+  EdgeOptions off;
+  off.occlusion_edges = false;
+  // The converter's own rule gives the same points as the query path, for each option.
+  for (const EdgeOptions& e : {EdgeOptions{}, off}) {
+    const EdgeResult direct = ExtractEdges(hand.image, DefaultJointPairs(), e);
+    auto norm = ComputeNormalisation(direct.silhouette);
+    ASSERT_TRUE(norm.ok());
+    auto xy = [](const std::vector<PointQ>& v) {
+      std::vector<std::pair<int, int>> out;
+      for (const PointQ& q : v) out.emplace_back(q.x, q.y);
+      return out;
+    };
+    EXPECT_EQ(xy(points(e)), xy(NormalisePixels(direct.edges, *norm)));
+  }
+  EXPECT_GT(points(EdgeOptions{}).size(), points(off).size());  // occlusion edges add points
+  ImageEdgeOptions bad;
+  bad.label_edges.depth_jump = 0;
+  EXPECT_FALSE(bad.Check());
+}
+
+TEST_F(ImageEdgesTest, PhotoOfADatabaseViewFindsIt) {
+  // A small database of label-path views at several in-plane angles and bends; the photo of one
+  // of them must come back first.
+  std::vector<ViewLabel> db_labels;
+  std::vector<std::vector<PointQ>> db_points;
+  for (int i = 0; i < 12; ++i) {
+    const SyntheticHand h = Hand(0.5 * i, 0.05 * (i % 4));
+    const fs::path exr = dir_ / ("v" + std::to_string(i) + ".exr");
+    ASSERT_TRUE(WriteLabelExr(exr, h.image).ok());
+    auto q = LoadQueryEdges(exr, ImageEdgeOptions{});
+    ASSERT_TRUE(q.ok());
+    ViewLabel l;
+    l.render_id = i;
+    l.shape_id = 0;
+    db_labels.push_back(l);
+    db_points.push_back(q->points);
+  }
+  const auto db = std::make_shared<const Database>(
+      Database::FromMemory(db_labels, db_points, 8, {"synthetic"}));
+  const Searcher searcher(db);
+  const SyntheticHand target = Hand(0.5 * 7, 0.05 * 3);
+  auto photo = LoadQueryEdges(WritePhoto(target.image, "q.png", 9), ImageEdgeOptions{});
+  ASSERT_TRUE(photo.ok());
+  SearchOptions o;
+  o.top_k = 3;
+  o.num_threads = 2;
+  auto res = searcher.Search(photo->points_px(), o);
+  ASSERT_TRUE(res.ok());
+  EXPECT_EQ((*res)[0].view_id, 7u);
+  EXPECT_EQ((*res)[0].roll, 0u);
+  EXPECT_EQ((*res)[0].shape_name, "synthetic");
+
+  // And the contact sheet is a readable PNG with input, query and match tiles.
+  std::vector<SheetTile> tiles;
+  for (const Match& m : *res) {
+    SheetTile t;
+    t.caption = "#" + std::to_string(tiles.size() + 1);
+    for (const PointQ& p : db->points(m.view_id)) t.points.push_back(p);
+    tiles.push_back(t);
+  }
+  const fs::path sheet = dir_ / "sheet.png";
+  ASSERT_TRUE(WriteContactSheet(sheet, dir_ / "q.png", *photo, tiles, ContactSheetOptions{}).ok());
+  const cv::Mat img = cv::imread(sheet.string());
+  ASSERT_FALSE(img.empty());
+  EXPECT_EQ(img.cols, 4 * 240 + 5 * 4);  // 5 tiles in 4 columns -> 2 rows
+  EXPECT_EQ(img.rows, 2 * (240 + 22) + 3 * 4);
+}
+
+TEST_F(ImageEdgesTest, MaskAndRoi) {
+  const SyntheticHand hand = Hand(-0.4);
+  const fs::path photo = WritePhoto(hand.image, "p.png");
+  // A mask replaces skin colour: here a mask of the true hand region.
+  cv::Mat mask = cv::Mat::zeros(hand.image.height, hand.image.width, CV_8U);
+  for (int y = 0; y < mask.rows; ++y) {
+    for (int x = 0; x < mask.cols; ++x) mask.at<uint8_t>(y, x) = hand.image.label(x, y) ? 255 : 0;
+  }
+  ASSERT_TRUE(cv::imwrite((dir_ / "mask.png").string(), mask));
+  ImageEdgeOptions o;
+  o.mask = dir_ / "mask.png";
+  auto with_mask = LoadQueryEdges(photo, o);
+  ASSERT_TRUE(with_mask.ok()) << with_mask.status().ToString();
+  EXPECT_EQ(with_mask->hand_pixels, static_cast<int64_t>(cv::countNonZero(mask)));
+
+  // A wrong-size mask, a missing mask.
+  ASSERT_TRUE(cv::imwrite((dir_ / "small.png").string(), cv::Mat::zeros(10, 10, CV_8U)));
+  o.mask = dir_ / "small.png";
+  EXPECT_EQ(LoadQueryEdges(photo, o).status().code(), StatusCode::kBadImage);
+  o.mask = dir_ / "none.png";
+  EXPECT_EQ(LoadQueryEdges(photo, o).status().code(), StatusCode::kNotFound);
+
+  // An ROI away from the hand finds nothing; one outside the image is a bad argument.
+  ImageEdgeOptions r;
+  r.roi = {0, 0, 20, 20};
+  EXPECT_EQ(LoadQueryEdges(photo, r).status().code(), StatusCode::kNoHand);
+  r.roi = {300, 280, 50, 50};
+  EXPECT_EQ(LoadQueryEdges(photo, r).status().code(), StatusCode::kInvalidArgument);
+  r.roi = {0, 0, 320, 300};
+  EXPECT_TRUE(LoadQueryEdges(photo, r).ok());
+}
+
+TEST_F(ImageEdgesTest, BadInputs) {
+  ImageEdgeOptions o;
+  EXPECT_EQ(LoadQueryEdges(dir_ / "missing.png", o).status().code(), StatusCode::kNotFound);
+  {
+    std::ofstream f(dir_ / "garbage.png");
+    f << "this is not a png";
+  }
+  auto garbage = LoadQueryEdges(dir_ / "garbage.png", o);
+  EXPECT_EQ(garbage.status().code(), StatusCode::kBadImage);
+  EXPECT_NE(garbage.status().message().find("garbage.png"), std::string::npos);
+  // No skin anywhere.
+  ASSERT_TRUE(cv::imwrite((dir_ / "blue.png").string(),
+                          cv::Mat(100, 120, CV_8UC3, cv::Scalar(200, 60, 20))));
+  auto blue = LoadQueryEdges(dir_ / "blue.png", o);
+  EXPECT_EQ(blue.status().code(), StatusCode::kNoHand);
+  // An all-black edge image, forced as edges.
+  ASSERT_TRUE(cv::imwrite((dir_ / "black.png").string(), cv::Mat::zeros(50, 50, CV_8U)));
+  o.kind = QueryInputKind::kEdges;
+  EXPECT_EQ(LoadQueryEdges(dir_ / "black.png", o).status().code(), StatusCode::kNoHand);
+  // A label EXR that is not an EXR.
+  o.kind = QueryInputKind::kAuto;
+  {
+    std::ofstream f(dir_ / "bad.exr");
+    f << "nope";
+  }
+  EXPECT_FALSE(LoadQueryEdges(dir_ / "bad.exr", o).ok());
+}
+
+TEST(ImageEdges, ParsePixelRectAndOptions) {
+  auto r = ParsePixelRect("10,20,30,40");
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->x, 10);
+  EXPECT_EQ(r->height, 40);
+  for (const char* bad : {"", "1,2,3", "1,2,3,4,5", "a,b,c,d", "1,2,0,4", "-1,2,3,4", "1,2,3,4 "}) {
+    EXPECT_FALSE(ParsePixelRect(bad).ok()) << bad;
+  }
+  EXPECT_TRUE(ImageEdgeOptions{}.Check());
+  ImageEdgeOptions o;
+  o.skin.cr_min = 200;
+  o.skin.cr_max = 100;
+  EXPECT_FALSE(o.Check());
+  o = {};
+  o.canny_low = 200;
+  o.canny_high = 100;
+  EXPECT_FALSE(o.Check());
+  EXPECT_EQ(*ParseQueryInputKind("photo"), QueryInputKind::kPhoto);
+  EXPECT_FALSE(ParseQueryInputKind("video").ok());
+}
+
+}  // namespace
+}  // namespace handdb

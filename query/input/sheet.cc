@@ -1,0 +1,116 @@
+#include "query/input/sheet.h"
+
+#include <algorithm>
+#include <cmath>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "base/atomic_file.h"
+
+namespace handdb {
+namespace {
+
+const cv::Scalar kWhite(255, 255, 255);
+const cv::Scalar kBlack(0, 0, 0);
+const cv::Scalar kQueryColour(150, 150, 255);  // light red (BGR)
+const cv::Scalar kGreen(0, 200, 0);
+constexpr int kCaptionPx = 22;
+
+void DrawPoints(cv::Mat& tile,
+                std::span<const PointQ> pts,
+                const cv::Scalar& colour,
+                const ContactSheetOptions& o) {
+  const double s = o.tile_px / (2.0 * o.extent_px);
+  const cv::Vec3b c(static_cast<uint8_t>(colour[0]),
+                    static_cast<uint8_t>(colour[1]),
+                    static_cast<uint8_t>(colour[2]));
+  for (const PointQ& p : pts) {
+    const int x = static_cast<int>(std::floor((PointQToPx(p.x) + o.extent_px) * s));
+    const int y = static_cast<int>(std::floor((PointQToPx(p.y) + o.extent_px) * s)) + kCaptionPx;
+    if (x >= 0 && x < tile.cols && y >= kCaptionPx && y < tile.rows) tile.at<cv::Vec3b>(y, x) = c;
+  }
+}
+
+void Caption(cv::Mat& tile, const std::string& text) {
+  cv::putText(tile, text, {4, 16}, cv::FONT_HERSHEY_SIMPLEX, 0.42, kBlack, 1, cv::LINE_AA);
+}
+
+}  // namespace
+
+bool ContactSheetOptions::Check() const {
+  CHECK_OPTION_GE(tile_px, 64);
+  CHECK_OPTION_LE(tile_px, 2048);
+  CHECK_OPTION_GE(columns, 1);
+  CHECK_OPTION_GT(extent_px, 0.0f);
+  return true;
+}
+
+Status WriteContactSheet(const std::filesystem::path& out_png,
+                         const std::filesystem::path& input_image,
+                         const QueryEdges& query,
+                         std::span<const SheetTile> matches,
+                         const ContactSheetOptions& options) {
+  THROW_CHECK(options.Check());
+  const int t = options.tile_px;
+  const int th = t + kCaptionPx;
+  std::vector<cv::Mat> tiles;
+
+  if (!input_image.empty()) {
+    cv::Mat img = query.kind == QueryInputKind::kLabels
+                      ? cv::Mat()
+                      : cv::imread(input_image.string(), cv::IMREAD_COLOR);
+    cv::Mat tile(th, t, CV_8UC3, kWhite);
+    if (img.empty()) {
+      // Label EXRs are not images OpenCV reads: draw the source edge pixels instead.
+      img = cv::Mat(std::max(query.height, 1), std::max(query.width, 1), CV_8UC3, kWhite);
+    }
+    for (const EdgePixelXY& p : query.edge_pixels) {
+      if (p.x >= 0 && p.y >= 0 && p.x < img.cols && p.y < img.rows) {
+        img.at<cv::Vec3b>(p.y, p.x) = cv::Vec3b(0, 200, 0);
+      }
+    }
+    const double s = std::min(static_cast<double>(t) / img.cols, static_cast<double>(t) / img.rows);
+    cv::Mat small;
+    cv::resize(
+        img,
+        small,
+        {std::max(1, static_cast<int>(img.cols * s)), std::max(1, static_cast<int>(img.rows * s))},
+        0,
+        0,
+        cv::INTER_AREA);
+    small.copyTo(tile(
+        cv::Rect((t - small.cols) / 2, kCaptionPx + (t - small.rows) / 2, small.cols, small.rows)));
+    Caption(tile, "input (" + std::string(QueryInputKindName(query.kind)) + ")");
+    tiles.push_back(tile);
+  }
+  {
+    cv::Mat tile(th, t, CV_8UC3, kWhite);
+    DrawPoints(tile, query.points, kBlack, options);
+    Caption(tile, "query: " + std::to_string(query.points.size()) + " edge points");
+    tiles.push_back(tile);
+  }
+  for (const SheetTile& m : matches) {
+    cv::Mat tile(th, t, CV_8UC3, kWhite);
+    DrawPoints(tile, query.points, kQueryColour, options);
+    DrawPoints(tile, m.points, kBlack, options);
+    Caption(tile, m.caption);
+    tiles.push_back(tile);
+  }
+  const int cols = std::min<int>(options.columns, static_cast<int>(tiles.size()));
+  const int rows = (static_cast<int>(tiles.size()) + cols - 1) / cols;
+  cv::Mat sheet(
+      rows * th + (rows + 1) * 4, cols * t + (cols + 1) * 4, CV_8UC3, cv::Scalar(200, 200, 200));
+  for (size_t i = 0; i < tiles.size(); ++i) {
+    const int r = static_cast<int>(i) / cols;
+    const int c = static_cast<int>(i) % cols;
+    tiles[i].copyTo(sheet(cv::Rect(4 + c * (t + 4), 4 + r * (th + 4), t, th)));
+  }
+  std::vector<uchar> png;
+  if (!cv::imencode(".png", sheet, png)) {
+    return Status(StatusCode::kIoError, out_png.string() + ": PNG encoding failed");
+  }
+  return WriteFileAtomic(out_png,
+                         std::string_view(reinterpret_cast<const char*>(png.data()), png.size()));
+}
+
+}  // namespace handdb

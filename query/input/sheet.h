@@ -1,0 +1,39 @@
+// A contact sheet PNG for one query, so a person sees at a glance whether the answer is right:
+// the input image (with its edges in green), the query's normalised edges, then one tile per
+// match with the match's edges (black) over the query's (light red) and a caption
+// "#rank  D_c  shape  roll".
+#pragma once
+
+#include <filesystem>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "base/status.h"
+#include "format/view.h"
+#include "query/input/image_edges.h"
+
+namespace handdb {
+
+struct SheetTile {
+  std::string caption;
+  std::vector<PointQ> points;  // normalised frame (for a match: the rolled view)
+};
+
+struct ContactSheetOptions {
+  int tile_px = 240;  // square tiles
+  int columns = 4;
+  float extent_px = 175;  // normalised frame shown: [-extent, extent]^2
+  bool Check() const;
+};
+
+// `input_image` may be empty (no input tile); `query` gives the input's edge pixels and the
+// normalised query points. Written atomically. kBadImage if the input cannot be read, kIoError
+// on write failure.
+Status WriteContactSheet(const std::filesystem::path& out_png,
+                         const std::filesystem::path& input_image,
+                         const QueryEdges& query,
+                         std::span<const SheetTile> matches,
+                         const ContactSheetOptions& options);
+
+}  // namespace handdb
