@@ -3,9 +3,10 @@
 
 #include <CLI/CLI.hpp>
 #include <cstdio>
+#include <string_view>
 
-#include "cli/commands.h"
 #include "base/status.h"
+#include "cli/commands.h"
 
 namespace handdb::cli {
 
@@ -22,9 +23,18 @@ inline int ParseArgs(CLI::App& app, int argc, char** argv) {
   return -1;
 }
 
-// "handdb <cmd>: <message>" on stderr; exit 1 (130 when the run was interrupted).
-inline int Fail(const char* cmd, const Status& status) {
-  std::fprintf(stderr, "handdb %s: %s\n", cmd, status.message().c_str());
+// "handdb <cmd>: <message>" on stderr.
+inline void PrintError(std::string_view cmd, const Status& status) {
+  std::fprintf(stderr,
+               "handdb %.*s: %s\n",
+               static_cast<int>(cmd.size()),
+               cmd.data(),
+               status.message().c_str());
+}
+
+// PrintError; exit 1 (130 when the run was interrupted).
+inline int Fail(std::string_view cmd, const Status& status) {
+  PrintError(cmd, status);
   return status.code() == StatusCode::kCancelled ? kExitInterrupted : kExitError;
 }
 

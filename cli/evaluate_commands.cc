@@ -319,49 +319,42 @@ int RunEvaluate(int argc, char** argv) {
       "--slurm the test views are split over a Slurm job array and the parts merged into the same "
       "report (docs/cluster.md).",
       "handdb evaluate");
-  std::string db_dir;
-  std::string testset_path;
-  std::string json_out;
-  std::string plots_dir;
-  EvaluateFlags flags;
-  bool quiet = false;
+  // Bound to the request of a Slurm run; a local run reads the same fields.
+  EvaluateSlurmRequest request;
+  const std::string& db_dir = request.db;
+  const std::string& testset_path = request.testset;
+  const std::string& json_out = request.json_out;
+  const std::string& plots_dir = request.plots_dir;
+  EvaluateFlags& flags = request.flags;
+  const bool& quiet = request.quiet;
   SlurmFlags slurm;
-  uint32_t tasks = 0;
-  std::string work;
-  app.add_option("db", db_dir, "database directory (manifest.json + shards)")->required();
-  app.add_option("testset", testset_path, "test-set directory (or its testset.json)")->required();
-  app.add_option("--json", json_out, "write the full report (schemas/evaluation.schema.json)");
-  app.add_option("--plots", plots_dir, "write PNG plots and example sheets into this directory");
+  app.add_option("db", request.db, "database directory (manifest.json + shards)")->required();
+  app.add_option("testset", request.testset, "test-set directory (or its testset.json)")
+      ->required();
+  app.add_option(
+      "--json", request.json_out, "write the full report (schemas/evaluation.schema.json)");
+  app.add_option(
+      "--plots", request.plots_dir, "write PNG plots and example sheets into this directory");
   flags.Add(app);
-  app.add_flag("-q,--quiet", quiet, "no progress, no text report");
+  app.add_flag("-q,--quiet", request.quiet, "no progress, no text report");
   slurm.Add(app);
   const char* group = "Slurm (docs/cluster.md)";
-  app.add_option("--tasks", tasks, "array tasks (default: one per 16 test views, at most 1000)")
+  app.add_option(
+         "--tasks", request.tasks, "array tasks (default: one per 16 test views, at most 1000)")
       ->check(CLI::Range(1, 100000))
       ->group(group);
   app.add_option("--work",
-                 work,
+                 request.work,
                  "directory for parts, scripts and logs (default: "
                  "TESTSET/slurm-evaluations/<fingerprint>)")
       ->group(group);
   if (int rc = ParseArgs(app, argc, argv); rc >= 0) return rc;
   if (!flags.Finish("evaluate", quiet)) return kExitUsage;
-  if (!slurm.enabled && (tasks != 0 || !work.empty())) {
+  if (!slurm.enabled && (request.tasks != 0 || !request.work.empty())) {
     std::fprintf(stderr, "handdb evaluate: --tasks and --work need --slurm\n");
     return kExitUsage;
   }
-  if (slurm.enabled) {
-    EvaluateSlurmRequest request;
-    request.db = db_dir;
-    request.testset = testset_path;
-    request.json_out = json_out;
-    request.plots_dir = plots_dir;
-    request.flags = flags;
-    request.tasks = tasks;
-    request.work = work;
-    request.quiet = quiet;
-    return RunEvaluateOnSlurm(request, slurm);
-  }
+  if (slurm.enabled) return RunEvaluateOnSlurm(request, slurm);
 
   auto testset = ReadTestSet(testset_path);
   if (!testset.ok()) return Fail("evaluate", testset.status());

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "cli/cli_util.h"
 #include "cli/commands.h"
 #include "base/json_schema.h"
 #include "format/manifest.h"
@@ -24,11 +25,6 @@ namespace fs = std::filesystem;
 using json = nlohmann::json;
 
 constexpr double kDeg = 180.0 / M_PI;
-
-int Fail(const Status& status) {
-  std::fprintf(stderr, "handdb query: %s\n", status.message().c_str());
-  return kExitError;
-}
 
 // "a,b,c,..." -> exactly n integers.
 bool ParseInts(const std::string& text, size_t n, std::vector<int>* out) {
@@ -133,34 +129,37 @@ void PrintTable(const std::vector<Match>& matches,
   }
 }
 
-}  // namespace
+// The flags of `handdb query`, bound to the option structs they set.
+struct QueryFlags {
+  std::string db_dir, image, sheet, mask, roi, skin, canny;
+  std::string input = "auto";
+  std::string kdtree = std::string(KdTreeBackendName(SearchOptions{}.kdtree));
+  bool as_json = false, verify = false;
+  SearchOptions search;
+  ImageEdgeOptions edges;
+  void Add(CLI::App& app);
+  // Completes `edges` and `search` from the text flags; false (message printed) on bad usage.
+  bool Finish();
+};
 
-int RunQuery(int argc, char** argv) {
-  CLI::App app{
-      "Finds the database views most similar to a picture of a hand: exact top-k by the undirected "
-      "chamfer distance D_c over every (view, roll), pruned with distance-transform lower bounds "
-      "(docs/query.md). IMAGE is a photo (PNG/JPEG: skin-colour segmentation, or --mask), an "
-      "edge image (non-zero pixels are edges) or a Blender label EXR.",
-      "handdb query"};
-  std::string db_dir, image, sheet, mask, roi, input = "auto", kdtree = "nanoflann", skin, canny;
-  int top = 10;
-  int threads = -1;
-  bool as_json = false, brute = false, verify = false;
-  float dt_cell = 1.0f;
+void QueryFlags::Add(CLI::App& app) {
   app.add_option("DB", db_dir, "database directory (manifest.json + shards)")->required();
   app.add_option("IMAGE", image, "query image: photo, edge image or label EXR")->required();
-  app.add_option("--top", top, "number of matches")
+  app.add_option("--top", search.top_k, "number of matches")
       ->check(CLI::Range(1, 100000))
       ->capture_default_str();
   app.add_flag("--json", as_json, "print the result as JSON (schemas/query_result.schema.json)");
   app.add_option("--sheet", sheet, "write a contact sheet PNG: input, its edges, the top matches");
-  app.add_option("--threads", threads, "worker threads (-1: all cores)")->capture_default_str();
-  app.add_flag(
-      "--bruteforce", brute, "exact D_c for every (view, roll), no pruning (the reference)");
+  app.add_option("--threads", search.num_threads, "worker threads (-1: all cores)")
+      ->capture_default_str();
+  app.add_flag("--bruteforce",
+               search.brute_force,
+               "exact D_c for every (view, roll), no pruning (the reference)");
   app.add_option("--kdtree", kdtree, "kd-tree backend")
       ->check(CLI::IsMember({"nanoflann", "pcl"}))
       ->capture_default_str();
-  app.add_option("--dt-cell", dt_cell, "distance-transform grid step in px (1, 0.5, 0.25, ...)")
+  app.add_option(
+         "--dt-cell", search.dt_cell_px, "distance-transform grid step in px (1, 0.5, 0.25, ...)")
       ->capture_default_str();
   app.add_option("--input",
                  input,
@@ -175,64 +174,147 @@ int RunQuery(int argc, char** argv) {
                  "40,255,133,173,77,127)");
   app.add_option("--canny", canny, "photo: Canny thresholds low,high (default 40,120)");
   app.add_flag("--verify", verify, "hash every shard section before searching");
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e) == 0 ? kExitOk : kExitUsage;
-  }
-  if (threads == 0 || threads < -1) {
-    std::fprintf(stderr, "handdb query: --threads must be -1 or >= 1\n");
-    return kExitUsage;
-  }
+}
 
-  ImageEdgeOptions edge_options;
-  edge_options.kind = *ParseQueryInputKind(input);
-  edge_options.mask = mask;
+bool QueryFlags::Finish() {
+  if (search.num_threads == 0 || search.num_threads < -1) {
+    std::fprintf(stderr, "handdb query: --threads must be -1 or >= 1\n");
+    return false;
+  }
+  edges.kind = *ParseQueryInputKind(input);
+  edges.mask = mask;
   if (!roi.empty()) {
     auto r = ParsePixelRect(roi);
     if (!r.ok()) {
       std::fprintf(stderr, "handdb query: --roi: %s\n", r.status().message().c_str());
-      return kExitUsage;
+      return false;
     }
-    edge_options.roi = *r;
+    edges.roi = *r;
   }
   std::vector<int> v;
   if (!skin.empty()) {
     if (!ParseInts(skin, 6, &v)) {
       std::fprintf(stderr,
                    "handdb query: --skin needs six integers Ymin,Ymax,Crmin,Crmax,Cbmin,Cbmax\n");
-      return kExitUsage;
+      return false;
     }
-    edge_options.skin = {v[0], v[1], v[2], v[3], v[4], v[5]};
+    edges.skin = {v[0], v[1], v[2], v[3], v[4], v[5]};
   }
   if (!canny.empty()) {
     if (!ParseInts(canny, 2, &v)) {
       std::fprintf(stderr, "handdb query: --canny needs two integers low,high\n");
-      return kExitUsage;
+      return false;
     }
-    edge_options.canny_low = v[0];
-    edge_options.canny_high = v[1];
+    edges.canny_low = v[0];
+    edges.canny_high = v[1];
   }
-  if (!edge_options.Check()) {
+  if (!edges.Check()) {
     std::fprintf(stderr, "handdb query: invalid photo options (see above)\n");
-    return kExitUsage;
+    return false;
   }
-  SearchOptions search;
-  search.top_k = top;
-  search.num_threads = threads;
-  search.brute_force = brute;
   search.kdtree = *ParseKdTreeBackend(kdtree);
-  search.dt_cell_px = dt_cell;
   if (!search.Check()) {
     std::fprintf(stderr, "handdb query: invalid search options (see above)\n");
-    return kExitUsage;
+    return false;
   }
+  return true;
+}
+
+// The contact sheet of --sheet: the input, its edges and each match's edges at its roll.
+Status WriteSheet(const QueryFlags& flags,
+                  const QueryEdges& query,
+                  const std::vector<Match>& matches,
+                  const Database& db) {
+  std::vector<SheetTile> tiles;
+  int rank = 1;
+  for (const Match& m : matches) {
+    SheetTile t;
+    char caption[128];
+    std::snprintf(caption,
+                  sizeof(caption),
+                  "#%d  D=%.2f  %s  r=%.0f",
+                  rank++,
+                  m.distance,
+                  m.shape_name.empty() ? ("shape " + std::to_string(m.label.shape_id)).c_str()
+                                       : m.shape_name.c_str(),
+                  Deg0To360(m.roll_angle));
+    t.caption = caption;
+    std::vector<Point2f> rolled;
+    RollPoints(db.points(m.view_id), m.roll_angle, &rolled);
+    for (const Point2f& p : rolled) {
+      t.points.push_back({static_cast<int16_t>(std::lround(p.x * kPointScale)),
+                          static_cast<int16_t>(std::lround(p.y * kPointScale))});
+    }
+    tiles.push_back(std::move(t));
+  }
+  return WriteContactSheet(flags.sheet, flags.image, query, tiles, ContactSheetOptions{});
+}
+
+// The --json document (schemas/query_result.schema.json).
+json ResultJson(const QueryFlags& flags,
+                const QueryEdges& query,
+                const std::vector<Match>& matches,
+                const SearchStats& stats,
+                const Database& db) {
+  json matches_json = json::array();
+  int rank = 1;
+  for (const Match& m : matches) matches_json.push_back(MatchJson(m, rank++));
+  const SearchOptions& search = flags.search;
+  return {{"format", "handdb-query-result"},
+          {"version", 1},
+          {"tool_version", HANDDB_VERSION},
+          {"database", flags.db_dir},
+          {"image", flags.image},
+          {"input_kind", std::string(QueryInputKindName(query.kind))},
+          {"query",
+           {{"edge_points", query.points.size()},
+            {"width", query.width},
+            {"height", query.height},
+            {"hand_pixels", query.hand_pixels},
+            {"touches_border", query.touches_border},
+            {"diameter_px", query.diameter_px},
+            {"centre_px", {query.centre_x, query.centre_y}},
+            {"scale", query.scale}}},
+          {"options",
+           {{"top_k", search.top_k},
+            {"threads", ResolveThreadCount(search.num_threads)},
+            {"brute_force", search.brute_force},
+            {"kdtree", flags.kdtree},
+            {"dt_cell_px", search.dt_cell_px}}},
+          {"stats",
+           {{"virtual_views", stats.virtual_views},
+            {"canonical_views", db.num_views()},
+            {"rolls", db.num_rolls()},
+            {"refined", stats.refined},
+            {"abandoned", stats.abandoned},
+            {"view_kdtrees", stats.view_trees},
+            {"seconds", stats.seconds_total},
+            {"seconds_bounds", stats.seconds_bounds},
+            {"seconds_refine", stats.seconds_refine}}},
+          {"matches", matches_json}};
+}
+
+}  // namespace
+
+int RunQuery(int argc, char** argv) {
+  CLI::App app{
+      "Finds the database views most similar to a picture of a hand: exact top-k by the undirected "
+      "chamfer distance D_c over every (view, roll), pruned with distance-transform lower bounds "
+      "(docs/query.md). IMAGE is a photo (PNG/JPEG: skin-colour segmentation, or --mask), an "
+      "edge image (non-zero pixels are edges) or a Blender label EXR.",
+      "handdb query"};
+  QueryFlags flags;
+  flags.Add(app);
+  if (int rc = ParseArgs(app, argc, argv); rc >= 0) return rc;
+  if (!flags.Finish()) return kExitUsage;
+  const std::string& db_dir = flags.db_dir;
+  ImageEdgeOptions& edge_options = flags.edges;
 
   // Open the database first: a broken database is reported before any image work.
-  auto db = Database::Open(db_dir, verify);
-  if (!db.ok()) return Fail(db.status());
+  auto db = Database::Open(db_dir, flags.verify);
+  if (!db.ok()) return Fail("query", db.status());
   if (db->num_views() == 0)
-    return Fail(Status(StatusCode::kNotFound, db_dir + ": the database has no views"));
+    return Fail("query", Status(StatusCode::kNotFound, db_dir + ": the database has no views"));
   auto shared_db = std::make_shared<const Database>(std::move(db).value());
   const Searcher searcher(shared_db);
 
@@ -244,84 +326,29 @@ int RunQuery(int argc, char** argv) {
       edge_options.label_edges = recorded->edges;
       edge_options.label_joint_pairs = recorded->joint_pairs;
     } else if (recorded.status().code() != StatusCode::kNotFound) {
-      return Fail(recorded.status());
+      return Fail("query", recorded.status());
     }
   }
-  auto query = LoadQueryEdges(image, edge_options);
-  if (!query.ok()) return Fail(query.status());
+  auto query = LoadQueryEdges(flags.image, edge_options);
+  if (!query.ok()) return Fail("query", query.status());
   SearchStats stats;
-  auto matches = searcher.Search(query->points_px(), search, &stats);
-  if (!matches.ok()) return Fail(matches.status());
+  auto matches = searcher.Search(query->points_px(), flags.search, &stats);
+  if (!matches.ok()) return Fail("query", matches.status());
 
-  if (!sheet.empty()) {
-    std::vector<SheetTile> tiles;
-    int rank = 1;
-    for (const Match& m : *matches) {
-      SheetTile t;
-      char caption[128];
-      std::snprintf(caption,
-                    sizeof(caption),
-                    "#%d  D=%.2f  %s  r=%.0f",
-                    rank++,
-                    m.distance,
-                    m.shape_name.empty() ? ("shape " + std::to_string(m.label.shape_id)).c_str()
-                                         : m.shape_name.c_str(),
-                    Deg0To360(m.roll_angle));
-      t.caption = caption;
-      std::vector<Point2f> rolled;
-      RollPoints(shared_db->points(m.view_id), m.roll_angle, &rolled);
-      for (const Point2f& p : rolled) {
-        t.points.push_back({static_cast<int16_t>(std::lround(p.x * kPointScale)),
-                            static_cast<int16_t>(std::lround(p.y * kPointScale))});
-      }
-      tiles.push_back(std::move(t));
-    }
-    const Status st = WriteContactSheet(sheet, image, *query, tiles, ContactSheetOptions{});
-    if (!st.ok()) return Fail(st);
+  if (!flags.sheet.empty()) {
+    const Status st = WriteSheet(flags, *query, *matches, *shared_db);
+    if (!st.ok()) return Fail("query", st);
   }
 
-  if (as_json) {
-    json matches_json = json::array();
-    int rank = 1;
-    for (const Match& m : *matches) matches_json.push_back(MatchJson(m, rank++));
-    json doc = {{"format", "handdb-query-result"},
-                {"version", 1},
-                {"tool_version", HANDDB_VERSION},
-                {"database", db_dir},
-                {"image", image},
-                {"input_kind", std::string(QueryInputKindName(query->kind))},
-                {"query",
-                 {{"edge_points", query->points.size()},
-                  {"width", query->width},
-                  {"height", query->height},
-                  {"hand_pixels", query->hand_pixels},
-                  {"touches_border", query->touches_border},
-                  {"diameter_px", query->diameter_px},
-                  {"centre_px", {query->centre_x, query->centre_y}},
-                  {"scale", query->scale}}},
-                {"options",
-                 {{"top_k", top},
-                  {"threads", ResolveThreadCount(threads)},
-                  {"brute_force", brute},
-                  {"kdtree", kdtree},
-                  {"dt_cell_px", dt_cell}}},
-                {"stats",
-                 {{"virtual_views", stats.virtual_views},
-                  {"canonical_views", shared_db->num_views()},
-                  {"rolls", shared_db->num_rolls()},
-                  {"refined", stats.refined},
-                  {"abandoned", stats.abandoned},
-                  {"view_kdtrees", stats.view_trees},
-                  {"seconds", stats.seconds_total},
-                  {"seconds_bounds", stats.seconds_bounds},
-                  {"seconds_refine", stats.seconds_refine}}},
-                {"matches", matches_json}};
+  if (flags.as_json) {
+    const json doc = ResultJson(flags, *query, *matches, stats, *shared_db);
     const Status valid = ValidateJson(doc, "query_result.schema.json", "query result");
-    if (!valid.ok()) return Fail(valid);  // a bug, but never print JSON that breaks the schema
+    // A bug, but never print JSON that breaks the schema.
+    if (!valid.ok()) return Fail("query", valid);
     std::printf("%s\n", doc.dump(2).c_str());
   } else {
     PrintTable(*matches, *query, stats, *shared_db);
-    if (!sheet.empty()) std::printf("\ncontact sheet: %s\n", sheet.c_str());
+    if (!flags.sheet.empty()) std::printf("\ncontact sheet: %s\n", flags.sheet.c_str());
   }
   return kExitOk;
 }
