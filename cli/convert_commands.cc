@@ -15,6 +15,7 @@
 
 #include "cli/cli_util.h"
 #include "cli/commands.h"
+#include "cli/slurm_cli.h"
 #include "cli/slurm_commands.h"
 #include "base/atomic_file.h"
 #include "base/json_schema.h"
@@ -32,29 +33,8 @@ namespace {
 namespace fs = std::filesystem;
 using json = nlohmann::json;
 
-struct EdgeFlags {
-  std::string occlusion = "on";
-  double depth_jump = EdgeOptions{}.depth_jump;
-  void Add(CLI::App& app) {
-    app.add_option("--occlusion-edges",
-                   occlusion,
-                   "keep joint-pair borders across a depth jump as occlusion edges (on|off)")
-        ->check(CLI::IsMember({"on", "off"}))
-        ->capture_default_str();
-    app.add_option("--depth-jump",
-                   depth_jump,
-                   "depth difference (scene units, metres) that makes a joint-pair border an "
-                   "occlusion edge")
-        ->check(CLI::PositiveNumber)
-        ->capture_default_str();
-  }
-  EdgeOptions Get() const {
-    EdgeOptions e;
-    e.occlusion_edges = occlusion == "on";
-    e.depth_jump = depth_jump;
-    return e;
-  }
-};
+constexpr const char* kDepthJumpHelp =
+    "depth difference (scene units, metres) that makes a joint-pair border an occlusion edge";
 
 json SummaryJson(const ConvertSummary& s, const fs::path& db_dir) {
   json skipped = json::array();
@@ -124,7 +104,7 @@ int RunConvert(int argc, char** argv) {
   app.add_flag("--skip-bad",
                options.skip_bad,
                "leave bad views out (recorded in the manifest's 'skipped') instead of failing");
-  edges.Add(app);
+  edges.Add(app, kDepthJumpHelp);
   app.add_flag("--quiet,-q", quiet, "no progress display");
   app.add_flag("--json", as_json, "print the summary as JSON on stdout");
   if (int rc = ParseArgs(app, argc, argv); rc >= 0) return rc;
@@ -166,10 +146,10 @@ int RunGenerate(int argc, char** argv) {
       ->check(CLI::PositiveNumber);
   app.add_option("--blender", blender, "Blender executable (default: $HANDDB_BLENDER or PATH)");
   app.add_flag("--skip-bad", convert.skip_bad, "leave bad views out instead of failing");
-  edges.Add(app);
+  edges.Add(app, kDepthJumpHelp);
   app.add_flag("--quiet,-q", quiet, "no progress display");
   app.add_flag("--json", as_json, "print the summary as JSON on stdout");
-  SlurmFlags slurm;  // --slurm and its options (cli/slurm_commands.h)
+  SlurmFlags slurm;  // --slurm and its options (cli/slurm_cli.h)
   slurm.Add(app);
   if (int rc = ParseArgs(app, argc, argv); rc >= 0) return rc;
   if (jobs <= 0) jobs = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
@@ -209,7 +189,11 @@ int RunGenerate(int argc, char** argv) {
   // On Slurm: one array task per unit (render + convert), then a final job (manifest, validate).
   if (slurm.enabled) {
     convert.edges = edges.Get();
-    return RunGenerateOnSlurm({db_dir, work_dir, blender, convert, quiet, as_json}, slurm);
+    // The tasks convert with the edge flags as typed here, so they convert as this run would.
+    std::vector<std::string> convert_args = edges.Typed();
+    if (convert.skip_bad) convert_args.push_back("--skip-bad");
+    return RunGenerateOnSlurm({db_dir, work_dir, blender, convert, convert_args, quiet, as_json},
+                              slurm);
   }
 
   // 2. Render.

@@ -10,7 +10,7 @@
 #include <string>
 #include <vector>
 
-#include "cli/slurm_commands.h"
+#include "cli/slurm_cli.h"
 #include "evaluate/evaluate.h"
 
 namespace handdb::cli {

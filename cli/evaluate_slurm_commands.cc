@@ -7,12 +7,12 @@
 #include <cstdio>
 #include <nlohmann/json.hpp>
 
+#include "base/atomic_file.h"
+#include "base/json_schema.h"
 #include "cli/cli_util.h"
 #include "cli/commands.h"
 #include "cli/evaluate_cli.h"
 #include "cli/slurm_cli.h"
-#include "base/atomic_file.h"
-#include "base/json_schema.h"
 #include "cluster/slurm.h"
 #include "evaluate/parts.h"
 #include "query/searcher.h"
@@ -35,12 +35,8 @@ std::vector<std::string> TaskFailures(const SlurmEvaluateLayout& layout,
                                       const SlurmSubmission& sub,
                                       const std::vector<bool>& complete,
                                       const std::vector<SlurmJobState>& jobs) {
-  const TaskFiles files{[&](uint32_t t) { return layout.TaskLog(t); },
-                        [&](uint32_t t) { return layout.TaskFailedMarker(t); },
-                        layout.log_dir(),
-                        "part"};
   std::vector<std::string> lines;
-  for (const UnitFailure& f : CollectFailures(files, sub, complete, jobs)) {
+  for (const UnitFailure& f : CollectFailures(layout.Files(), "part", sub, complete, jobs)) {
     lines.push_back("task " + std::to_string(f.unit) + ": " + f.reason +
                     "; log: " + f.log.string());
   }
@@ -49,7 +45,7 @@ std::vector<std::string> TaskFailures(const SlurmEvaluateLayout& layout,
 
 // The merge job's own one-line error, if its log has one.
 std::string MergeError(const SlurmEvaluateLayout& layout) {
-  const std::string log = ReadTrimmed(layout.final_log());
+  const std::string log = ReadTrimmed(layout.Files().final_log());
   std::string found;
   size_t pos = 0;
   while (pos < log.size()) {
@@ -162,7 +158,7 @@ int RunEvaluateOnSlurm(const EvaluateSlurmRequest& request, const SlurmFlags& fl
   // An earlier submission still running must end first (two tasks on one part do the work twice).
   PreviousSubmission previous;
   if (!flags.dry_run) {
-    auto prev = CheckPreviousSubmission(layout.jobs_file(),
+    auto prev = CheckPreviousSubmission(layout.Files().jobs_file(),
                                         "of this evaluation (" + layout.work_dir.string() + ")");
     if (!prev.ok()) return Fail(cmd, prev.status());
     previous = std::move(*prev);
@@ -179,19 +175,16 @@ int RunEvaluateOnSlurm(const EvaluateSlurmRequest& request, const SlurmFlags& fl
     }
   }
 
+  const SlurmArrayJob job = layout.Job();
+  const SlurmArrayLayout& files = job.layout;
   std::error_code ec;
-  for (const auto& dir : {layout.work_dir,
-                          layout.log_dir(),
-                          layout.failed_dir(),
-                          PartPath(layout.work_dir, 0).parent_path()}) {
-    fs::create_directories(dir, ec);
-    if (ec) {
-      return Fail(cmd,
-                  Status(StatusCode::kIoError, dir.string() + ": cannot create: " + ec.message()));
-    }
+  const fs::path parts_dir = PartPath(layout.work_dir, 0).parent_path();
+  fs::create_directories(parts_dir, ec);
+  if (ec) {
+    return Fail(
+        cmd, Status(StatusCode::kIoError, parts_dir.string() + ": cannot create: " + ec.message()));
   }
-  Status s = WriteFileAtomic(layout.array_script(), EvaluateArrayScript(layout, *options));
-  if (s.ok()) s = WriteFileAtomic(layout.final_script(), EvaluateFinalScript(layout, *options));
+  Status s = WriteJobScripts(job, *options);
   if (!s.ok()) return Fail(cmd, s);
   if (!flags.dry_run) {
     auto max_array = QueryMaxArraySize();
@@ -199,16 +192,11 @@ int RunEvaluateOnSlurm(const EvaluateSlurmRequest& request, const SlurmFlags& fl
     options->max_array_size = *max_array;
     // Markers of tasks about to be resubmitted describe an old attempt; a report of an old merge
     // must not pass for the new one.
-    for (uint32_t t : pending) fs::remove(layout.TaskFailedMarker(t), ec);
+    for (uint32_t t : pending) fs::remove(files.TaskFailedMarker(t), ec);
     fs::remove(layout.report_text(), ec);
   }
-  auto sub = SubmitArrayWithFinal(layout.array_script(),
-                                  layout.final_script(),
-                                  layout.jobs_file(),
-                                  layout.work_dir.string(),
-                                  *options,
-                                  pending,
-                                  flags.dry_run);
+  auto sub =
+      SubmitArrayWithFinal(files, layout.work_dir.string(), *options, pending, flags.dry_run);
   if (!sub.ok()) return Fail(cmd, sub.status());
 
   const std::string tasks_text = pending.empty() ? "none" : FormatArrayRanges(pending);
@@ -221,8 +209,8 @@ int RunEvaluateOnSlurm(const EvaluateSlurmRequest& request, const SlurmFlags& fl
         pending.size(),
         tasks_text.c_str(),
         layout.work_dir.c_str(),
-        layout.array_script().c_str(),
-        layout.final_script().c_str());
+        files.array_script().c_str(),
+        files.final_script().c_str());
     for (const auto& c : sub->sbatch_commands) std::printf("  %s\n", FormatCommand(c).c_str());
     return kExitOk;
   }
@@ -267,11 +255,11 @@ int RunEvaluateOnSlurm(const EvaluateSlurmRequest& request, const SlurmFlags& fl
   if (!report.ok()) {
     const std::string final_state = FinalJobState(*sub, *states);
     const std::string why = MergeError(layout);
-    return Fail(cmd,
-                Status(StatusCode::kExternalToolFailed,
-                       "merge job " + sub->final_job_id + " ended " + final_state +
-                           " without a report" + (why.empty() ? "" : " (" + why + ")") +
-                           "; log: " + layout.final_log().string()));
+    return Fail(
+        cmd,
+        Status(StatusCode::kExternalToolFailed,
+               "merge job " + sub->final_job_id + " ended " + final_state + " without a report" +
+                   (why.empty() ? "" : " (" + why + ")") + "; log: " + files.final_log().string()));
   }
   if (!request.quiet) std::printf("%s", report->c_str());
   return kExitOk;

@@ -1,35 +1,53 @@
 #include "cli/slurm_cli.h"
 
-#include <algorithm>
-#include <chrono>
 #include <cstdlib>
-#include <map>
-#include <set>
-#include <thread>
 
 #include "base/atomic_file.h"
-#include "base/progress.h"
+#include "evaluate/parts.h"
 
 namespace handdb::cli {
-namespace {
 
 namespace fs = std::filesystem;
 
-// The Slurm state of each array task of a submission, keyed by unit (the last report wins).
-std::map<uint32_t, SlurmJobState> TaskStatesByUnit(const SlurmSubmission& sub,
-                                                   const std::vector<SlurmJobState>& jobs) {
-  std::map<uint32_t, SlurmJobState> by_unit;
-  for (size_t c = 0; c < sub.array_job_ids.size() && c < sub.chunk_bases.size(); ++c) {
-    for (const auto& j : jobs) {
-      if (j.array_job_id == sub.array_job_ids[c] && j.array_task_id >= 0) {
-        by_unit[sub.chunk_bases[c] + static_cast<uint32_t>(j.array_task_id)] = j;
-      }
-    }
-  }
-  return by_unit;
+void SlurmFlags::Add(CLI::App& app) {
+  const char* group = "Slurm (docs/cluster.md)";
+  app.add_flag(
+         "--slurm", enabled, "run on a Slurm cluster: one array task per unit, then a final job")
+      ->group(group);
+  app.add_option("--partition", options.partition, "Slurm partition (default: the cluster's)")
+      ->group(group);
+  app.add_option("--max-parallel",
+                 options.max_parallel,
+                 "at most N array tasks at once (default: no limit)")
+      ->check(CLI::PositiveNumber)
+      ->group(group);
+  app.add_option(
+         "--time", options.time_limit, "time limit of each task, Slurm syntax (e.g. 1:00:00)")
+      ->group(group);
+  app.add_option(
+         "--mem", options.mem_per_task, "memory of each task, e.g. 2G (default: the cluster's)")
+      ->group(group);
+  app.add_option("--cpus-per-task", options.cpus_per_task, "CPUs of each task")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str()
+      ->group(group);
+  app.add_option("--slurm-setup",
+                 setup_file,
+                 "file of shell lines every job runs first (module load, PATH=...)")
+      ->check(CLI::ExistingFile)
+      ->group(group);
+  app.add_option("--sbatch-arg", options.sbatch_args, "extra sbatch option, verbatim (repeatable)")
+      ->allow_extra_args(false)
+      ->group(group);
+  app.add_flag("--dry-run", dry_run, "write the job scripts and print the sbatch commands only")
+      ->group(group);
+  app.add_flag("--wait", wait, "wait for the jobs and report the result (exit 1 on a failure)")
+      ->group(group);
+  app.add_option("--poll", poll_seconds, "seconds between job-state checks with --wait")
+      ->check(CLI::Range(0.1, 3600.0))
+      ->capture_default_str()
+      ->group(group);
 }
-
-}  // namespace
 
 int TaskThreads() {
   if (const char* c = std::getenv("SLURM_CPUS_PER_TASK")) {
@@ -59,17 +77,11 @@ Result<fs::path> SelfExecutable() {
 }
 
 Result<SlurmOptions> OptionsFromFlags(const SlurmFlags& flags) {
-  SlurmOptions options;
-  options.partition = flags.partition;
-  options.max_parallel = flags.max_parallel;
-  options.time_limit = flags.time;
-  options.mem_per_task = flags.mem;
-  options.cpus_per_task = flags.cpus_per_task;
-  options.sbatch_args = flags.sbatch_args;
-  if (!flags.time.empty() && !IsValidSlurmTime(flags.time)) {
-    return Status(
-        StatusCode::kInvalidArgument,
-        "--time '" + flags.time + "': not a Slurm time (M, M:S, H:M:S, D-H, D-H:M or D-H:M:S)");
+  SlurmOptions options = flags.options;
+  if (!options.time_limit.empty() && !IsValidSlurmTime(options.time_limit)) {
+    return Status(StatusCode::kInvalidArgument,
+                  "--time '" + options.time_limit +
+                      "': not a Slurm time (M, M:S, H:M:S, D-H, D-H:M or D-H:M:S)");
   }
   if (!flags.setup_file.empty()) {
     auto setup = ReadFileToString(flags.setup_file);
@@ -83,127 +95,67 @@ Result<SlurmOptions> OptionsFromFlags(const SlurmFlags& flags) {
   return options;
 }
 
-std::string JoinIds(const std::vector<std::string>& ids, const char* sep) {
-  std::string out;
-  for (const auto& id : ids) out += (out.empty() ? "" : sep) + id;
-  return out;
+SlurmArrayLayout SlurmGenerateLayout::Files() const {
+  return {slurm_dir, "generate-array.sbatch", "generate-final.sbatch", "final.log", "u"};
 }
 
-std::vector<std::string> JobIds(const SlurmSubmission& sub) {
-  std::vector<std::string> ids = sub.array_job_ids;
-  if (!sub.final_job_id.empty()) ids.push_back(sub.final_job_id);
-  return ids;
+SlurmArrayJob SlurmGenerateLayout::Job() const {
+  SlurmArrayJob job;
+  job.layout = Files();
+  job.chdir = run_dir;
+  job.generated_by = "handdb generate --slurm";
+  job.final_job_suffix = "-final";
+  job.array_comment =
+      "# Array task i renders unit BASE+i with Blender and converts it into its own shard.\n"
+      "# Safe to re-run: finished renders and valid shards are kept, so only missing work runs.\n";
+  job.final_comment = "writes the manifest and validates the database.";
+  job.task_noun = "unit";
+  job.final_noun = "finalize";
+  job.array_variables = {{"HANDDB", {handdb.string()}},
+                         {"RUN_DIR", {run_dir.string()}},
+                         {"DB_DIR", {db_dir.string()}},
+                         {"RENDER_ARGS", render_args, true},
+                         {"CONVERT_ARGS", convert_args, true}};
+  job.final_variables = {{"HANDDB", {handdb.string()}},
+                         {"RUN_DIR", {run_dir.string()}},
+                         {"DB_DIR", {db_dir.string()}},
+                         {"CONVERT_ARGS", convert_args, true}};
+  job.task_commands = {
+      {R"("$HANDDB" unit render "$RUN_DIR/plan.json" --unit "$task" --out "$RUN_DIR" --quiet )"
+       R"("${RENDER_ARGS[@]}")",
+       "handdb unit render"},
+      {R"("$HANDDB" unit convert "$RUN_DIR" --unit "$task" --out "$DB_DIR" --quiet )"
+       R"("${CONVERT_ARGS[@]}")",
+       "handdb unit convert"}};
+  job.final_command =
+      R"("$HANDDB" unit finalize "$RUN_DIR" --out "$DB_DIR" --quiet "${CONVERT_ARGS[@]}")";
+  return job;
 }
 
-Result<std::vector<std::string>> ActiveJobs(const SlurmSubmission& sub,
-                                            std::vector<SlurmJobState>* states) {
-  auto jobs = QueryJobs(JobIds(sub));
-  if (!jobs.ok()) return jobs.status();
-  std::set<std::string> active;
-  for (const auto& j : *jobs) {
-    if (IsFinishedJobState(j.state)) continue;
-    active.insert(j.array_job_id.empty() ? j.job_id : j.array_job_id);
-  }
-  if (states != nullptr) *states = *jobs;
-  return std::vector<std::string>(active.begin(), active.end());
+SlurmArrayLayout SlurmEvaluateLayout::Files() const {
+  return {work_dir, "evaluate-array.sbatch", "evaluate-merge.sbatch", "merge.log", kPartPrefix};
 }
 
-Result<PreviousSubmission> CheckPreviousSubmission(const fs::path& jobs_file,
-                                                   const std::string& of_what) {
-  PreviousSubmission previous;
-  std::error_code ec;
-  if (!fs::exists(jobs_file, ec)) return previous;
-  auto sub = ReadSubmissionRecord(jobs_file);
-  if (!sub.ok()) return sub.status();
-  previous.exists = true;
-  previous.sub = std::move(*sub);
-  auto active = ActiveJobs(previous.sub, &previous.states);
-  if (!active.ok()) return active.status();
-  if (!active->empty()) {
-    return Status(StatusCode::kInvalidArgument,
-                  "Slurm jobs " + JoinIds(*active, ", ") + " of an earlier submission " + of_what +
-                      " are still queued or running; wait for them (squeue -j " + JoinIds(*active) +
-                      ") or cancel them (scancel " + JoinIds(*active, " ") +
-                      ") and run this again");
-  }
-  return previous;
-}
-
-Result<std::vector<SlurmJobState>> WaitForJobs(const SlurmSubmission& sub,
-                                               uint64_t num_tasks,
-                                               double poll_seconds,
-                                               bool show_progress) {
-  Progress progress("slurm", num_tasks, show_progress, "tasks");
-  std::vector<SlurmJobState> states;
-  uint64_t shown = 0;
-  while (true) {
-    auto active = ActiveJobs(sub, &states);
-    if (!active.ok()) return active.status();
-    uint64_t finished = 0;
-    for (const auto& j : states) {
-      if (!j.array_job_id.empty() && j.array_task_id >= 0 && IsFinishedJobState(j.state)) {
-        ++finished;
-      }
-    }
-    finished = std::min<uint64_t>(finished, num_tasks);
-    if (finished > shown) {
-      progress.Add(finished - shown);
-      shown = finished;
-    }
-    if (active->empty()) return states;
-    std::this_thread::sleep_for(std::chrono::duration<double>(poll_seconds));
-  }
-}
-
-std::string FinalJobState(const SlurmSubmission& sub, const std::vector<SlurmJobState>& states) {
-  std::string final_state = "unknown";
-  for (const auto& j : states) {
-    if (j.job_id == sub.final_job_id) final_state = j.state;
-  }
-  return final_state;
-}
-
-std::string ReadTrimmed(const fs::path& path) {
-  auto text = ReadFileToString(path);
-  if (!text.ok()) return "";
-  std::string s = *text;
-  while (!s.empty() && (s.back() == '\n' || s.back() == '\r')) s.pop_back();
-  return s;
-}
-
-std::vector<UnitFailure> CollectFailures(const TaskFiles& files,
-                                         const SlurmSubmission& sub,
-                                         const std::vector<bool>& complete,
-                                         const std::vector<SlurmJobState>& jobs) {
-  const auto states = TaskStatesByUnit(sub, jobs);
-  std::vector<UnitFailure> failures;
-  for (uint32_t u : sub.units) {
-    if (u < complete.size() && complete[u]) continue;
-    UnitFailure f;
-    f.unit = u;
-    f.log = files.log(u);
-    const std::string marker = ReadTrimmed(files.failed_marker(u));
-    const auto it = states.find(u);
-    if (it != states.end() && !IsFinishedJobState(it->second.state)) {
-      f.reason = "still " + it->second.state;
-    } else if (!marker.empty()) {
-      f.reason = marker;
-      if (it != states.end()) f.reason += " [Slurm: " + it->second.state + "]";
-    } else if (it != states.end()) {
-      f.reason = "Slurm task " + it->second.job_id + " ended " + it->second.state + " (exit " +
-                 it->second.exit_code + ") without a " + files.output;
-    } else {
-      f.reason = "no " + files.output + " written (Slurm no longer reports the task)";
-    }
-    std::error_code ec;
-    if (!fs::exists(f.log, ec)) {
-      // The task never reached its own log: Slurm's output file is the place to look.
-      f.log = it != states.end() && !it->second.std_out.empty() ? fs::path(it->second.std_out)
-                                                                : files.log_dir;
-    }
-    failures.push_back(std::move(f));
-  }
-  return failures;
+SlurmArrayJob SlurmEvaluateLayout::Job() const {
+  SlurmArrayJob job;
+  job.layout = Files();
+  job.chdir = submit_dir;
+  job.generated_by = "handdb evaluate --slurm";
+  job.array_job_suffix = "-eval";
+  job.final_job_suffix = "-eval-merge";
+  job.array_comment =
+      "# Array task i scores slice BASE+i of the test views and writes parts/part-<BASE+i>.json.\n"
+      "# Safe to re-run: a complete part of the same evaluation is kept.\n";
+  job.final_comment = "merges the parts into the report (text in " +
+                      report_text().filename().string() + ", JSON, plots).";
+  job.task_noun = "task";
+  job.final_noun = "merge";
+  job.array_variables = {{"HANDDB", {handdb.string()}}, {"TASK_ARGS", task_args, true}};
+  job.final_variables = {{"HANDDB", {handdb.string()}}, {"MERGE_ARGS", merge_args, true}};
+  job.task_commands = {
+      {R"("$HANDDB" "${TASK_ARGS[@]}" --task "$task" --quiet)", "handdb unit evaluate"}};
+  job.final_command = R"("$HANDDB" "${MERGE_ARGS[@]}" --quiet)";
+  return job;
 }
 
 }  // namespace handdb::cli

@@ -1,20 +1,31 @@
 // What the two Slurm front ends share: `handdb generate --slurm` (cli/slurm_commands.cc) and
-// `handdb evaluate --slurm` (cli/evaluate_slurm_commands.cc), and their `handdb unit ...` tasks.
-// Both submit an array plus a final job recorded in a jobs.json, refuse to submit while an earlier
-// submission still runs, wait with --wait and report each array task that left no output; one
-// copy of that logic keeps the two commands' messages and failure reports alike.
+// `handdb evaluate --slurm` (cli/evaluate_slurm_commands.cc), and their `handdb unit ...` tasks:
+// the --slurm flags, and the job each front end describes to cluster/ (its file names and task
+// command lines). cluster/ does the rest (scripts, submission, waiting, failure reports), so the
+// two commands' messages and failure reports stay alike.
 #pragma once
 
+#include <CLI/CLI.hpp>
 #include <filesystem>
-#include <functional>
 #include <string>
 #include <vector>
 
-#include "cli/slurm_commands.h"
 #include "base/status.h"
 #include "cluster/slurm.h"
 
 namespace handdb::cli {
+
+// The --slurm options of a command that can run as a Slurm job array; the Slurm options are
+// bound to `options`' fields.
+struct SlurmFlags {
+  bool enabled = false;
+  SlurmOptions options;
+  bool dry_run = false;
+  bool wait = false;
+  double poll_seconds = 10;
+  std::filesystem::path setup_file;
+  void Add(CLI::App& app);
+};
 
 // Threads for a task: what Slurm gave it ($SLURM_CPUS_PER_TASK), else 1.
 int TaskThreads();
@@ -28,54 +39,45 @@ Result<std::filesystem::path> SelfExecutable();
 // The SlurmOptions of --partition, --time, --mem, ... with --time and --slurm-setup checked.
 Result<SlurmOptions> OptionsFromFlags(const SlurmFlags& flags);
 
-// "a,b,c" (or joined by `sep`).
-std::string JoinIds(const std::vector<std::string>& ids, const char* sep = ",");
+// Where `handdb generate --slurm` keeps its files and what its jobs run. All paths absolute.
+struct SlurmGenerateLayout {
+  std::filesystem::path handdb;     // the handdb executable the jobs run (shared filesystem)
+  std::filesystem::path run_dir;    // RUN_DIR: plan.json, units/
+  std::filesystem::path db_dir;     // DB_DIR: shards, manifest
+  std::filesystem::path slurm_dir;  // scripts, logs, failure markers, jobs.json
+  // Extra arguments, passed verbatim: to `handdb unit render` (e.g. --blender PATH) and to
+  // `handdb unit convert` / `unit finalize` (edge options, --skip-bad, as typed), so every task
+  // converts exactly as a local `handdb generate` with the same options would.
+  std::vector<std::string> render_args;
+  std::vector<std::string> convert_args;
 
-// The array job ids and the final job id of a submission.
-std::vector<std::string> JobIds(const SlurmSubmission& sub);
-
-// Jobs of `sub` Slurm still runs or queues (array job ids for arrays); `states` (if not null)
-// gets every job state Slurm reports.
-Result<std::vector<std::string>> ActiveJobs(const SlurmSubmission& sub,
-                                            std::vector<SlurmJobState>* states);
-
-// The submission an earlier run recorded in its jobs.json, with its jobs' states.
-struct PreviousSubmission {
-  bool exists = false;  // false: no jobs.json yet
-  SlurmSubmission sub;
-  std::vector<SlurmJobState> states;
+  // slurm/generate-array.sbatch, generate-final.sbatch, logs/u00007.log, logs/final.log, ...
+  SlurmArrayLayout Files() const;
+  // Each array task renders its unit (`handdb unit render`) and converts it (`handdb unit
+  // convert`), both no-ops when already done; the final job runs `handdb unit finalize`
+  // (manifest + validation).
+  SlurmArrayJob Job() const;
 };
-// Reads `jobs_file` if it exists. An error when any of its jobs is still queued or running (two
-// tasks on one unit would do the work twice); `of_what` completes "an earlier submission ...",
-// e.g. "for /data/db".
-Result<PreviousSubmission> CheckPreviousSubmission(const std::filesystem::path& jobs_file,
-                                                   const std::string& of_what);
 
-// --wait: polls Slurm every `poll_seconds` until every job of `sub` has ended, showing finished
-// array tasks (of `num_tasks`) as progress. Returns the last job states.
-Result<std::vector<SlurmJobState>> WaitForJobs(const SlurmSubmission& sub,
-                                               uint64_t num_tasks,
-                                               double poll_seconds,
-                                               bool show_progress);
+// Where `handdb evaluate --slurm` keeps its files (WORK = the evaluation's work directory).
+struct SlurmEvaluateLayout {
+  std::filesystem::path handdb;      // the handdb executable the jobs run (shared filesystem)
+  std::filesystem::path submit_dir;  // every job runs here (--chdir): the DB, test-set, --json and
+                                     // --plots paths resolve as they did when submitted
+  std::filesystem::path work_dir;    // WORK: parts/, logs/, failed/, scripts, jobs.json
+  // The words after `handdb` each array task runs (the script appends --task T) and the final job
+  // runs: `unit evaluate DB TESTSET --tasks N --work WORK OPTIONS...` and
+  // `unit evaluate-merge DB TESTSET --tasks N --work WORK OPTIONS... [--json F] [--plots P]`.
+  std::vector<std::string> task_args;
+  std::vector<std::string> merge_args;
 
-// The state of `sub`'s final job in `states` ("unknown" when Slurm no longer reports it).
-std::string FinalJobState(const SlurmSubmission& sub, const std::vector<SlurmJobState>& states);
-
-// The text of `path` without trailing line ends; empty when it cannot be read.
-std::string ReadTrimmed(const std::filesystem::path& path);
-
-// Where an array task keeps its log and failure marker, and what it writes ("shard", "part").
-struct TaskFiles {
-  std::function<std::filesystem::path(uint32_t)> log;
-  std::function<std::filesystem::path(uint32_t)> failed_marker;
-  std::filesystem::path log_dir;  // Slurm's own output files, when a task has no log of its own
-  std::string output;
+  // WORK/evaluate-array.sbatch, evaluate-merge.sbatch, logs/part-00007.log (the part's name),
+  // logs/merge.log, ...
+  SlurmArrayLayout Files() const;
+  std::filesystem::path report_text() const { return work_dir / "report.txt"; }
+  // Task T runs `handdb unit evaluate ... --task T` (a no-op when its part is already complete);
+  // the final job `handdb unit evaluate-merge ...` (report text, JSON, plots).
+  SlurmArrayJob Job() const;
 };
-// Why each unit of `sub` that is not `complete` has no output: from its failure marker and
-// Slurm's state of its array task; the log to read (the task's own, else Slurm's output file).
-std::vector<UnitFailure> CollectFailures(const TaskFiles& files,
-                                         const SlurmSubmission& sub,
-                                         const std::vector<bool>& complete,
-                                         const std::vector<SlurmJobState>& jobs);
 
 }  // namespace handdb::cli

@@ -1,14 +1,14 @@
-// Scale-out on a real cluster engine: `handdb generate --slurm` as a Slurm job array.
+// Scale-out on a real cluster engine: work as a Slurm job array plus one final job.
 //
-// One array task per render unit (render the unit with Blender, convert it into its own shard),
-// then one final job, dependent on the array with afterok, that writes the manifest and validates
-// the database. Units are the unit of work everywhere (docs/conventions.md), so a database built
-// on Slurm is byte-identical to one built locally. Every task is idempotent; a re-run submits only
-// the units whose shard is missing or invalid (the array index list is computed from disk).
+// The caller (cli/) describes the work as task command lines (SlurmArrayJob); this file knows
+// nothing of what they compute. Array task i runs the task commands for index BASE + i, then one
+// final job, dependent on the array with afterok, runs the final command. Every task is idempotent;
+// a re-run submits only the indices whose output is missing (the caller computes them from disk).
 //
-// This file holds the parts that do not depend on a running cluster (the array index list, the
-// script text, option checks) and the thin layer that talks to Slurm through its ordinary
-// commands (sbatch --parsable, scontrol -o show job), so it works against any Slurm >= 20.
+// It holds the parts that do not depend on a running cluster (the array index list, the script
+// text, option checks), the thin layer that talks to Slurm through its ordinary commands
+// (sbatch --parsable, scontrol -o show job), so it works against any Slurm >= 20, and the
+// submission records, waiting and failure reports built on it.
 #pragma once
 
 #include <cstdint>
@@ -52,7 +52,7 @@ struct ArrayChunk {
 };
 
 // Splits the units to run into as few array submissions as possible, each keeping every array
-// index below `max_array_size` (base = a multiple of max_array_size; a plan with fewer units than
+// index below `max_array_size` (base = a multiple of max_array_size; fewer units than
 // MaxArraySize is always one chunk with base 0, so array task id == unit id).
 std::vector<ArrayChunk> PlanArrayChunks(std::vector<uint32_t> units, uint32_t max_array_size);
 
@@ -66,36 +66,69 @@ std::vector<uint32_t> PendingUnits(uint32_t num_units, IsComplete&& is_complete)
   return pending;
 }
 
-// Where a Slurm generation keeps its files. All paths absolute: they are read on compute nodes.
-struct SlurmGenerateLayout {
-  std::filesystem::path handdb;     // the handdb executable the jobs run (shared filesystem)
-  std::filesystem::path run_dir;    // RUN_DIR: plan.json, units/
-  std::filesystem::path db_dir;     // DB_DIR: shards, manifest
-  std::filesystem::path slurm_dir;  // scripts, logs, failure markers, jobs.json
-  // Extra arguments, passed verbatim: to `handdb unit render` (e.g. --blender PATH) and to
-  // `handdb unit convert` / `unit finalize` (edge options, --skip-bad), so every task converts
-  // exactly as a local `handdb generate` with the same options would.
-  std::vector<std::string> render_args;
-  std::vector<std::string> convert_args;
+// ---- Job scripts -------------------------------------------------------------------------------
 
-  std::filesystem::path array_script() const { return slurm_dir / "generate-array.sbatch"; }
-  std::filesystem::path final_script() const { return slurm_dir / "generate-final.sbatch"; }
-  std::filesystem::path log_dir() const { return slurm_dir / "logs"; }
-  std::filesystem::path failed_dir() const { return slurm_dir / "failed"; }
-  std::filesystem::path jobs_file() const { return slurm_dir / "jobs.json"; }
-  // The log every attempt at unit `unit` appends to: slurm/logs/u00007.log.
-  std::filesystem::path UnitLog(uint32_t unit) const;
-  // Written by a task whose unit failed (exit code, job id, host); removed when it succeeds.
-  std::filesystem::path UnitFailedMarker(uint32_t unit) const;
-  std::filesystem::path final_log() const { return log_dir() / "final.log"; }
+// Where one submission (an array of tasks plus a final job) keeps its files; the caller names
+// them. All paths absolute: they are read on compute nodes.
+struct SlurmArrayLayout {
+  std::filesystem::path dir;      // scripts, logs/, failed/, jobs.json
+  std::string array_script_name;  // the array's sbatch script, in `dir`
+  std::string final_script_name;  // the final job's sbatch script, in `dir`
+  std::string final_log_name;     // the final job's log, in logs/
+  std::string task_prefix;        // task 7's files are logs/<prefix>00007.log, failed/<prefix>00007
+
+  std::filesystem::path array_script() const { return dir / array_script_name; }
+  std::filesystem::path final_script() const { return dir / final_script_name; }
+  std::filesystem::path log_dir() const { return dir / "logs"; }
+  std::filesystem::path failed_dir() const { return dir / "failed"; }
+  std::filesystem::path jobs_file() const { return dir / "jobs.json"; }
+  std::filesystem::path final_log() const { return log_dir() / final_log_name; }
+  // <prefix>00007: the one rule for a task's file names, here and in the array script.
+  std::string TaskName(uint32_t task) const;
+  // The log every attempt at task `task` appends to.
+  std::filesystem::path TaskLog(uint32_t task) const;
+  // Written by a task that failed (exit code, job id, host); removed when it succeeds.
+  std::filesystem::path TaskFailedMarker(uint32_t task) const;
 };
 
-// The sbatch script of the array: argument $1 is the chunk's base. Each task renders its unit
-// (`handdb unit render`), converts it (`handdb unit convert`), both no-ops when already done, and
-// records a failure marker with the exit code when either fails.
-std::string GenerateArrayScript(const SlurmGenerateLayout& layout, const SlurmOptions& options);
-// The final job: `handdb unit finalize` (manifest + validation).
-std::string GenerateFinalScript(const SlurmGenerateLayout& layout, const SlurmOptions& options);
+// A shell variable the scripts set before their commands: NAME='value' or NAME=('a' 'b').
+struct ScriptVariable {
+  std::string name;
+  std::vector<std::string> words;
+  bool is_array = false;
+};
+
+// One command of an array task: bash text in which "$task" is the task's index
+// (BASE + SLURM_ARRAY_TASK_ID) and the script's variables are set.
+struct TaskCommand {
+  std::string line;
+  std::string what;  // names it in the failure marker: "exit code 1 from <what>"
+};
+
+// What the array and final job scripts run; the caller (cli/) fills it in.
+struct SlurmArrayJob {
+  SlurmArrayLayout layout;
+  std::filesystem::path chdir;   // every job runs here
+  std::string generated_by;      // the command that wrote the scripts, for their comments
+  std::string array_job_suffix;  // appended to SlurmOptions::job_name ("" or "-x")
+  std::string final_job_suffix;
+  std::string array_comment;  // "# ..." lines: what array task i does
+  std::string final_comment;  // completes "runs after every array task succeeded: ..."
+  std::string task_noun;      // names a task in its log: "=== <noun> 7: ..."
+  std::string final_noun;     // names the final job in its log
+  std::vector<ScriptVariable> array_variables;
+  std::vector<ScriptVariable> final_variables;
+  std::vector<TaskCommand> task_commands;  // in order; the first that fails ends the task
+  std::string final_command;               // the final job's exit code is this command's
+};
+
+// The sbatch script of the array: argument $1 is the chunk's base. Each task runs the task
+// commands, logging to its own log, and records a failure marker with the exit code when one fails.
+std::string ArrayScript(const SlurmArrayJob& job, const SlurmOptions& options);
+// The final job: the final command, its exit code the job's.
+std::string FinalScript(const SlurmArrayJob& job, const SlurmOptions& options);
+// Creates the layout's directories and writes both scripts (atomically).
+Status WriteJobScripts(const SlurmArrayJob& job, const SlurmOptions& options);
 
 // Shell-quotes a word for bash ('...' with embedded quotes escaped).
 std::string ShellQuote(const std::string& word);
@@ -140,12 +173,12 @@ Result<std::vector<SlurmJobState>> QueryJobs(const std::vector<std::string>& job
 // True for states after which a job no longer runs.
 bool IsFinishedJobState(const std::string& state);
 
-// ---- handdb generate --slurm -------------------------------------------------------------------
+// ---- Submissions -------------------------------------------------------------------------------
 
 // A previous or new submission, recorded in slurm/jobs.json so a re-run can tell whether jobs
 // are still running and a report can name their Slurm ids.
 struct SlurmSubmission {
-  std::string db_dir;                                     // the database the jobs build
+  std::string db_dir;                                     // what the jobs build (the target)
   std::vector<std::string> array_job_ids;                 // one per chunk
   std::vector<uint32_t> chunk_bases;                      // parallel to array_job_ids
   std::string final_job_id;                               // empty in a dry run
@@ -155,65 +188,71 @@ struct SlurmSubmission {
 Status WriteSubmissionRecord(const std::filesystem::path& path, const SlurmSubmission& sub);
 Result<SlurmSubmission> ReadSubmissionRecord(const std::filesystem::path& path);
 
-// Writes both scripts (atomically) and, unless `dry_run`, submits the array chunks for `units` and
-// the final job (afterok on every chunk). With no units, only the final job is submitted.
-Result<SlurmSubmission> SubmitGenerateJobs(const SlurmGenerateLayout& layout,
-                                           const SlurmOptions& options,
-                                           const std::vector<uint32_t>& units,
-                                           bool dry_run);
-
 // Submits one array job per chunk of `indices` (PlanArrayChunks; each task gets its chunk's base
 // as the script's argument $1) and a final job with --dependency=afterok on all of them (alone,
 // without a dependency, when `indices` is empty). The scripts must exist. Unless `dry_run`, records
-// the submission in `jobs_file`. `target` names what the jobs build (SlurmSubmission::db_dir).
-Result<SlurmSubmission> SubmitArrayWithFinal(const std::filesystem::path& array_script,
-                                             const std::filesystem::path& final_script,
-                                             const std::filesystem::path& jobs_file,
+// the submission in the layout's jobs file. `target` names what the jobs build
+// (SlurmSubmission::db_dir).
+Result<SlurmSubmission> SubmitArrayWithFinal(const SlurmArrayLayout& layout,
                                              const std::string& target,
                                              const SlurmOptions& options,
                                              const std::vector<uint32_t>& indices,
                                              bool dry_run);
 
-// ---- handdb evaluate --slurm -------------------------------------------------------------------
+// "a,b,c" (or joined by `sep`).
+std::string JoinIds(const std::vector<std::string>& ids, const char* sep = ",");
 
-// Where a Slurm evaluation keeps its files (WORK = the evaluation's work directory).
-struct SlurmEvaluateLayout {
-  std::filesystem::path handdb;      // the handdb executable the jobs run (shared filesystem)
-  std::filesystem::path submit_dir;  // every job runs here (--chdir): the DB, test-set, --json and
-                                     // --plots paths resolve as they did when submitted
-  std::filesystem::path work_dir;    // WORK: parts/, logs/, failed/, scripts, jobs.json
-  // The words after `handdb` each array task runs (the script appends --task T) and the final job
-  // runs: `unit evaluate DB TESTSET --tasks N --work WORK OPTIONS...` and
-  // `unit evaluate-merge DB TESTSET --tasks N --work WORK OPTIONS... [--json F] [--plots P]`.
-  std::vector<std::string> task_args;
-  std::vector<std::string> merge_args;
+// The array job ids and the final job id of a submission.
+std::vector<std::string> JobIds(const SlurmSubmission& sub);
 
-  std::filesystem::path array_script() const { return work_dir / "evaluate-array.sbatch"; }
-  std::filesystem::path final_script() const { return work_dir / "evaluate-merge.sbatch"; }
-  std::filesystem::path log_dir() const { return work_dir / "logs"; }
-  std::filesystem::path failed_dir() const { return work_dir / "failed"; }
-  std::filesystem::path jobs_file() const { return work_dir / "jobs.json"; }
-  std::filesystem::path report_text() const { return work_dir / "report.txt"; }
-  // logs/part-00007.log (all attempts at task 7), failed/part-00007 (why the last one failed).
-  std::filesystem::path TaskLog(uint32_t task) const;
-  std::filesystem::path TaskFailedMarker(uint32_t task) const;
-  std::filesystem::path final_log() const { return log_dir() / "merge.log"; }
+// Jobs of `sub` Slurm still runs or queues (array job ids for arrays); `states` (if not null)
+// gets every job state Slurm reports.
+Result<std::vector<std::string>> ActiveJobs(const SlurmSubmission& sub,
+                                            std::vector<SlurmJobState>* states);
+
+// The submission an earlier run recorded in its jobs.json, with its jobs' states.
+struct PreviousSubmission {
+  bool exists = false;  // false: no jobs.json yet
+  SlurmSubmission sub;
+  std::vector<SlurmJobState> states;
 };
+// Reads `jobs_file` if it exists. An error when any of its jobs is still queued or running (two
+// tasks on one unit would do the work twice); `of_what` completes "an earlier submission ...",
+// e.g. "for /data/db".
+Result<PreviousSubmission> CheckPreviousSubmission(const std::filesystem::path& jobs_file,
+                                                   const std::string& of_what);
 
-// The array script: argument $1 is the chunk's base; task BASE + SLURM_ARRAY_TASK_ID runs
-// `handdb unit evaluate ... --task T` (a no-op when its part is already complete) and records a
-// failure marker with the exit code when it fails.
-std::string EvaluateArrayScript(const SlurmEvaluateLayout& layout, const SlurmOptions& options);
-// The final job: `handdb unit evaluate-merge ...` (report text, JSON, plots).
-std::string EvaluateFinalScript(const SlurmEvaluateLayout& layout, const SlurmOptions& options);
+// --wait: polls Slurm every `poll_seconds` until every job of `sub` has ended, showing finished
+// array tasks (of `num_tasks`) as progress. Returns the last job states.
+Result<std::vector<SlurmJobState>> WaitForJobs(const SlurmSubmission& sub,
+                                               uint64_t num_tasks,
+                                               double poll_seconds,
+                                               bool show_progress);
+
+// The state of `sub`'s final job in `states` ("unknown" when Slurm no longer reports it).
+std::string FinalJobState(const SlurmSubmission& sub, const std::vector<SlurmJobState>& states);
+
+// The text of `path` without trailing line ends; empty when it cannot be read.
+std::string ReadTrimmed(const std::filesystem::path& path);
+
+// ---- Failure reports ---------------------------------------------------------------------------
 
 // Why a unit is incomplete after its task ran: from the failure marker and Slurm's job state.
 struct UnitFailure {
   uint32_t unit = 0;
-  std::string reason;  // "exit code 1 in `handdb unit render`", "TIMEOUT", ...
+  std::string reason;  // the failure marker's text, "TIMEOUT", ...
   std::filesystem::path log;
 };
 // One line per failure: "unit 7: <reason>; log: <path>".
 std::string FormatUnitFailure(const UnitFailure& failure);
+
+// Why each unit of `sub` that is not `complete` has no `output` (what a task writes, for
+// messages): from its failure marker in `layout` and Slurm's state of its array task; the log to
+// read (the task's own, else Slurm's output file).
+std::vector<UnitFailure> CollectFailures(const SlurmArrayLayout& layout,
+                                         const std::string& output,
+                                         const SlurmSubmission& sub,
+                                         const std::vector<bool>& complete,
+                                         const std::vector<SlurmJobState>& jobs);
 
 }  // namespace handdb

@@ -153,10 +153,14 @@ std::vector<uint32_t> TaskSlice(std::span<const uint32_t> selected,
   return slice;
 }
 
+std::string PartName(uint32_t task) {
+  char digits[16];
+  std::snprintf(digits, sizeof digits, "%05u", task);
+  return kPartPrefix + std::string(digits);
+}
+
 fs::path PartPath(const fs::path& work_dir, uint32_t task) {
-  char name[32];
-  std::snprintf(name, sizeof name, "part-%05u.json", task);
-  return work_dir / "parts" / name;
+  return work_dir / "parts" / (PartName(task) + ".json");
 }
 
 json PartToJson(const EvaluationPart& part) {

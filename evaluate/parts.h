@@ -49,6 +49,11 @@ std::vector<uint32_t> TaskSlice(std::span<const uint32_t> selected,
                                 uint32_t task,
                                 uint32_t num_tasks);
 
+// Task 7's part is "part-00007": the stem of its file and (`handdb evaluate --slurm`) of its
+// Slurm task's log and failure marker.
+inline constexpr char kPartPrefix[] = "part-";
+std::string PartName(uint32_t task);
+
 // WORK/parts/part-00007.json
 std::filesystem::path PartPath(const std::filesystem::path& work_dir, uint32_t task);
 
