@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <functional>
 #include <nlohmann/json.hpp>
 
 #include "base/atomic_file.h"
@@ -84,6 +85,81 @@ Result<std::vector<bool>> CompleteParts(const fs::path& work,
   return complete;
 }
 
+// The files of an evaluation split into `tasks` parts and the words its jobs run: the same
+// database, test set and options as this run, and its --json and --plots for the merge.
+Result<SlurmEvaluateLayout> MakeEvaluateLayout(const EvaluateSlurmRequest& request,
+                                               const TestSet& testset,
+                                               const EvaluationFingerprint& fp,
+                                               uint32_t tasks) {
+  SlurmEvaluateLayout layout;
+  auto exe = SelfExecutable();
+  if (!exe.ok()) return exe.status();
+  layout.handdb = *exe;
+  std::error_code ec;
+  layout.submit_dir = fs::current_path(ec);
+  if (ec) return Status(StatusCode::kIoError, "current directory: " + ec.message());
+  auto work =
+      Absolute(request.work.empty() ? testset.dir / "slurm-evaluations" / fp.value : request.work);
+  if (!work.ok()) return work.status();
+  layout.work_dir = *work;
+  std::vector<std::string> common = {request.db,
+                                     request.testset,
+                                     "--tasks",
+                                     std::to_string(tasks),
+                                     "--work",
+                                     layout.work_dir.string()};
+  const auto eval_args = request.flags.Args();
+  common.insert(common.end(), eval_args.begin(), eval_args.end());
+  layout.task_args = {"unit", "evaluate"};
+  layout.task_args.insert(layout.task_args.end(), common.begin(), common.end());
+  layout.merge_args = {"unit", "evaluate-merge"};
+  layout.merge_args.insert(layout.merge_args.end(), common.begin(), common.end());
+  if (!request.json_out.empty()) {
+    layout.merge_args.insert(layout.merge_args.end(), {"--json", request.json_out});
+  }
+  if (!request.plots_dir.empty()) {
+    layout.merge_args.insert(layout.merge_args.end(), {"--plots", request.plots_dir});
+  }
+
+  return layout;
+}
+
+// --wait: polls until every job has ended (finished tasks as progress), then reports the failed
+// tasks or prints the merged report. `complete_parts` tells which parts are complete.
+int WaitAndReport(const EvaluateSlurmRequest& request,
+                  const SlurmEvaluateLayout& layout,
+                  const SlurmFlags& flags,
+                  const SlurmSubmission& sub,
+                  const std::vector<uint32_t>& pending,
+                  const std::function<Result<std::vector<bool>>()>& complete_parts) {
+  const char* cmd = "evaluate";
+  auto states = WaitForJobs(sub, pending.size(), flags.poll_seconds, !request.quiet);
+  if (!states.ok()) return Fail(cmd, states.status());
+  auto after = complete_parts();
+  if (!after.ok()) return Fail(cmd, after.status());
+  const auto failures = TaskFailures(layout, sub, *after, *states);
+  for (const auto& line : failures) std::fprintf(stderr, "handdb %s: %s\n", cmd, line.c_str());
+  if (!failures.empty()) {
+    return Fail(cmd,
+                Status(StatusCode::kExternalToolFailed,
+                       std::to_string(failures.size()) + " of " + std::to_string(pending.size()) +
+                           " Slurm tasks failed (listed above); run the same command again to "
+                           "resubmit only the missing parts"));
+  }
+  auto report = ReadFileToString(layout.report_text());
+  if (!report.ok()) {
+    const std::string final_state = FinalJobState(sub, *states);
+    const std::string why = MergeError(layout);
+    return Fail(cmd,
+                Status(StatusCode::kExternalToolFailed,
+                       "merge job " + sub.final_job_id + " ended " + final_state +
+                           " without a report" + (why.empty() ? "" : " (" + why + ")") +
+                           "; log: " + layout.Files().final_log().string()));
+  }
+  if (!request.quiet) std::printf("%s", report->c_str());
+  return kExitOk;
+}
+
 }  // namespace
 
 int RunEvaluateOnSlurm(const EvaluateSlurmRequest& request, const SlurmFlags& flags) {
@@ -123,37 +199,9 @@ int RunEvaluateOnSlurm(const EvaluateSlurmRequest& request, const SlurmFlags& fl
   auto fp = ComputeEvaluationFingerprint(request.db, *testset, input, eval, tasks);
   if (!fp.ok()) return Fail(cmd, fp.status());
 
-  SlurmEvaluateLayout layout;
-  {
-    auto exe = SelfExecutable();
-    if (!exe.ok()) return Fail(cmd, exe.status());
-    layout.handdb = *exe;
-    std::error_code ec;
-    layout.submit_dir = fs::current_path(ec);
-    if (ec) return Fail(cmd, Status(StatusCode::kIoError, "current directory: " + ec.message()));
-    auto work = Absolute(request.work.empty() ? testset->dir / "slurm-evaluations" / fp->value
-                                              : request.work);
-    if (!work.ok()) return Fail(cmd, work.status());
-    layout.work_dir = *work;
-  }
-  std::vector<std::string> common = {request.db,
-                                     request.testset,
-                                     "--tasks",
-                                     std::to_string(tasks),
-                                     "--work",
-                                     layout.work_dir.string()};
-  const auto eval_args = request.flags.Args();
-  common.insert(common.end(), eval_args.begin(), eval_args.end());
-  layout.task_args = {"unit", "evaluate"};
-  layout.task_args.insert(layout.task_args.end(), common.begin(), common.end());
-  layout.merge_args = {"unit", "evaluate-merge"};
-  layout.merge_args.insert(layout.merge_args.end(), common.begin(), common.end());
-  if (!request.json_out.empty()) {
-    layout.merge_args.insert(layout.merge_args.end(), {"--json", request.json_out});
-  }
-  if (!request.plots_dir.empty()) {
-    layout.merge_args.insert(layout.merge_args.end(), {"--plots", request.plots_dir});
-  }
+  auto made = MakeEvaluateLayout(request, *testset, *fp, tasks);
+  if (!made.ok()) return Fail(cmd, made.status());
+  const SlurmEvaluateLayout& layout = *made;
 
   // An earlier submission still running must end first (two tasks on one part do the work twice).
   PreviousSubmission previous;
@@ -237,32 +285,9 @@ int RunEvaluateOnSlurm(const EvaluateSlurmRequest& request, const SlurmFlags& fl
     return kExitOk;
   }
 
-  // --wait: poll until every job has ended, finished tasks as progress.
-  auto states = WaitForJobs(*sub, pending.size(), flags.poll_seconds, !request.quiet);
-  if (!states.ok()) return Fail(cmd, states.status());
-  auto after = CompleteParts(layout.work_dir, *fp, selected, tasks, num_criteria);
-  if (!after.ok()) return Fail(cmd, after.status());
-  const auto failures = TaskFailures(layout, *sub, *after, *states);
-  for (const auto& line : failures) std::fprintf(stderr, "handdb %s: %s\n", cmd, line.c_str());
-  if (!failures.empty()) {
-    return Fail(cmd,
-                Status(StatusCode::kExternalToolFailed,
-                       std::to_string(failures.size()) + " of " + std::to_string(pending.size()) +
-                           " Slurm tasks failed (listed above); run the same command again to "
-                           "resubmit only the missing parts"));
-  }
-  auto report = ReadFileToString(layout.report_text());
-  if (!report.ok()) {
-    const std::string final_state = FinalJobState(*sub, *states);
-    const std::string why = MergeError(layout);
-    return Fail(
-        cmd,
-        Status(StatusCode::kExternalToolFailed,
-               "merge job " + sub->final_job_id + " ended " + final_state + " without a report" +
-                   (why.empty() ? "" : " (" + why + ")") + "; log: " + files.final_log().string()));
-  }
-  if (!request.quiet) std::printf("%s", report->c_str());
-  return kExitOk;
+  return WaitAndReport(request, layout, flags, *sub, pending, [&] {
+    return CompleteParts(layout.work_dir, *fp, selected, tasks, num_criteria);
+  });
 }
 
 UnitEvaluateCommands::UnitEvaluateCommands(CLI::App& unit_app) {
