@@ -134,10 +134,10 @@ std::vector<ArrayChunk> PlanArrayChunks(std::vector<uint32_t> units, uint32_t ma
   return chunks;
 }
 
-std::string SlurmArrayLayout::TaskName(uint32_t task) const {
+std::string SlurmTaskName(const std::string& prefix, uint32_t task) {
   char digits[16];
   std::snprintf(digits, sizeof(digits), "%0*u", kTaskNameDigits, task);
-  return task_prefix + digits;
+  return prefix + digits;
 }
 
 std::filesystem::path SlurmArrayLayout::TaskLog(uint32_t task) const {

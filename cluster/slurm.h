@@ -68,6 +68,9 @@ std::vector<uint32_t> PendingUnits(uint32_t num_units, IsComplete&& is_complete)
 
 // ---- Job scripts -------------------------------------------------------------------------------
 
+// <prefix>00007: the one rule for a task's names (its log, failure marker, evaluation part).
+std::string SlurmTaskName(const std::string& prefix, uint32_t task);
+
 // Where one submission (an array of tasks plus a final job) keeps its files; the caller names
 // them. All paths absolute: they are read on compute nodes.
 struct SlurmArrayLayout {
@@ -83,8 +86,8 @@ struct SlurmArrayLayout {
   std::filesystem::path failed_dir() const { return dir / "failed"; }
   std::filesystem::path jobs_file() const { return dir / "jobs.json"; }
   std::filesystem::path final_log() const { return log_dir() / final_log_name; }
-  // <prefix>00007: the one rule for a task's file names, here and in the array script.
-  std::string TaskName(uint32_t task) const;
+  // SlurmTaskName(task_prefix, task), here and in the array script.
+  std::string TaskName(uint32_t task) const { return SlurmTaskName(task_prefix, task); }
   // The log every attempt at task `task` appends to.
   std::filesystem::path TaskLog(uint32_t task) const;
   // Written by a task that failed (exit code, job id, host); removed when it succeeds.

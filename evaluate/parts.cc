@@ -6,6 +6,7 @@
 #include <limits>
 
 #include "base/json_schema.h"
+#include "cluster/slurm.h"
 #include "format/shard_layout.h"
 
 namespace handdb {
@@ -153,11 +154,7 @@ std::vector<uint32_t> TaskSlice(std::span<const uint32_t> selected,
   return slice;
 }
 
-std::string PartName(uint32_t task) {
-  char digits[16];
-  std::snprintf(digits, sizeof digits, "%05u", task);
-  return kPartPrefix + std::string(digits);
-}
+std::string PartName(uint32_t task) { return SlurmTaskName(kPartPrefix, task); }
 
 fs::path PartPath(const fs::path& work_dir, uint32_t task) {
   return work_dir / "parts" / (PartName(task) + ".json");
