@@ -1,13 +1,15 @@
 // Sobol' low-discrepancy sequence in up to 21 dimensions, with the direction numbers of Joe & Kuo
 // (new-joe-kuo-6.21201, "Constructing Sobol sequences with better two-dimensional projections",
-// SIAM J. Sci. Comput. 30, 2008). Points in Gray-code order (Antonov-Saleev), as in the reference
-// implementation and SciPy's unscrambled Sobol: point 0 is the origin, point 1 is (1/2, ..., 1/2).
+// SIAM J. Sci. Comput. 30, 2008) as shipped in Boost.Random's sobol table. Points in Gray-code
+// order (Antonov-Saleev), as in the reference implementation and SciPy's unscrambled Sobol: point 0
+// is the origin, point 1 is (1/2, ..., 1/2). Boost's engine starts at point 1, so point i is
+// Boost's point i - 1.
 // An optional digital shift (XOR of a per-dimension random word) randomises the sequence from a
 // seed while keeping its net properties.
 #pragma once
 
-#include <array>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 namespace handdb {
@@ -18,6 +20,9 @@ class Sobol {
   static constexpr int kBits = 32;
 
   explicit Sobol(int dims);
+  ~Sobol();
+  Sobol(const Sobol&) = delete;
+  Sobol& operator=(const Sobol&) = delete;
   int dims() const { return dims_; }
 
   // Point `index` (0-based) as 32-bit integers: coordinate = value / 2^32.
@@ -29,8 +34,11 @@ class Sobol {
   std::vector<double> ShiftedPoint(uint64_t index, const std::vector<uint32_t>& shift) const;
 
  private:
+  struct Engine;  // Boost's sobol_engine, kept out of this header
+
   int dims_;
-  std::vector<std::array<uint32_t, kBits>> v_;  // direction numbers, left-justified
+  // At point 1; copied and seeked per point, so queries stay const and safe from many threads.
+  std::unique_ptr<const Engine> engine_;
 };
 
 }  // namespace handdb
