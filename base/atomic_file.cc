@@ -10,6 +10,8 @@
 #include <random>
 #include <sstream>
 
+#include "base/hex.h"
+
 namespace handdb {
 namespace {
 
@@ -20,9 +22,7 @@ Status Errno(const std::string& what, const std::filesystem::path& path) {
 std::string RandomSuffix() {
   static thread_local std::mt19937_64 rng(std::random_device{}() ^
                                           (static_cast<uint64_t>(getpid()) << 32));
-  std::ostringstream os;
-  os << std::hex << rng();
-  return os.str();
+  return Hex64(rng());
 }
 
 }  // namespace

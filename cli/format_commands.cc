@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "base/hex.h"
 #include "cli/cli_util.h"
 #include "cli/commands.h"
 #include "format/manifest.h"
@@ -20,12 +21,6 @@ namespace {
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;
-
-std::string Hex(uint64_t v) {
-  char buf[24];
-  std::snprintf(buf, sizeof(buf), "0x%" PRIx64, v);
-  return buf;
-}
 
 // The metadata as JSON when it parses, else as a string (info never fails on bad metadata;
 // validate reports it).
@@ -96,8 +91,8 @@ int InfoShard(const fs::path& path, bool as_json) {
               h.file_size,
               shard::ChecksumHex(*whole).c_str());
   std::printf("  features    required %s, optional %s\n",
-              Hex(h.required_features).c_str(),
-              Hex(h.optional_features).c_str());
+              HexPrefixed(h.required_features).c_str(),
+              HexPrefixed(h.optional_features).c_str());
   std::printf("  views       %" PRIu64 "\n", h.num_views);
   std::printf("  points      %" PRIu64 " (%.1f per view)\n", h.num_points, mean);
   std::printf("  sections    %-16s %8s %12s %12s %10s %6s  %s\n",
@@ -111,7 +106,7 @@ int InfoShard(const fs::path& path, bool as_json) {
   for (const auto& s : reader->sections()) {
     std::printf("              %-16s %8s %12" PRIu64 " %12" PRIu64 " %10" PRIu64 " %6u  %s\n",
                 s.name.c_str(),
-                (s.flags & shard::kSectionFlagRequired) ? "required" : Hex(s.flags).c_str(),
+                (s.flags & shard::kSectionFlagRequired) ? "required" : HexPrefixed(s.flags).c_str(),
                 s.offset,
                 s.size,
                 s.count,

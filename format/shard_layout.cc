@@ -6,28 +6,12 @@
 
 #include <algorithm>
 #include <cerrno>
-#include <cinttypes>
-#include <cstdio>
 #include <sstream>
+
+#include "base/hex.h"
 
 namespace handdb::shard {
 namespace {
-
-std::string Hex(uint64_t v) {
-  char buf[24];
-  std::snprintf(buf, sizeof(buf), "0x%" PRIx64, v);
-  return buf;
-}
-
-std::string BytesHex(const uint8_t* p, size_t n) {
-  std::string out;
-  char buf[4];
-  for (size_t i = 0; i < n; ++i) {
-    std::snprintf(buf, sizeof(buf), i == 0 ? "%02x" : " %02x", p[i]);
-    out += buf;
-  }
-  return out;
-}
 
 std::string Quote(const std::string& s) { return "'" + s + "'"; }
 
@@ -42,7 +26,7 @@ void CheckZeroRegion(const uint8_t* base,
       uint64_t nonzero = 0;
       for (uint64_t k = o; k < end; ++k) nonzero += base[k] != 0;
       std::ostringstream os;
-      os << where << ": byte is " << Hex(base[o]) << ", expected 0 (" << nonzero
+      os << where << ": byte is " << HexPrefixed(base[o]) << ", expected 0 (" << nonzero
          << " non-zero byte(s) in [" << begin << ", " << end << "))";
       problems->Add("padding", StatusCode::kNonZeroReserved, o, os.str());
       return;
@@ -54,11 +38,7 @@ void CheckZeroRegion(const uint8_t* base,
 
 uint64_t Checksum(const void* data, size_t size) { return XXH3_64bits(data, size); }
 
-std::string ChecksumHex(uint64_t checksum) {
-  char buf[20];
-  std::snprintf(buf, sizeof(buf), "%016" PRIx64, checksum);
-  return buf;
-}
+std::string ChecksumHex(uint64_t checksum) { return Hex64(checksum); }
 
 StreamingChecksum::StreamingChecksum() : state_(XXH3_createState()) {
   THROW_CHECK(state_ != nullptr);
@@ -184,7 +164,7 @@ std::string SectionName(uint32_t type) {
     case kSectionPoints:
       return "points";
     default:
-      return "unknown(" + Hex(type) + ")";
+      return "unknown(" + HexPrefixed(type) + ")";
   }
 }
 
@@ -231,8 +211,8 @@ Layout CheckLayout(std::span<const uint8_t> bytes, ProblemList* problems) {
       problems->Add("magic",
                     StatusCode::kBadMagic,
                     0,
-                    "leading magic is [" + BytesHex(b, magic_len) + "], expected [" +
-                        BytesHex(kMagic.data(), 8) + "]: not a handdb shard");
+                    "leading magic is [" + HexBytes(b, magic_len, " ") + "], expected [" +
+                        HexBytes(kMagic.data(), 8, " ") + "]: not a handdb shard");
     }
     return layout;
   }
@@ -295,8 +275,9 @@ Layout CheckLayout(std::span<const uint8_t> bytes, ProblemList* problems) {
     problems->Add("features",
                   StatusCode::kUnknownRequiredFeature,
                   kOffRequiredFeatures,
-                  "required_features " + Hex(h.required_features) + " has bits unknown to this " +
-                      "reader (" + Hex(h.required_features & ~kKnownRequiredFeatures) + ")");
+                  "required_features " + HexPrefixed(h.required_features) +
+                      " has bits unknown to this " + "reader (" +
+                      HexPrefixed(h.required_features & ~kKnownRequiredFeatures) + ")");
     if (problems->done()) return layout;
   }
   if (know_minor) {
@@ -311,8 +292,8 @@ Layout CheckLayout(std::span<const uint8_t> bytes, ProblemList* problems) {
     problems->Add("footer",
                   StatusCode::kBadMagic,
                   footer_at + 8,
-                  "trailing magic is [" + BytesHex(b + footer_at + 8, 8) + "], expected [" +
-                      BytesHex(kMagic.data(), 8) + "] (truncated or overwritten end)");
+                  "trailing magic is [" + HexBytes(b + footer_at + 8, 8, " ") + "], expected [" +
+                      HexBytes(kMagic.data(), 8, " ") + "] (truncated or overwritten end)");
     if (problems->done()) return layout;
   }
   if (footer_size != n) {
@@ -384,13 +365,13 @@ Layout CheckLayout(std::span<const uint8_t> bytes, ProblemList* problems) {
       problems->Add("reserved",
                     StatusCode::kNonZeroReserved,
                     entry_at + kSecOffFlags,
-                    label + ": flags " + Hex(s.flags) + " has reserved bits set");
+                    label + ": flags " + HexPrefixed(s.flags) + " has reserved bits set");
     }
     if (s.reserved != 0) {
       problems->Add("reserved",
                     StatusCode::kNonZeroReserved,
                     entry_at + kSecOffReserved,
-                    label + ": reserved field is " + Hex(s.reserved) + ", expected 0");
+                    label + ": reserved field is " + HexPrefixed(s.reserved) + ", expected 0");
     }
     const uint64_t expected = AlignUp(prev_end);
     if (s.offset != expected) {
@@ -445,8 +426,8 @@ Layout CheckLayout(std::span<const uint8_t> bytes, ProblemList* problems) {
           problems->Add("features",
                         StatusCode::kUnknownRequiredFeature,
                         entry_at + kSecOffType,
-                        label + ": unknown section type " + Hex(s.type) +
-                            " is marked required (flags " + Hex(s.flags) + ")");
+                        label + ": unknown section type " + HexPrefixed(s.type) +
+                            " is marked required (flags " + HexPrefixed(s.flags) + ")");
         }
         break;
     }
@@ -535,11 +516,11 @@ Layout CheckLayout(std::span<const uint8_t> bytes, ProblemList* problems) {
     const uint8_t* rec = b + at;
     const uint32_t flags = Load<uint32_t>(rec + kViewOffFlags);
     if (flags != 0 && know_minor) {
-      problems->Add(
-          "reserved",
-          StatusCode::kNonZeroReserved,
-          at + kViewOffFlags,
-          "view " + std::to_string(i) + ": reserved flags are " + Hex(flags) + ", expected 0");
+      problems->Add("reserved",
+                    StatusCode::kNonZeroReserved,
+                    at + kViewOffFlags,
+                    "view " + std::to_string(i) + ": reserved flags are " + HexPrefixed(flags) +
+                        ", expected 0");
     }
     const uint64_t off = Load<uint64_t>(rec + kViewOffPointOffset);
     const uint32_t cnt = Load<uint32_t>(rec + kViewOffPointCount);

@@ -16,6 +16,7 @@
 #include <thread>
 
 #include "base/atomic_file.h"
+#include "base/hex.h"
 #include "base/json_schema.h"
 #include "format/manifest.h"
 #include "base/progress.h"
@@ -265,12 +266,6 @@ std::string RelativeRenderFile(uint32_t unit, uint32_t render_id, const char* ex
   return "units/" + UnitDirName(unit) + "/" + RenderFileStem(render_id) + ext;
 }
 
-std::string Hex16(uint64_t v) {
-  char buf[17];
-  std::snprintf(buf, sizeof(buf), "%016llx", static_cast<unsigned long long>(v));
-  return buf;
-}
-
 Result<ConvertedRender> ConvertRender(const RunContext& ctx,
                                       const PlanUnit& unit,
                                       const PlanRender& r) {
@@ -443,7 +438,7 @@ bool KeepExistingShard(UnitState* st, bool skip_bad) {
   st->manifest_shard.views = reader->num_views();
   st->manifest_shard.points = reader->all_points().size();
   st->manifest_shard.bytes = bytes.size();
-  st->manifest_shard.xxh3 = Hex16(XXH3_64bits(bytes.data(), bytes.size()));
+  st->manifest_shard.xxh3 = Hex64(XXH3_64bits(bytes.data(), bytes.size()));
   return true;
 }
 
