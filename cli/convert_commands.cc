@@ -10,7 +10,6 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include "cli/cli_util.h"
@@ -19,6 +18,7 @@
 #include "cli/slurm_commands.h"
 #include "base/atomic_file.h"
 #include "base/json_schema.h"
+#include "base/thread_pool.h"
 #include "format/roll.h"
 #include "format/validator.h"
 #include "format/view.h"
@@ -152,7 +152,7 @@ int RunGenerate(int argc, char** argv) {
   SlurmFlags slurm;  // --slurm and its options (cli/slurm_cli.h)
   slurm.Add(app);
   if (int rc = ParseArgs(app, argc, argv); rc >= 0) return rc;
-  if (jobs <= 0) jobs = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  jobs = ResolveNumThreads(jobs);
   if (work_dir.empty()) work_dir = db_dir / "render";
   auto stage = [&](const char* what) {
     if (!quiet) std::fprintf(stderr, "handdb generate: %s\n", what);

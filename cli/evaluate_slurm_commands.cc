@@ -10,6 +10,7 @@
 
 #include "base/atomic_file.h"
 #include "base/json_schema.h"
+#include "base/thread_pool.h"
 #include "cli/cli_util.h"
 #include "cli/commands.h"
 #include "cli/evaluate_cli.h"
@@ -381,7 +382,7 @@ int UnitEvaluateCommands::Run() {
   part.fingerprint = *fp;
   part.task = task_;
   part.num_tasks = tasks_;
-  part.threads = ResolveThreadCount(options.num_threads);
+  part.threads = ResolveNumThreads(options.num_threads);
   part.started_at = UnixNow();
   auto views = EvaluateViews(**searcher, *testset, *points, options, expect.slice);
   if (!views.ok()) return Fail(cmd, views.status());

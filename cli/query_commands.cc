@@ -10,6 +10,7 @@
 #include "cli/cli_util.h"
 #include "cli/commands.h"
 #include "base/json_schema.h"
+#include "base/thread_pool.h"
 #include "format/manifest.h"
 #include "format/roll.h"
 #include "generator/convert/converter.h"
@@ -277,7 +278,7 @@ json ResultJson(const QueryFlags& flags,
             {"scale", query.scale}}},
           {"options",
            {{"top_k", search.top_k},
-            {"threads", ResolveThreadCount(search.num_threads)},
+            {"threads", ResolveNumThreads(search.num_threads)},
             {"brute_force", search.brute_force},
             {"kdtree", flags.kdtree},
             {"dt_cell_px", search.dt_cell_px}}},

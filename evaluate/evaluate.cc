@@ -9,6 +9,7 @@
 
 #include "base/json_schema.h"
 #include "base/progress.h"
+#include "base/thread_pool.h"
 #include "evaluate/plots.h"
 
 namespace handdb {
@@ -208,7 +209,7 @@ EvaluationReport StartReport(const Database& db,
   report.input = input;
   report.options = options;
   report.criteria = MakeCriteria(options);
-  report.threads = ResolveThreadCount(options.num_threads);
+  report.threads = ResolveNumThreads(options.num_threads);
   return report;
 }
 

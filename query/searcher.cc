@@ -4,11 +4,11 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
-#include <exception>
 #include <limits>
 #include <mutex>
-#include <thread>
+#include <optional>
 
+#include "base/thread_pool.h"
 #include "query/chamfer.h"
 #include "query/distance_transform.h"
 
@@ -67,38 +67,6 @@ class TopK {
   std::atomic<double> threshold_{kInf};
 };
 
-// Runs fn(i, worker) for i in [0, n) on `threads` workers taking indices in order from a shared
-// counter; fn returns false to stop every worker (used when the rest is known to be pruned).
-// An exception in a worker is rethrown in the caller.
-template <class Fn>
-void ParallelFor(int threads, size_t n, Fn&& fn) {
-  std::atomic<size_t> next{0};
-  std::atomic<bool> stop{false};
-  std::exception_ptr error;
-  std::mutex error_mu;
-  auto work = [&](int worker) {
-    try {
-      while (!stop.load(std::memory_order_relaxed)) {
-        const size_t i = next.fetch_add(1, std::memory_order_relaxed);
-        if (i >= n) break;
-        if (!fn(i, worker)) stop.store(true, std::memory_order_relaxed);
-      }
-    } catch (...) {
-      std::lock_guard<std::mutex> lock(error_mu);
-      if (!error) error = std::current_exception();
-      stop.store(true);
-    }
-  };
-  const int workers =
-      static_cast<int>(std::min<size_t>(std::max(threads, 1), std::max<size_t>(n, 1)));
-  std::vector<std::thread> pool;
-  pool.reserve(workers - 1);
-  for (int w = 1; w < workers; ++w) pool.emplace_back(work, w);
-  work(0);
-  for (auto& t : pool) t.join();
-  if (error) std::rethrow_exception(error);
-}
-
 // Lower bounds are stored per (view, roll) as uint16 in 1/64 px, rounded down (a lower bound
 // stays a lower bound) and saturating at kBoundMax (1023.98 px, still a valid bound); kNoBound
 // marks a view without points. Two bytes per virtual view instead of four: on the paper database
@@ -136,7 +104,7 @@ class QueryContext {
         rolled_max_abs_(db.num_rolls()),
         query_trees_(db.num_rolls()),
         query_tree_once_(db.num_rolls()),
-        caches_(ResolveThreadCount(options.num_threads)) {}
+        caches_(ResolveNumThreads(options.num_threads)) {}
 
   // The query rotated by -angle(r) and quantised.
   void PrepareRoll(roll_id_t r) {
@@ -256,11 +224,6 @@ bool SearchOptions::Check() const {
   return true;
 }
 
-int ResolveThreadCount(int num_threads) {
-  if (num_threads >= 1) return num_threads;
-  return std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
-}
-
 Searcher::Searcher(std::shared_ptr<const Database> db) : db_(std::move(db)) {
   THROW_CHECK(db_ != nullptr);
   max_abs_.resize(db_->num_views());
@@ -303,7 +266,10 @@ Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
   const Database& db = *db_;
   const size_t num_views = db.num_views();
   const uint32_t num_rolls = db.num_rolls();
-  const int threads = ResolveThreadCount(options.num_threads);
+  const int threads = ResolveNumThreads(options.num_threads);
+  // One pool for the query's parallel loops; the calling thread is worker 0.
+  std::optional<ThreadPool> pool_storage;
+  ThreadPool* pool = threads > 1 ? &pool_storage.emplace(threads - 1) : nullptr;
   const size_t k = static_cast<size_t>(options.top_k);
   SearchStats local;
   local.virtual_views = db.num_virtual_views();
@@ -315,22 +281,30 @@ Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
   std::atomic<uint64_t> abandoned{0};
 
   if (options.brute_force) {
-    ParallelFor(threads, num_rolls, [&](size_t r, int) {
-      ctx.PrepareRoll(static_cast<roll_id_t>(r));
-      return true;
-    });
+    ParallelFor(
+        num_rolls,
+        threads,
+        [&](size_t r, int) {
+          ctx.PrepareRoll(static_cast<roll_id_t>(r));
+          return true;
+        },
+        pool);
     local.seconds_bounds = Seconds(start);
     const auto refine_start = std::chrono::steady_clock::now();
-    ParallelFor(threads, num_views, [&](size_t v, int worker) {
-      if (db.points(static_cast<view_id_t>(v)).empty()) return true;
-      for (roll_id_t r = 0; r < num_rolls; ++r) {
-        Scored s;
-        ctx.Score(static_cast<view_id_t>(v), r, kInf, 0.0, worker, &s);
-        top.Insert(s);
-      }
-      refined.fetch_add(num_rolls, std::memory_order_relaxed);
-      return true;
-    });
+    ParallelFor(
+        num_views,
+        threads,
+        [&](size_t v, int worker) {
+          if (db.points(static_cast<view_id_t>(v)).empty()) return true;
+          for (roll_id_t r = 0; r < num_rolls; ++r) {
+            Scored s;
+            ctx.Score(static_cast<view_id_t>(v), r, kInf, 0.0, worker, &s);
+            top.Insert(s);
+          }
+          refined.fetch_add(num_rolls, std::memory_order_relaxed);
+          return true;
+        },
+        pool);
     local.seconds_refine = Seconds(refine_start);
   } else {
     // Step 1: lower bounds, roll-major (one distance transform per roll, reused for every view).
@@ -342,60 +316,64 @@ Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
     const DistanceGridOptions grid_options{options.dt_cell_px, 170.0f};
     std::vector<DistanceGrid> grids(threads, DistanceGrid(grid_options));
     constexpr size_t kChunk = 64;
-    ParallelFor(threads, num_rolls, [&](size_t ri, int worker) {
-      const roll_id_t r = static_cast<roll_id_t>(ri);
-      ctx.PrepareRoll(r);
-      DistanceGrid& grid = grids[worker];
-      grid.Build(ctx.rolled(r));
-      Bound* out = bound.data() + ri * num_views;
-      for (view_id_t v = 0; v < num_views; ++v) {
-        const std::span<const PointQ> pts = db.points(v);
-        if (pts.empty()) {
-          out[v] = kNoBound;
-          continue;
-        }
-        const double limit = Limit(top.threshold(), 0.0, static_cast<double>(pts.size()));
-        const bool fast = grid.Covers(max_abs_[v]);
-        double sum = 0;
-        for (size_t i = 0; i < pts.size() && sum <= limit; i += kChunk) {
-          const auto chunk = pts.subspan(i, std::min(kChunk, pts.size() - i));
-          sum += fast ? grid.SumLowerBoundsFast(chunk) : grid.SumLowerBounds(chunk);
-        }
-        const double mean = sum / static_cast<double>(pts.size());
-        out[v] = BoundBelow(mean - DistanceGrid::MeanLowerBoundMargin(pts.size(), mean));
-      }
-      // Score this roll's most promising pairs now so later rolls can stop early.
-      const size_t m = std::min<size_t>(num_views, top.threshold() == kInf ? k : 2);
-      std::vector<uint32_t> best;
-      best.reserve(m + 1);
-      auto less = [&](uint32_t x, uint32_t y) {
-        return out[x] != out[y] ? out[x] < out[y] : x < y;
-      };
-      for (uint32_t v = 0; v < num_views; ++v) {
-        if (out[v] == kNoBound) continue;
-        if (best.size() < m) {
-          best.push_back(v);
-          std::push_heap(best.begin(), best.end(), less);
-        } else if (m > 0 && less(v, best.front())) {
-          std::pop_heap(best.begin(), best.end(), less);
-          best.back() = v;
-          std::push_heap(best.begin(), best.end(), less);
-        }
-      }
-      for (uint32_t v : best) {
-        const double threshold = top.threshold();
-        if (BoundPx(out[v]) > threshold) continue;
-        refined.fetch_add(1, std::memory_order_relaxed);
-        Scored sc;
-        if (ctx.Score(v, r, threshold, BoundPx(out[v]), worker, &sc)) {
-          sc.lower_bound = BoundPx(out[v]);
-          top.Insert(sc);
-        } else {
-          abandoned.fetch_add(1, std::memory_order_relaxed);
-        }
-      }
-      return true;
-    });
+    ParallelFor(
+        num_rolls,
+        threads,
+        [&](size_t ri, int worker) {
+          const roll_id_t r = static_cast<roll_id_t>(ri);
+          ctx.PrepareRoll(r);
+          DistanceGrid& grid = grids[worker];
+          grid.Build(ctx.rolled(r));
+          Bound* out = bound.data() + ri * num_views;
+          for (view_id_t v = 0; v < num_views; ++v) {
+            const std::span<const PointQ> pts = db.points(v);
+            if (pts.empty()) {
+              out[v] = kNoBound;
+              continue;
+            }
+            const double limit = Limit(top.threshold(), 0.0, static_cast<double>(pts.size()));
+            const bool fast = grid.Covers(max_abs_[v]);
+            double sum = 0;
+            for (size_t i = 0; i < pts.size() && sum <= limit; i += kChunk) {
+              const auto chunk = pts.subspan(i, std::min(kChunk, pts.size() - i));
+              sum += fast ? grid.SumLowerBoundsFast(chunk) : grid.SumLowerBounds(chunk);
+            }
+            const double mean = sum / static_cast<double>(pts.size());
+            out[v] = BoundBelow(mean - DistanceGrid::MeanLowerBoundMargin(pts.size(), mean));
+          }
+          // Score this roll's most promising pairs now so later rolls can stop early.
+          const size_t m = std::min<size_t>(num_views, top.threshold() == kInf ? k : 2);
+          std::vector<uint32_t> best;
+          best.reserve(m + 1);
+          auto less = [&](uint32_t x, uint32_t y) {
+            return out[x] != out[y] ? out[x] < out[y] : x < y;
+          };
+          for (uint32_t v = 0; v < num_views; ++v) {
+            if (out[v] == kNoBound) continue;
+            if (best.size() < m) {
+              best.push_back(v);
+              std::push_heap(best.begin(), best.end(), less);
+            } else if (m > 0 && less(v, best.front())) {
+              std::pop_heap(best.begin(), best.end(), less);
+              best.back() = v;
+              std::push_heap(best.begin(), best.end(), less);
+            }
+          }
+          for (uint32_t v : best) {
+            const double threshold = top.threshold();
+            if (BoundPx(out[v]) > threshold) continue;
+            refined.fetch_add(1, std::memory_order_relaxed);
+            Scored sc;
+            if (ctx.Score(v, r, threshold, BoundPx(out[v]), worker, &sc)) {
+              sc.lower_bound = BoundPx(out[v]);
+              top.Insert(sc);
+            } else {
+              abandoned.fetch_add(1, std::memory_order_relaxed);
+            }
+          }
+          return true;
+        },
+        pool);
     grids.clear();
     local.bounded = n;
     local.seconds_bounds = Seconds(start);
@@ -407,22 +385,26 @@ Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
       return bound[x] != bound[y] ? bound[x] < bound[y] : x < y;
     };
     auto visit = [&](std::span<const uint32_t> order) {
-      ParallelFor(threads, order.size(), [&](size_t i, int worker) {
-        const uint32_t idx = order[i];
-        const double threshold = top.threshold();
-        if (BoundPx(bound[idx]) > threshold) return false;  // every later pair: a larger bound
-        const view_id_t v = idx % num_views;
-        const roll_id_t r = static_cast<roll_id_t>(idx / num_views);
-        refined.fetch_add(1, std::memory_order_relaxed);
-        Scored s;
-        if (ctx.Score(v, r, threshold, BoundPx(bound[idx]), worker, &s)) {
-          s.lower_bound = BoundPx(bound[idx]);
-          top.Insert(s);
-        } else {
-          abandoned.fetch_add(1, std::memory_order_relaxed);
-        }
-        return true;
-      });
+      ParallelFor(
+          order.size(),
+          threads,
+          [&](size_t i, int worker) {
+            const uint32_t idx = order[i];
+            const double threshold = top.threshold();
+            if (BoundPx(bound[idx]) > threshold) return false;  // every later pair: a larger bound
+            const view_id_t v = idx % num_views;
+            const roll_id_t r = static_cast<roll_id_t>(idx / num_views);
+            refined.fetch_add(1, std::memory_order_relaxed);
+            Scored s;
+            if (ctx.Score(v, r, threshold, BoundPx(bound[idx]), worker, &s)) {
+              s.lower_bound = BoundPx(bound[idx]);
+              top.Insert(s);
+            } else {
+              abandoned.fetch_add(1, std::memory_order_relaxed);
+            }
+            return true;
+          },
+          pool);
     };
     // The k smallest bounds with a bounded max-heap (no N-sized index array).
     std::vector<uint32_t> first;

@@ -17,8 +17,8 @@
 #include <string>
 #include <vector>
 
-#include "format/roll.h"
 #include "base/status.h"
+#include "format/roll.h"
 #include "format/view.h"
 #include "query/database.h"
 #include "query/kdtree.h"
@@ -83,8 +83,5 @@ class Searcher {
   std::shared_ptr<const Database> db_;
   std::vector<int32_t> max_abs_;  // per view: max |x|, |y| of its points (PointQ units)
 };
-
-// Number of worker threads for a num_threads option (-1: hardware concurrency, at least 1).
-int ResolveThreadCount(int num_threads);
 
 }  // namespace handdb

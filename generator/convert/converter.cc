@@ -6,14 +6,11 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <exception>
-#include <functional>
 #include <map>
 #include <mutex>
 #include <optional>
 #include <set>
 #include <system_error>
-#include <thread>
 
 #include "base/atomic_file.h"
 #include "base/hex.h"
@@ -27,6 +24,7 @@
 #include "edges/normalise.h"
 #include "generator/plan/plan.h"
 #include "base/sha256.h"
+#include "base/thread_pool.h"
 #include "handdb_version.h"
 
 namespace handdb {
@@ -464,53 +462,6 @@ void RemoveStaleTempFiles(const fs::path& db_dir,
   }
 }
 
-// Runs fn(i) for i in [0, n) on `threads` threads. Stops early on cancel; rethrows the first
-// exception (a broken invariant) on the calling thread.
-Status ParallelFor(size_t n,
-                   int threads,
-                   const std::atomic<bool>* cancel,
-                   const std::function<Status(size_t)>& fn) {
-  std::atomic<size_t> next{0};
-  std::atomic<bool> stop{false};
-  std::mutex mu;
-  Status first_error;
-  std::exception_ptr exception;
-  auto worker = [&] {
-    while (!stop.load()) {
-      if (cancel != nullptr && cancel->load()) {
-        std::lock_guard<std::mutex> lock(mu);
-        if (first_error.ok()) first_error = Status(StatusCode::kCancelled, "cancelled");
-        stop = true;
-        return;
-      }
-      const size_t i = next.fetch_add(1);
-      if (i >= n) return;
-      try {
-        Status s = fn(i);
-        if (!s.ok()) {
-          std::lock_guard<std::mutex> lock(mu);
-          if (first_error.ok()) first_error = std::move(s);
-          stop = true;
-        }
-      } catch (...) {
-        std::lock_guard<std::mutex> lock(mu);
-        if (!exception) exception = std::current_exception();
-        stop = true;
-      }
-    }
-  };
-  const int nt = static_cast<int>(std::min<size_t>(static_cast<size_t>(std::max(threads, 1)), n));
-  if (nt <= 1) {
-    worker();
-  } else {
-    std::vector<std::thread> pool;
-    for (int t = 0; t < nt; ++t) pool.emplace_back(worker);
-    for (auto& t : pool) t.join();
-  }
-  if (exception) std::rethrow_exception(exception);
-  return first_error;
-}
-
 // The skipped-view record of a failed render: file relative to the render dir, reason without
 // the path prefix (so shards do not depend on where the render dir is).
 SkippedView MakeSkipped(const RunContext& ctx,
@@ -546,9 +497,7 @@ Result<ConvertSummary> ConvertOrCheck(const fs::path& render_dir,
                                       std::vector<bool>* complete) {
   THROW_CHECK(options.Check());
   const auto start = std::chrono::steady_clock::now();
-  const int threads = options.num_threads > 0
-                          ? options.num_threads
-                          : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  const int threads = ResolveNumThreads(options.num_threads);
 
   // Inputs: plan, hand model, completeness of every unit.
   RunContext ctx;
@@ -608,7 +557,7 @@ Result<ConvertSummary> ConvertOrCheck(const fs::path& render_dir,
   }
 
   // Shards already done on an earlier run.
-  HANDDB_RETURN_IF_ERROR(ParallelFor(units.size(), threads, options.cancel, [&](size_t u) {
+  HANDDB_RETURN_IF_ERROR(ParallelForStatus(units.size(), threads, options.cancel, [&](size_t u) {
     if (selected[u]) units[u].kept = KeepExistingShard(&units[u], options.skip_bad);
     return Status::Ok();
   }));
@@ -642,7 +591,7 @@ Result<ConvertSummary> ConvertOrCheck(const fs::path& render_dir,
   std::mutex version_mu;
   {
     Progress progress("convert", tasks.size(), options.progress, "views");
-    HANDDB_RETURN_IF_ERROR(ParallelFor(tasks.size(), threads, options.cancel, [&](size_t t) {
+    HANDDB_RETURN_IF_ERROR(ParallelForStatus(tasks.size(), threads, options.cancel, [&](size_t t) {
       UnitState& st = units[tasks[t].unit];
       const size_t r = tasks[t].render;
       auto converted = ConvertRender(ctx, *st.unit, st.unit->renders[r]);
@@ -712,7 +661,7 @@ Result<ConvertSummary> ConvertOrCheck(const fs::path& render_dir,
   const json hand_json = HandModelJson(ctx.hand);
   const json label_names = LabelNamesJson(ctx.hand);
   const json shapes = ShapesJson(ctx.plan);
-  HANDDB_RETURN_IF_ERROR(ParallelFor(to_write.size(), threads, options.cancel, [&](size_t i) {
+  HANDDB_RETURN_IF_ERROR(ParallelForStatus(to_write.size(), threads, options.cancel, [&](size_t i) {
     UnitState& st = units[to_write[i]];
     json meta = {{"format", "handdb-shard-metadata"},
                  {"version", kShardMetadataVersion},

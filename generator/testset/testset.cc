@@ -16,6 +16,7 @@
 #include "base/atomic_file.h"
 #include "base/json_schema.h"
 #include "base/progress.h"
+#include "base/thread_pool.h"
 #include "generator/hand/hand_model.h"
 #include "generator/sampling/random.h"
 #include "generator/render/render_driver.h"
@@ -420,57 +421,46 @@ Result<TestSetRenderSummary> RenderTestSet(const fs::path& dir,
   }
   Progress progress("testset render", todo.size(), options.progress, "units");
   std::mutex mu;
-  size_t next = 0;
-  Status failure;
-  std::atomic<bool> stop{false};
-  auto worker = [&]() {
-    while (true) {
-      uint32_t unit = 0;
-      {
-        std::lock_guard<std::mutex> lock(mu);
-        if (next >= todo.size() || !failure.ok()) return;
-        unit = todo[next++];
-      }
-      const fs::path log = dir / "logs" / (UnitDirName(unit) + ".log");
-      std::vector<std::string> argv = {blender->string(),
-                                       "-b",
-                                       "--factory-startup",
-                                       "-noaudio",
-                                       "-t",
-                                       "1",
-                                       "-P",
-                                       script.string(),
-                                       "--",
-                                       "--plan",
-                                       (dir / "testset_plan.json").string(),
-                                       "--unit",
-                                       std::to_string(unit),
-                                       "--out",
-                                       dir.string()};
-      if (!options.photos) argv.push_back("--no-photos");
-      const int code = RunLogged(argv, log, &stop, options.cancel);
-      if (code != 0 || !UnitComplete(dir, unit, options.photos)) {
-        std::lock_guard<std::mutex> lock(mu);
-        if (failure.ok() && !(options.cancel != nullptr && options.cancel->load())) {
-          failure =
-              Status(StatusCode::kExternalToolFailed,
-                     "unit " + std::to_string(unit) + " failed (exit code " + std::to_string(code) +
-                         "): " + LastNonEmptyLine(log) + "; log: " + log.string());
+  std::atomic<bool> stop{false};  // set by the first failure: ends the other units' Blender runs
+  const Status failure =
+      ParallelForStatus(todo.size(), options.jobs, options.cancel, [&](size_t i) {
+        const uint32_t unit = todo[i];
+        const fs::path log = dir / "logs" / (UnitDirName(unit) + ".log");
+        std::vector<std::string> argv = {blender->string(),
+                                         "-b",
+                                         "--factory-startup",
+                                         "-noaudio",
+                                         "-t",
+                                         "1",
+                                         "-P",
+                                         script.string(),
+                                         "--",
+                                         "--plan",
+                                         (dir / "testset_plan.json").string(),
+                                         "--unit",
+                                         std::to_string(unit),
+                                         "--out",
+                                         dir.string()};
+        if (!options.photos) argv.push_back("--no-photos");
+        const int code = RunLogged(argv, log, &stop, options.cancel);
+        if (code != 0 || !UnitComplete(dir, unit, options.photos)) {
+          stop = true;
+          // A cancelled run is reported as such below, not as this unit's failure.
+          if (options.cancel != nullptr && options.cancel->load()) {
+            return Status(StatusCode::kCancelled, "cancelled");
+          }
+          return Status(StatusCode::kExternalToolFailed,
+                        "unit " + std::to_string(unit) + " failed (exit code " +
+                            std::to_string(code) + "): " + LastNonEmptyLine(log) +
+                            "; log: " + log.string());
         }
-        stop = true;
-        return;
-      }
-      {
-        std::lock_guard<std::mutex> lock(mu);
-        ++summary.units_rendered;
-      }
-      progress.Add();
-    }
-  };
-  std::vector<std::thread> threads;
-  const int jobs = std::max(1, std::min<int>(options.jobs, static_cast<int>(todo.size())));
-  for (int j = 0; j < jobs; ++j) threads.emplace_back(worker);
-  for (auto& t : threads) t.join();
+        {
+          std::lock_guard<std::mutex> lock(mu);
+          ++summary.units_rendered;
+        }
+        progress.Add();
+        return Status::Ok();
+      });
   progress.Finish();
   if (options.cancel != nullptr && options.cancel->load()) {
     return Status(StatusCode::kCancelled, "testset render cancelled; rerun to continue");

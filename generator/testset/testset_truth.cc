@@ -2,12 +2,11 @@
 // as the database converter does. Kept apart from testset.cc, which includes the hand-model and
 // sampler headers.
 #include <algorithm>
-#include <atomic>
 #include <cmath>
-#include <thread>
 
 #include "base/json_schema.h"
 #include "base/progress.h"
+#include "base/thread_pool.h"
 #include "generator/convert/converter.h"
 #include "edges/exr_io.h"
 #include "generator/testset/testset.h"
@@ -36,75 +35,68 @@ Status WriteTestSetGroundTruth(const fs::path& dir, int num_threads, bool progre
   read_options.expected_width = plan->resolution;
   read_options.expected_height = plan->resolution;
   Progress progress("testset truth", n, progress_enabled, "views");
-  std::atomic<size_t> next{0};
-  auto worker = [&]() {
-    for (size_t i = next++; i < n; i = next++) {
-      const TestSetItem& item = plan->items[i];
-      const fs::path exr = TestSetLabelPath(dir, item.unit, item.id);
-      const fs::path sidecar_path = TestSetSidecarPath(dir, item.unit, item.id);
-      auto image = ReadLabelExr(exr, read_options);
-      if (!image.ok()) {
-        errors[i] = image.status();
-        continue;
-      }
-      auto sidecar = ReadSidecar(sidecar_path);
-      if (!sidecar.ok()) {
-        errors[i] = sidecar.status();
-        continue;
-      }
-      // The render must be of this item.
-      double joint_diff = 0;
-      for (int k = 0; k < kNumJoints; ++k) {
-        joint_diff = std::max(joint_diff, std::abs(sidecar->joint_angles[k] - item.joints[k]));
-      }
-      const double roll_diff = std::abs(std::remainder(sidecar->camera_roll - item.roll, 2 * M_PI));
-      if (sidecar->render_id != item.id || joint_diff > 1e-5 || roll_diff > 1e-5) {
-        errors[i] = Status(StatusCode::kSizeMismatch,
-                           sidecar_path.string() + ": sidecar does not match plan item " +
-                               std::to_string(item.id) + " (render_id " +
-                               std::to_string(sidecar->render_id) + ", joint difference " +
-                               std::to_string(joint_diff) + ", roll difference " +
-                               std::to_string(roll_diff) + ")");
-        continue;
-      }
-      auto view = ConvertView(*image, *sidecar, conversion, exr.string());
-      if (!view.ok()) {
-        errors[i] = view.status();
-        continue;
-      }
-      const ViewLabel& label = view->label;
-      nlohmann::json keypoints = nlohmann::json::array();
-      for (const auto& k : label.keypoints) keypoints.push_back({k[0], k[1], k[2]});
-      nlohmann::json j = {
-          {"id", item.id},
-          {"unit", item.unit},
-          {"basic", item.basic},
-          {"shape_name", item.shape_name},
-          {"joint_angles", JointsToJson(item.joints)},
-          {"view_direction", item.direction},
-          {"view_theta", item.theta},
-          {"view_phi", item.phi},
-          {"camera_roll", item.roll},
-          {"keypoints", keypoints},
-          {"normalisation",
-           {{"centre_px", {label.source_centre_px[0], label.source_centre_px[1]}},
-            {"diameter_px", label.source_diameter_px},
-            {"scale", label.scale}}},
-          {"num_edge_points", view->points.size()},
-          {"label", fs::relative(exr, dir).generic_string()},
-          {"sidecar", fs::relative(sidecar_path, dir).generic_string()},
-      };
-      const fs::path photo = TestSetPhotoPath(dir, item.unit, item.id);
-      if (fs::exists(photo)) j["photo"] = fs::relative(photo, dir).generic_string();
-      items[i] = std::move(j);
-      progress.Add();
+  // Every item is converted (no stop at the first bad one) so the error names how many are bad.
+  ParallelFor(n, ResolveNumThreads(num_threads), [&](size_t i, int) {
+    const TestSetItem& item = plan->items[i];
+    const fs::path exr = TestSetLabelPath(dir, item.unit, item.id);
+    const fs::path sidecar_path = TestSetSidecarPath(dir, item.unit, item.id);
+    auto image = ReadLabelExr(exr, read_options);
+    if (!image.ok()) {
+      errors[i] = image.status();
+      return true;
     }
-  };
-  std::vector<std::thread> threads;
-  const int threads_n =
-      num_threads > 0 ? num_threads : std::max(1u, std::thread::hardware_concurrency());
-  for (int t = 0; t < threads_n; ++t) threads.emplace_back(worker);
-  for (auto& t : threads) t.join();
+    auto sidecar = ReadSidecar(sidecar_path);
+    if (!sidecar.ok()) {
+      errors[i] = sidecar.status();
+      return true;
+    }
+    // The render must be of this item.
+    double joint_diff = 0;
+    for (int k = 0; k < kNumJoints; ++k) {
+      joint_diff = std::max(joint_diff, std::abs(sidecar->joint_angles[k] - item.joints[k]));
+    }
+    const double roll_diff = std::abs(std::remainder(sidecar->camera_roll - item.roll, 2 * M_PI));
+    if (sidecar->render_id != item.id || joint_diff > 1e-5 || roll_diff > 1e-5) {
+      errors[i] = Status(
+          StatusCode::kSizeMismatch,
+          sidecar_path.string() + ": sidecar does not match plan item " + std::to_string(item.id) +
+              " (render_id " + std::to_string(sidecar->render_id) + ", joint difference " +
+              std::to_string(joint_diff) + ", roll difference " + std::to_string(roll_diff) + ")");
+      return true;
+    }
+    auto view = ConvertView(*image, *sidecar, conversion, exr.string());
+    if (!view.ok()) {
+      errors[i] = view.status();
+      return true;
+    }
+    const ViewLabel& label = view->label;
+    nlohmann::json keypoints = nlohmann::json::array();
+    for (const auto& k : label.keypoints) keypoints.push_back({k[0], k[1], k[2]});
+    nlohmann::json j = {
+        {"id", item.id},
+        {"unit", item.unit},
+        {"basic", item.basic},
+        {"shape_name", item.shape_name},
+        {"joint_angles", JointsToJson(item.joints)},
+        {"view_direction", item.direction},
+        {"view_theta", item.theta},
+        {"view_phi", item.phi},
+        {"camera_roll", item.roll},
+        {"keypoints", keypoints},
+        {"normalisation",
+         {{"centre_px", {label.source_centre_px[0], label.source_centre_px[1]}},
+          {"diameter_px", label.source_diameter_px},
+          {"scale", label.scale}}},
+        {"num_edge_points", view->points.size()},
+        {"label", fs::relative(exr, dir).generic_string()},
+        {"sidecar", fs::relative(sidecar_path, dir).generic_string()},
+    };
+    const fs::path photo = TestSetPhotoPath(dir, item.unit, item.id);
+    if (fs::exists(photo)) j["photo"] = fs::relative(photo, dir).generic_string();
+    items[i] = std::move(j);
+    progress.Add();
+    return true;
+  });
   progress.Finish();
   size_t bad = 0;
   Status first;
