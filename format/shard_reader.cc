@@ -1,14 +1,10 @@
 #include "format/shard_reader.h"
 
-#include <fcntl.h>
-#include <sys/mman.h>
-#include <sys/stat.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
 
+#include "base/mapped_file.h"
 #include "format/shard_layout.h"
 
 namespace handdb {
@@ -17,8 +13,7 @@ using namespace shard;  // NOLINT(google-build-using-namespace): the layout cons
 
 struct ShardReader::Impl {
   std::string name;
-  void* map = nullptr;  // mmap'ed file, or null when reading from memory
-  size_t map_size = 0;
+  MappedFile file;              // empty when reading from memory
   std::vector<uint64_t> owned;  // aligned copy when FromMemory() got misaligned bytes
   std::span<const uint8_t> bytes;
   Layout layout;
@@ -31,9 +26,6 @@ struct ShardReader::Impl {
   uint64_t num_points = 0;
   std::string_view metadata;
 
-  ~Impl() {
-    if (map != nullptr) ::munmap(map, map_size);
-  }
   const uint8_t* record(size_t i) const { return views + i * view_stride; }
 };
 
@@ -45,36 +37,10 @@ ShardReader& ShardReader::operator=(ShardReader&&) noexcept = default;
 Result<ShardReader> ShardReader::Open(const std::filesystem::path& path) {
   auto impl = std::make_unique<Impl>();
   impl->name = path.string();
-  int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) {
-    const StatusCode code = errno == ENOENT ? StatusCode::kNotFound : StatusCode::kIoError;
-    return Status(code, impl->name + ": cannot open: " + std::strerror(errno));
-  }
-  struct stat st {};
-  if (::fstat(fd, &st) != 0) {
-    Status s(StatusCode::kIoError, impl->name + ": fstat failed: " + std::strerror(errno));
-    ::close(fd);
-    return s;
-  }
-  if (!S_ISREG(st.st_mode)) {
-    ::close(fd);
-    return Status(StatusCode::kIoError, impl->name + ": not a regular file");
-  }
-  const auto size = static_cast<size_t>(st.st_size);
-  if (size > 0) {
-    void* map = ::mmap(nullptr, size, PROT_READ, MAP_PRIVATE, fd, 0);
-    if (map == MAP_FAILED) {
-      Status s(StatusCode::kIoError,
-               impl->name + ": mmap of " + std::to_string(size) +
-                   " bytes failed: " + std::strerror(errno));
-      ::close(fd);
-      return s;
-    }
-    impl->map = map;
-    impl->map_size = size;
-    impl->bytes = std::span<const uint8_t>(static_cast<const uint8_t*>(map), size);
-  }
-  ::close(fd);
+  auto file = MappedFile::Open(path);
+  if (!file.ok()) return file.status();
+  impl->file = std::move(file).value();
+  impl->bytes = impl->file.bytes();
   return Init(std::move(impl));
 }
 
@@ -148,13 +114,12 @@ std::span<const uint8_t> ShardReader::bytes() const { return impl_->bytes; }
 
 void ShardReader::ReleaseViewTablePages() const {
   const Impl& r = *impl_;
-  if (r.map == nullptr) return;
   const RawSection& vs = r.layout.sections[r.layout.views];
   constexpr uint64_t kPage = 4096;
   // Whole pages inside the section only: the pages it shares with its neighbours stay.
   const uint64_t begin = (vs.offset + kPage - 1) & ~(kPage - 1);
-  const uint64_t end = std::min<uint64_t>(vs.offset + vs.size, r.map_size) & ~(kPage - 1);
-  if (end > begin) ::madvise(static_cast<uint8_t*>(r.map) + begin, end - begin, MADV_DONTNEED);
+  const uint64_t end = std::min<uint64_t>(vs.offset + vs.size, r.file.size()) & ~(kPage - 1);
+  r.file.Advise(begin, end, MappedFile::Advice::kDontNeed);
 }
 
 ViewLabel ShardReader::label(size_t i) const {
@@ -187,26 +152,18 @@ namespace {
 // save on a warm cache (43% vs 59% of the raw read() rate).
 class SequentialAdvice {
  public:
-  SequentialAdvice(const uint8_t* map, size_t map_size, uint64_t offset, uint64_t size)
-      : map_(map), map_size_(map_size), offset_(offset), size_(size) {
-    Advise(MADV_SEQUENTIAL);
+  SequentialAdvice(const MappedFile& file, uint64_t offset, uint64_t size)
+      : file_(file), begin_(offset & ~uint64_t{4095}), end_(size == 0 ? begin_ : offset + size) {
+    file_.Advise(begin_, end_, MappedFile::Advice::kSequential);
   }
-  ~SequentialAdvice() { Advise(MADV_NORMAL); }
+  ~SequentialAdvice() { file_.Advise(begin_, end_, MappedFile::Advice::kNormal); }
   SequentialAdvice(const SequentialAdvice&) = delete;
   SequentialAdvice& operator=(const SequentialAdvice&) = delete;
 
  private:
-  void Advise(int advice) const {
-    if (map_ == nullptr || size_ == 0) return;
-    constexpr uint64_t kPage = 4096;
-    const uint64_t begin = offset_ & ~(kPage - 1);
-    const uint64_t end = std::min<uint64_t>(offset_ + size_, map_size_);
-    ::madvise(const_cast<uint8_t*>(map_) + begin, end - begin, advice);
-  }
-  const uint8_t* map_;
-  size_t map_size_;
-  uint64_t offset_;
-  uint64_t size_;
+  const MappedFile& file_;
+  uint64_t begin_;
+  uint64_t end_;
 };
 
 }  // namespace
@@ -217,9 +174,8 @@ Status ShardReader::ScanViews(const ViewCallback& fn, const ScanOptions& options
   const RawSection& vs = layout.sections[layout.views];
   const RawSection& ps = layout.sections[layout.points];
   const uint8_t* base = r.bytes.data();
-  const uint8_t* map = r.map != nullptr ? base : nullptr;
-  const SequentialAdvice views_advice(map, r.map_size, vs.offset, vs.size);
-  const SequentialAdvice points_advice(map, r.map_size, ps.offset, ps.size);
+  const SequentialAdvice views_advice(r.file, vs.offset, vs.size);
+  const SequentialAdvice points_advice(r.file, ps.offset, ps.size);
   StreamingChecksum views_hash;
   StreamingChecksum points_hash;
   for (size_t i = 0; i < r.num_views; ++i) {

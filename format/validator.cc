@@ -1,10 +1,5 @@
 #include "format/validator.h"
 
-#include <fcntl.h>
-#include <sys/mman.h>
-#include <sys/stat.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
@@ -17,8 +12,9 @@
 #include <sstream>
 #include <unordered_map>
 
-#include "format/manifest.h"
+#include "base/mapped_file.h"
 #include "base/progress.h"
+#include "format/manifest.h"
 #include "format/shard_layout.h"
 
 namespace handdb {
@@ -324,46 +320,6 @@ ValidationReport ValidateBytes(std::span<const uint8_t> bytes,
   return report;
 }
 
-// A read-only mapping of a whole file (empty files map to an empty span).
-class MappedFile {
- public:
-  ~MappedFile() {
-    if (map_ != nullptr) ::munmap(map_, size_);
-  }
-  Status Open(const fs::path& path) {
-    int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-    if (fd < 0) {
-      return Status(errno == ENOENT ? StatusCode::kNotFound : StatusCode::kIoError,
-                    path.string() + ": cannot open: " + std::strerror(errno));
-    }
-    struct stat st {};
-    if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
-      ::close(fd);
-      return Status(StatusCode::kIoError, path.string() + ": not a regular file");
-    }
-    size_ = static_cast<size_t>(st.st_size);
-    if (size_ > 0) {
-      void* map = ::mmap(nullptr, size_, PROT_READ, MAP_PRIVATE, fd, 0);
-      if (map == MAP_FAILED) {
-        Status s(StatusCode::kIoError, path.string() + ": mmap failed: " + std::strerror(errno));
-        ::close(fd);
-        return s;
-      }
-      map_ = map;
-      ::madvise(map_, size_, MADV_SEQUENTIAL);
-    }
-    ::close(fd);
-    return Status::Ok();
-  }
-  std::span<const uint8_t> bytes() const {
-    return {static_cast<const uint8_t*>(map_), map_ ? size_ : 0};
-  }
-
- private:
-  void* map_ = nullptr;
-  size_t size_ = 0;
-};
-
 ValidationReport FileProblem(const std::string& file, const Status& status) {
   ValidationReport r;
   r.problems.push_back({status.code(), file, 0, status.message()});
@@ -379,11 +335,10 @@ ValidationReport ValidateShardBytes(std::span<const uint8_t> bytes,
 }
 
 ValidationReport ValidateShardFile(const fs::path& path, const ValidateOptions& options) {
-  MappedFile file;
-  Status s = file.Open(path);
-  if (!s.ok()) return FileProblem(path.string(), s);
+  auto file = MappedFile::Open(path, MappedFile::Advice::kSequential);
+  if (!file.ok()) return FileProblem(path.string(), file.status());
   RenderIdMap seen;
-  return ValidateBytes(file.bytes(), path.string(), options, &seen);
+  return ValidateBytes(file->bytes(), path.string(), options, &seen);
 }
 
 ValidationReport ValidateDatabase(const fs::path& db_dir, const ValidateOptions& options) {
@@ -441,9 +396,9 @@ ValidationReport ValidateDatabase(const fs::path& db_dir, const ValidateOptions&
   for (const ManifestShard* entry : listed) {
     const fs::path path = db_dir / entry->file;
     const std::string file = path.string();
-    MappedFile mapped;
-    Status s = mapped.Open(path);
-    if (!s.ok()) {
+    auto mapped = MappedFile::Open(path, MappedFile::Advice::kSequential);
+    if (!mapped.ok()) {
+      const Status& s = mapped.status();
       report.Append(
           FileProblem(file,
                       s.code() == StatusCode::kNotFound
@@ -451,7 +406,7 @@ ValidationReport ValidateDatabase(const fs::path& db_dir, const ValidateOptions&
                           : s));
       continue;
     }
-    const auto bytes = mapped.bytes();
+    const auto bytes = mapped->bytes();
     if (manifest.ok()) {
       auto mismatch = [&](StatusCode code, uint64_t offset, const std::string& what) {
         report.problems.push_back({code, file, offset, file + ": " + what});

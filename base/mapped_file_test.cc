@@ -1,0 +1,61 @@
+#include "base/mapped_file.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <string>
+#include <utility>
+
+#include "base/atomic_file.h"
+
+namespace handdb {
+namespace {
+
+std::filesystem::path TempPath(const std::string& name) {
+  return std::filesystem::temp_directory_path() /
+         ("handdb_mapped_" + std::to_string(::getpid()) + "_" + name);
+}
+
+TEST(MappedFile, MapsTheBytesAndMoves) {
+  const auto path = TempPath("abc");
+  ASSERT_TRUE(WriteFileAtomic(path, "abc").ok());
+  auto file = MappedFile::Open(path, MappedFile::Advice::kSequential);
+  ASSERT_TRUE(file.ok()) << file.status().ToString();
+  ASSERT_EQ(file->size(), 3u);
+  EXPECT_EQ(std::string(reinterpret_cast<const char*>(file->bytes().data()), 3), "abc");
+  MappedFile moved = std::move(file).value();
+  EXPECT_EQ(moved.size(), 3u);
+  MappedFile other;
+  other = std::move(moved);
+  EXPECT_EQ(other.bytes()[2], 'c');
+  other.Advise(0, 4096, MappedFile::Advice::kDontNeed);  // pages fault back in from the file
+  EXPECT_EQ(other.bytes()[0], 'a');
+  EXPECT_THROW(other.Advise(1, 2, MappedFile::Advice::kNormal), std::logic_error);
+  EXPECT_EQ(moved.size(), 0u);  // NOLINT(bugprone-use-after-move): moved-from is empty
+  std::filesystem::remove(path);
+}
+
+TEST(MappedFile, EmptyFileIsAnEmptySpan) {
+  const auto path = TempPath("empty");
+  ASSERT_TRUE(WriteFileAtomic(path, "").ok());
+  auto file = MappedFile::Open(path);
+  ASSERT_TRUE(file.ok());
+  EXPECT_TRUE(file->bytes().empty());
+  std::filesystem::remove(path);
+}
+
+TEST(MappedFile, ErrorsNameThePath) {
+  const auto missing = TempPath("missing");
+  auto file = MappedFile::Open(missing);
+  ASSERT_FALSE(file.ok());
+  EXPECT_EQ(file.status().code(), StatusCode::kNotFound);
+  EXPECT_EQ(file.status().message().rfind(missing.string() + ": cannot open: ", 0), 0u);
+  const auto dir = std::filesystem::temp_directory_path();
+  auto not_regular = MappedFile::Open(dir);
+  ASSERT_FALSE(not_regular.ok());
+  EXPECT_EQ(not_regular.status().code(), StatusCode::kIoError);
+  EXPECT_EQ(not_regular.status().message(), dir.string() + ": not a regular file");
+}
+
+}  // namespace
+}  // namespace handdb
