@@ -244,10 +244,10 @@ Result<std::unique_ptr<Searcher>> Searcher::Open(const std::filesystem::path& di
   return std::make_unique<Searcher>(std::make_shared<const Database>(std::move(db).value()));
 }
 
-Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
-                                            const SearchOptions& options,
-                                            SearchStats* stats) const {
-  const auto start = std::chrono::steady_clock::now();
+namespace {
+
+// The query points must be finite and inside the normalised frame.
+Status CheckQuery(std::span<const Point2f> query_px, const SearchOptions& options) {
   if (!options.Check()) {
     return Status(StatusCode::kInvalidArgument, "invalid search options (see the line above)");
   }
@@ -262,156 +262,98 @@ Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
                         ") is not finite or outside +-2000 px of the normalised frame");
     }
   }
+  return Status::Ok();
+}
 
-  const Database& db = *db_;
-  const size_t num_views = db.num_views();
-  const uint32_t num_rolls = db.num_rolls();
-  const int threads = ResolveNumThreads(options.num_threads);
-  // One pool for the query's parallel loops; the calling thread is worker 0.
-  std::optional<ThreadPool> pool_storage;
-  ThreadPool* pool = threads > 1 ? &pool_storage.emplace(threads - 1) : nullptr;
-  const size_t k = static_cast<size_t>(options.top_k);
-  SearchStats local;
-  local.virtual_views = db.num_virtual_views();
-  local.query_points = query_px.size();
+// One query's stages, sharing the query context, the top k and the counters: BruteForce(), or
+// Bounds() then Refine(); then Matches().
+class QueryRun {
+ public:
+  QueryRun(const Database& db,
+           std::span<const int32_t> max_abs,
+           std::span<const Point2f> query_px,
+           const SearchOptions& options,
+           int threads,
+           ThreadPool* pool)
+      : db_(db),
+        max_abs_(max_abs),
+        options_(options),
+        threads_(threads),
+        pool_(pool),
+        num_views_(db.num_views()),
+        num_rolls_(db.num_rolls()),
+        k_(static_cast<size_t>(options.top_k)),
+        ctx_(db, max_abs, query_px, options),
+        top_(k_) {}
 
-  QueryContext ctx(db, max_abs_, query_px, options);
-  TopK top(k);
-  std::atomic<uint64_t> refined{0};
-  std::atomic<uint64_t> abandoned{0};
-
-  if (options.brute_force) {
+  // The reference: exact D_c for every (view, roll).
+  void BruteForce(SearchStats* stats, std::chrono::steady_clock::time_point start) {
     ParallelFor(
-        num_rolls,
-        threads,
+        num_rolls_,
+        threads_,
         [&](size_t r, int) {
-          ctx.PrepareRoll(static_cast<roll_id_t>(r));
+          ctx_.PrepareRoll(static_cast<roll_id_t>(r));
           return true;
         },
-        pool);
-    local.seconds_bounds = Seconds(start);
+        pool_);
+    stats->seconds_bounds = Seconds(start);
     const auto refine_start = std::chrono::steady_clock::now();
     ParallelFor(
-        num_views,
-        threads,
+        num_views_,
+        threads_,
         [&](size_t v, int worker) {
-          if (db.points(static_cast<view_id_t>(v)).empty()) return true;
-          for (roll_id_t r = 0; r < num_rolls; ++r) {
+          if (db_.points(static_cast<view_id_t>(v)).empty()) return true;
+          for (roll_id_t r = 0; r < num_rolls_; ++r) {
             Scored s;
-            ctx.Score(static_cast<view_id_t>(v), r, kInf, 0.0, worker, &s);
-            top.Insert(s);
+            ctx_.Score(static_cast<view_id_t>(v), r, kInf, 0.0, worker, &s);
+            top_.Insert(s);
           }
-          refined.fetch_add(num_rolls, std::memory_order_relaxed);
+          refined_.fetch_add(num_rolls_, std::memory_order_relaxed);
           return true;
         },
-        pool);
-    local.seconds_refine = Seconds(refine_start);
-  } else {
-    // Step 1: lower bounds, roll-major (one distance transform per roll, reused for every view).
-    // The threshold is learnt on the way: after each roll its best few pairs are scored exactly,
-    // and a pair's bound stops accumulating as soon as it exceeds the current k-th best D_c
-    // (the partial sum is still a valid lower bound, and already too large to matter).
-    const size_t n = num_views * num_rolls;
-    std::vector<Bound> bound(n);  // index r * num_views + v
-    const DistanceGridOptions grid_options{options.dt_cell_px, 170.0f};
-    std::vector<DistanceGrid> grids(threads, DistanceGrid(grid_options));
-    constexpr size_t kChunk = 64;
+        pool_);
+    stats->seconds_refine = Seconds(refine_start);
+  }
+
+  // Step 1: lower bounds, roll-major (one distance transform per roll, reused for every view),
+  // index r * num_views + v. The threshold is learnt on the way: after each roll its best few
+  // pairs are scored exactly, and a pair's bound stops accumulating as soon as it exceeds the
+  // current k-th best D_c (the partial sum is still a valid lower bound, and already too large to
+  // matter).
+  std::vector<Bound> Bounds() {
+    std::vector<Bound> bound(num_views_ * num_rolls_);
+    const DistanceGridOptions grid_options{options_.dt_cell_px, 170.0f};
+    std::vector<DistanceGrid> grids(threads_, DistanceGrid(grid_options));
     ParallelFor(
-        num_rolls,
-        threads,
+        num_rolls_,
+        threads_,
         [&](size_t ri, int worker) {
           const roll_id_t r = static_cast<roll_id_t>(ri);
-          ctx.PrepareRoll(r);
+          ctx_.PrepareRoll(r);
           DistanceGrid& grid = grids[worker];
-          grid.Build(ctx.rolled(r));
-          Bound* out = bound.data() + ri * num_views;
-          for (view_id_t v = 0; v < num_views; ++v) {
-            const std::span<const PointQ> pts = db.points(v);
-            if (pts.empty()) {
-              out[v] = kNoBound;
-              continue;
-            }
-            const double limit = Limit(top.threshold(), 0.0, static_cast<double>(pts.size()));
-            const bool fast = grid.Covers(max_abs_[v]);
-            double sum = 0;
-            for (size_t i = 0; i < pts.size() && sum <= limit; i += kChunk) {
-              const auto chunk = pts.subspan(i, std::min(kChunk, pts.size() - i));
-              sum += fast ? grid.SumLowerBoundsFast(chunk) : grid.SumLowerBounds(chunk);
-            }
-            const double mean = sum / static_cast<double>(pts.size());
-            out[v] = BoundBelow(mean - DistanceGrid::MeanLowerBoundMargin(pts.size(), mean));
-          }
-          // Score this roll's most promising pairs now so later rolls can stop early.
-          const size_t m = std::min<size_t>(num_views, top.threshold() == kInf ? k : 2);
-          std::vector<uint32_t> best;
-          best.reserve(m + 1);
-          auto less = [&](uint32_t x, uint32_t y) {
-            return out[x] != out[y] ? out[x] < out[y] : x < y;
-          };
-          for (uint32_t v = 0; v < num_views; ++v) {
-            if (out[v] == kNoBound) continue;
-            if (best.size() < m) {
-              best.push_back(v);
-              std::push_heap(best.begin(), best.end(), less);
-            } else if (m > 0 && less(v, best.front())) {
-              std::pop_heap(best.begin(), best.end(), less);
-              best.back() = v;
-              std::push_heap(best.begin(), best.end(), less);
-            }
-          }
-          for (uint32_t v : best) {
-            const double threshold = top.threshold();
-            if (BoundPx(out[v]) > threshold) continue;
-            refined.fetch_add(1, std::memory_order_relaxed);
-            Scored sc;
-            if (ctx.Score(v, r, threshold, BoundPx(out[v]), worker, &sc)) {
-              sc.lower_bound = BoundPx(out[v]);
-              top.Insert(sc);
-            } else {
-              abandoned.fetch_add(1, std::memory_order_relaxed);
-            }
-          }
+          grid.Build(ctx_.rolled(r));
+          Bound* out = bound.data() + ri * num_views_;
+          BoundRoll(grid, out);
+          ScoreRollBest(r, out, worker);
           return true;
         },
-        pool);
-    grids.clear();
-    local.bounded = n;
-    local.seconds_bounds = Seconds(start);
-    const auto refine_start = std::chrono::steady_clock::now();
+        pool_);
+    return bound;
+  }
 
-    // Step 2: visit pairs in increasing bound. First the k smallest bounds give a threshold,
-    // then only pairs whose bound is <= it are sorted and visited.
+  // Step 2: visit pairs in increasing bound. First the k smallest bounds give a threshold,
+  // then only pairs whose bound is <= it are sorted and visited.
+  void Refine(const std::vector<Bound>& bound) {
+    const size_t n = bound.size();
     auto by_bound = [&](uint32_t x, uint32_t y) {
       return bound[x] != bound[y] ? bound[x] < bound[y] : x < y;
     };
-    auto visit = [&](std::span<const uint32_t> order) {
-      ParallelFor(
-          order.size(),
-          threads,
-          [&](size_t i, int worker) {
-            const uint32_t idx = order[i];
-            const double threshold = top.threshold();
-            if (BoundPx(bound[idx]) > threshold) return false;  // every later pair: a larger bound
-            const view_id_t v = idx % num_views;
-            const roll_id_t r = static_cast<roll_id_t>(idx / num_views);
-            refined.fetch_add(1, std::memory_order_relaxed);
-            Scored s;
-            if (ctx.Score(v, r, threshold, BoundPx(bound[idx]), worker, &s)) {
-              s.lower_bound = BoundPx(bound[idx]);
-              top.Insert(s);
-            } else {
-              abandoned.fetch_add(1, std::memory_order_relaxed);
-            }
-            return true;
-          },
-          pool);
-    };
     // The k smallest bounds with a bounded max-heap (no N-sized index array).
     std::vector<uint32_t> first;
-    first.reserve(k + 1);
+    first.reserve(k_ + 1);
     for (uint32_t i = 0; i < n; ++i) {
       if (bound[i] == kNoBound) continue;
-      if (first.size() < k) {
+      if (first.size() < k_) {
         first.push_back(i);
         std::push_heap(first.begin(), first.end(), by_bound);
       } else if (by_bound(i, first.front())) {
@@ -421,8 +363,8 @@ Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
       }
     }
     std::sort(first.begin(), first.end(), by_bound);
-    visit(first);
-    const double t0 = top.threshold();
+    Visit(bound, first);
+    const double t0 = top_.threshold();
     std::vector<uint32_t> rest;
     const uint32_t last_first = first.empty() ? 0 : first.back();
     for (uint32_t i = 0; i < n; ++i) {
@@ -432,28 +374,155 @@ Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
       }
     }
     std::sort(rest.begin(), rest.end(), by_bound);
-    visit(rest);
-    local.seconds_refine = Seconds(refine_start);
+    Visit(bound, rest);
   }
 
-  std::vector<Match> matches;
-  for (const Scored& s : top.items()) {
-    Match m;
-    m.view_id = s.view;
-    m.roll = s.roll;
-    m.roll_angle = RollAngle(s.roll, num_rolls);
-    m.distance = s.distance;
-    m.a = s.a;
-    m.b = s.b;
-    m.lower_bound = s.lower_bound;
-    m.label = RollLabel(db.label(s.view), m.roll_angle);
-    m.shape_name = std::string(db.shape_name(m.label.shape_id));
-    matches.push_back(std::move(m));
+  // The top k, best first, with labels rolled and shape names.
+  std::vector<Match> Matches() const {
+    std::vector<Match> matches;
+    for (const Scored& s : top_.items()) {
+      Match m;
+      m.view_id = s.view;
+      m.roll = s.roll;
+      m.roll_angle = RollAngle(s.roll, num_rolls_);
+      m.distance = s.distance;
+      m.a = s.a;
+      m.b = s.b;
+      m.lower_bound = s.lower_bound;
+      m.label = RollLabel(db_.label(s.view), m.roll_angle);
+      m.shape_name = std::string(db_.shape_name(m.label.shape_id));
+      matches.push_back(std::move(m));
+    }
+    return matches;
   }
-  local.refined = refined.load();
-  local.abandoned = abandoned.load();
-  local.view_trees = ctx.num_view_trees();
-  local.probe_abandoned = ctx.num_probe_abandoned();
+
+  void CountInto(SearchStats* stats) const {
+    stats->refined = refined_.load();
+    stats->abandoned = abandoned_.load();
+    stats->view_trees = ctx_.num_view_trees();
+    stats->probe_abandoned = ctx_.num_probe_abandoned();
+  }
+
+ private:
+  // The bound of every view against one roll's distance grid, into out[v].
+  void BoundRoll(const DistanceGrid& grid, Bound* out) const {
+    constexpr size_t kChunk = 64;
+    for (view_id_t v = 0; v < num_views_; ++v) {
+      const std::span<const PointQ> pts = db_.points(v);
+      if (pts.empty()) {
+        out[v] = kNoBound;
+        continue;
+      }
+      const double limit = Limit(top_.threshold(), 0.0, static_cast<double>(pts.size()));
+      const bool fast = grid.Covers(max_abs_[v]);
+      double sum = 0;
+      for (size_t i = 0; i < pts.size() && sum <= limit; i += kChunk) {
+        const auto chunk = pts.subspan(i, std::min(kChunk, pts.size() - i));
+        sum += fast ? grid.SumLowerBoundsFast(chunk) : grid.SumLowerBounds(chunk);
+      }
+      const double mean = sum / static_cast<double>(pts.size());
+      out[v] = BoundBelow(mean - DistanceGrid::MeanLowerBoundMargin(pts.size(), mean));
+    }
+  }
+
+  // Scores this roll's most promising pairs now so later rolls can stop early.
+  void ScoreRollBest(roll_id_t r, const Bound* out, int worker) {
+    const size_t m = std::min<size_t>(num_views_, top_.threshold() == kInf ? k_ : 2);
+    std::vector<uint32_t> best;
+    best.reserve(m + 1);
+    auto less = [&](uint32_t x, uint32_t y) { return out[x] != out[y] ? out[x] < out[y] : x < y; };
+    for (uint32_t v = 0; v < num_views_; ++v) {
+      if (out[v] == kNoBound) continue;
+      if (best.size() < m) {
+        best.push_back(v);
+        std::push_heap(best.begin(), best.end(), less);
+      } else if (m > 0 && less(v, best.front())) {
+        std::pop_heap(best.begin(), best.end(), less);
+        best.back() = v;
+        std::push_heap(best.begin(), best.end(), less);
+      }
+    }
+    for (uint32_t v : best) {
+      const double threshold = top_.threshold();
+      if (BoundPx(out[v]) > threshold) continue;
+      refined_.fetch_add(1, std::memory_order_relaxed);
+      Scored sc;
+      if (ctx_.Score(v, r, threshold, BoundPx(out[v]), worker, &sc)) {
+        sc.lower_bound = BoundPx(out[v]);
+        top_.Insert(sc);
+      } else {
+        abandoned_.fetch_add(1, std::memory_order_relaxed);
+      }
+    }
+  }
+
+  // Scores the pairs of `order` (increasing bound) until a bound exceeds the k-th best.
+  void Visit(const std::vector<Bound>& bound, std::span<const uint32_t> order) {
+    ParallelFor(
+        order.size(),
+        threads_,
+        [&](size_t i, int worker) {
+          const uint32_t idx = order[i];
+          const double threshold = top_.threshold();
+          if (BoundPx(bound[idx]) > threshold) return false;  // every later pair: a larger bound
+          const view_id_t v = idx % num_views_;
+          const roll_id_t r = static_cast<roll_id_t>(idx / num_views_);
+          refined_.fetch_add(1, std::memory_order_relaxed);
+          Scored s;
+          if (ctx_.Score(v, r, threshold, BoundPx(bound[idx]), worker, &s)) {
+            s.lower_bound = BoundPx(bound[idx]);
+            top_.Insert(s);
+          } else {
+            abandoned_.fetch_add(1, std::memory_order_relaxed);
+          }
+          return true;
+        },
+        pool_);
+  }
+
+  const Database& db_;
+  std::span<const int32_t> max_abs_;
+  const SearchOptions& options_;
+  const int threads_;
+  ThreadPool* const pool_;
+  const size_t num_views_;
+  const uint32_t num_rolls_;
+  const size_t k_;
+  QueryContext ctx_;
+  TopK top_;
+  std::atomic<uint64_t> refined_{0};
+  std::atomic<uint64_t> abandoned_{0};
+};
+
+}  // namespace
+
+Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
+                                            const SearchOptions& options,
+                                            SearchStats* stats) const {
+  const auto start = std::chrono::steady_clock::now();
+  if (Status s = CheckQuery(query_px, options); !s.ok()) return s;
+
+  const int threads = ResolveNumThreads(options.num_threads);
+  // One pool for the query's parallel loops; the calling thread is worker 0.
+  std::optional<ThreadPool> pool_storage;
+  ThreadPool* pool = threads > 1 ? &pool_storage.emplace(threads - 1) : nullptr;
+  SearchStats local;
+  local.virtual_views = db_->num_virtual_views();
+  local.query_points = query_px.size();
+
+  QueryRun run(*db_, max_abs_, query_px, options, threads, pool);
+  if (options.brute_force) {
+    run.BruteForce(&local, start);
+  } else {
+    const std::vector<Bound> bound = run.Bounds();
+    local.bounded = bound.size();
+    local.seconds_bounds = Seconds(start);
+    const auto refine_start = std::chrono::steady_clock::now();
+    run.Refine(bound);
+    local.seconds_refine = Seconds(refine_start);
+  }
+  std::vector<Match> matches = run.Matches();
+  run.CountInto(&local);
   local.seconds_total = Seconds(start);
   if (stats != nullptr) *stats = local;
   return matches;
