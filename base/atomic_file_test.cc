@@ -4,16 +4,12 @@
 
 #include <filesystem>
 
+#include "base/testing.h"
+
 namespace handdb {
 namespace {
 
-std::filesystem::path TempDir(const std::string& name) {
-  auto dir = std::filesystem::temp_directory_path() /
-             ("handdb_atomic_" + name + "_" + std::to_string(::getpid()));
-  std::filesystem::remove_all(dir);
-  std::filesystem::create_directories(dir);
-  return dir;
-}
+using testing::TempDir;
 
 TEST(AtomicFile, WritesAndRenames) {
   auto dir = TempDir("writes");

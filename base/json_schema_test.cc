@@ -1,25 +1,19 @@
 #include "base/json_schema.h"
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <filesystem>
 #include <stdexcept>
 
 #include "base/atomic_file.h"
+#include "base/testing.h"
 
 namespace handdb {
 namespace {
 
-using nlohmann::json;
+using testing::TempDir;
 
-std::filesystem::path TempDir(const std::string& name) {
-  auto dir = std::filesystem::temp_directory_path() /
-             ("handdb_json_schema_" + name + "_" + std::to_string(::getpid()));
-  std::filesystem::remove_all(dir);
-  std::filesystem::create_directories(dir);
-  return dir;
-}
+using nlohmann::json;
 
 const json& PersonSchema() {
   static const json schema = json::parse(R"({

@@ -1,19 +1,18 @@
 #include "base/mapped_file.h"
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <string>
 #include <utility>
 
 #include "base/atomic_file.h"
+#include "base/testing.h"
 
 namespace handdb {
 namespace {
 
 std::filesystem::path TempPath(const std::string& name) {
-  return std::filesystem::temp_directory_path() /
-         ("handdb_mapped_" + std::to_string(::getpid()) + "_" + name);
+  return testing::TempDir("mapped") / name;
 }
 
 TEST(MappedFile, MapsTheBytesAndMoves) {

@@ -1,11 +1,11 @@
 #include "base/sha256.h"
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <string>
 
 #include "base/atomic_file.h"
+#include "base/testing.h"
 
 namespace handdb {
 namespace {
@@ -31,8 +31,7 @@ TEST(Sha256, ChunkedUpdatesEqualOneShot) {
 }
 
 TEST(Sha256, File) {
-  const auto path =
-      std::filesystem::temp_directory_path() / ("handdb_sha_" + std::to_string(::getpid()));
+  const auto path = testing::TempDir("sha256") / "abc";
   ASSERT_TRUE(WriteFileAtomic(path, "abc").ok());
   auto digest = Sha256File(path);
   ASSERT_TRUE(digest.ok());

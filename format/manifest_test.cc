@@ -1,25 +1,19 @@
 #include "format/manifest.h"
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <filesystem>
 
 #include "base/atomic_file.h"
 #include "base/json_schema.h"
+#include "base/testing.h"
 
 namespace handdb {
 namespace {
 
-namespace fs = std::filesystem;
+using testing::TempDir;
 
-fs::path TempDir(const std::string& name) {
-  auto dir =
-      fs::temp_directory_path() / ("handdb_manifest_" + name + "_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
-}
+namespace fs = std::filesystem;
 
 Manifest Sample() {
   Manifest m;

@@ -1,7 +1,6 @@
 #include "format/shard_reader.h"
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
@@ -9,6 +8,7 @@
 #include <set>
 
 #include "base/atomic_file.h"
+#include "base/testing.h"
 #include "format/shard_layout.h"
 #include "format/shard_testing.h"
 #include "format/shard_writer.h"
@@ -16,21 +16,10 @@
 namespace handdb {
 namespace {
 
+using testing::ReadBytes;
+using testing::TempDir;
+
 namespace fs = std::filesystem;
-
-fs::path TempDir(const std::string& name) {
-  auto dir = fs::temp_directory_path() /
-             ("handdb_shard_reader_" + name + "_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
-}
-
-std::vector<uint8_t> ReadBytes(const fs::path& path) {
-  auto s = ReadFileToString(path);
-  THROW_CHECK(s.ok());
-  return std::vector<uint8_t>(s->begin(), s->end());
-}
 
 // A small sample shard as bytes (5 views, 5..9 points each).
 std::vector<uint8_t> SampleShard(const std::string& name, ShardWriterOptions options = {}) {

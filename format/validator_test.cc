@@ -1,11 +1,11 @@
 #include "format/validator.h"
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <filesystem>
 
 #include "base/atomic_file.h"
+#include "base/testing.h"
 #include "format/manifest.h"
 #include "format/shard_layout.h"
 #include "format/shard_reader.h"
@@ -14,27 +14,11 @@
 namespace handdb {
 namespace {
 
+using testing::ReadBytes;
+using testing::TempDir;
+using testing::WriteBytes;
+
 namespace fs = std::filesystem;
-
-fs::path TempDir(const std::string& name) {
-  auto dir =
-      fs::temp_directory_path() / ("handdb_validator_" + name + "_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
-}
-
-std::vector<uint8_t> ReadBytes(const fs::path& path) {
-  auto s = ReadFileToString(path);
-  THROW_CHECK(s.ok());
-  return std::vector<uint8_t>(s->begin(), s->end());
-}
-
-void WriteBytes(const fs::path& path, const std::vector<uint8_t>& bytes) {
-  ASSERT_TRUE(WriteFileAtomic(
-                  path, std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()))
-                  .ok());
-}
 
 std::vector<uint8_t> Sample(const std::string& name, uint32_t views = 6) {
   auto dir = TempDir(name);
