@@ -197,362 +197,509 @@ Status ProblemList::FirstStatus() const {
   return Status(problems_.front().code, problems_.front().message);
 }
 
-Layout CheckLayout(std::span<const uint8_t> bytes, ProblemList* problems) {
-  Layout layout;
-  const uint8_t* b = bytes.data();
-  const uint64_t n = bytes.size();
+namespace {
 
-  // --- Header: fatal problems first (nothing after them can be interpreted).
-  const size_t magic_len = static_cast<size_t>(std::min<uint64_t>(n, 8));
-  if (magic_len == 0 || std::memcmp(b, kMagic.data(), magic_len) != 0) {
-    if (magic_len == 0) {
-      problems->Add("size", StatusCode::kTruncated, 0, "file is empty (0 bytes)");
-    } else {
-      problems->Add("magic",
+// The layout checks, in the order CheckLayout chains them. Each takes the scan state, adds at most
+// its own kind of problem, and returns false when checking must stop: a fatal problem (nothing
+// after it can be interpreted) or a stop-at-first list that has its problem.
+struct LayoutScan {
+  const uint8_t* b = nullptr;
+  uint64_t n = 0;
+  ProblemList* problems = nullptr;
+  Layout* layout = nullptr;
+  bool know_minor = false;  // the minor version is one this reader knows (reserved bits checked)
+  uint64_t footer_at = 0;
+  uint64_t table_end = 0;
+  bool bounds_ok = true;  // section offsets, sizes and uniqueness are consistent
+  uint64_t prev_end = 0;  // end of the previous section (or of the table)
+  std::string prev_name;
+};
+
+bool CheckMagic(LayoutScan& c) {
+  const size_t magic_len = static_cast<size_t>(std::min<uint64_t>(c.n, 8));
+  if (magic_len != 0 && std::memcmp(c.b, kMagic.data(), magic_len) == 0) return true;
+  if (magic_len == 0) {
+    c.problems->Add("size", StatusCode::kTruncated, 0, "file is empty (0 bytes)");
+  } else {
+    c.problems->Add("magic",
                     StatusCode::kBadMagic,
                     0,
-                    "leading magic is [" + HexBytes(b, magic_len, " ") + "], expected [" +
+                    "leading magic is [" + HexBytes(c.b, magic_len, " ") + "], expected [" +
                         HexBytes(kMagic.data(), 8, " ") + "]: not a handdb shard");
-    }
-    return layout;
   }
-  if (n < kMinFileSize) {
-    problems->Add("size",
+  return false;
+}
+
+bool CheckMinimumSize(LayoutScan& c) {
+  if (c.n >= kMinFileSize) return true;
+  c.problems->Add("size",
                   StatusCode::kTruncated,
                   0,
-                  "file is " + std::to_string(n) + " bytes, smaller than the smallest shard (" +
+                  "file is " + std::to_string(c.n) + " bytes, smaller than the smallest shard (" +
                       std::to_string(kMinFileSize) + " bytes: header + footer)");
-    return layout;
-  }
-  RawHeader h = ParseHeader(bytes);
-  layout.header = h;
-  if (h.version_major != kVersionMajor) {
-    problems->Add("version",
+  return false;
+}
+
+bool CheckVersion(LayoutScan& c) {
+  const RawHeader& h = c.layout->header;
+  if (h.version_major == kVersionMajor) return true;
+  c.problems->Add("version",
                   StatusCode::kUnsupportedVersion,
                   kOffVersionMajor,
                   "format version " + std::to_string(h.version_major) + "." +
                       std::to_string(h.version_minor) + ", this reader supports major version " +
                       std::to_string(kVersionMajor));
-    return layout;
+  return false;
+}
+
+bool CheckHeaderSize(LayoutScan& c) {
+  const RawHeader& h = c.layout->header;
+  if (h.header_size >= kHeaderSize && h.header_size % 8 == 0 &&
+      h.header_size <= c.n - kFooterSize) {
+    return true;
   }
-  if (h.header_size < kHeaderSize || h.header_size % 8 != 0 || h.header_size > n - kFooterSize) {
-    problems->Add("header",
+  c.problems->Add("header",
                   StatusCode::kBadLayout,
                   kOffHeaderSize,
                   "header_size is " + std::to_string(h.header_size) +
                       ", expected a multiple of 8, at least " + std::to_string(kHeaderSize) +
-                      " and leaving room for the footer in a " + std::to_string(n) + "-byte file");
-    return layout;
-  }
+                      " and leaving room for the footer in a " + std::to_string(c.n) +
+                      "-byte file");
+  return false;
+}
+
+bool CheckHeaderChecksum(LayoutScan& c) {
+  const RawHeader& h = c.layout->header;
   const uint64_t header_checksum =
-      HeaderChecksum(std::span<const uint8_t>(b, static_cast<size_t>(h.header_size)));
-  if (header_checksum != h.header_checksum) {
-    problems->Add("checksum",
+      HeaderChecksum(std::span<const uint8_t>(c.b, static_cast<size_t>(h.header_size)));
+  if (header_checksum == h.header_checksum) return true;
+  c.problems->Add("checksum",
                   StatusCode::kChecksumMismatch,
                   h.header_size - 8,
                   "header checksum stored " + ChecksumHex(h.header_checksum) + ", computed " +
                       ChecksumHex(header_checksum));
-    if (problems->done()) return layout;
-  }
-  if (h.file_size != n) {
-    if (h.file_size > n) {
-      problems->Add("size",
+  return !c.problems->done();
+}
+
+bool CheckFileSize(LayoutScan& c) {
+  const RawHeader& h = c.layout->header;
+  if (h.file_size == c.n) return true;
+  if (h.file_size > c.n) {
+    c.problems->Add("size",
                     StatusCode::kTruncated,
                     kOffFileSize,
-                    "file is " + std::to_string(n) + " bytes but its header says file_size " +
+                    "file is " + std::to_string(c.n) + " bytes but its header says file_size " +
                         std::to_string(h.file_size) + " (truncated)");
-    } else {
-      problems->Add("size",
+  } else {
+    c.problems->Add("size",
                     StatusCode::kSizeMismatch,
                     kOffFileSize,
-                    "file is " + std::to_string(n) + " bytes but its header says file_size " +
+                    "file is " + std::to_string(c.n) + " bytes but its header says file_size " +
                         std::to_string(h.file_size) + " (trailing bytes)");
-    }
-    if (problems->done()) return layout;
   }
-  const bool know_minor = h.version_minor <= kVersionMinor;
-  if ((h.required_features & ~kKnownRequiredFeatures) != 0) {
-    problems->Add("features",
+  return !c.problems->done();
+}
+
+bool CheckRequiredFeatures(LayoutScan& c) {
+  const RawHeader& h = c.layout->header;
+  if ((h.required_features & ~kKnownRequiredFeatures) == 0) return true;
+  c.problems->Add("features",
                   StatusCode::kUnknownRequiredFeature,
                   kOffRequiredFeatures,
                   "required_features " + HexPrefixed(h.required_features) +
                       " has bits unknown to this " + "reader (" +
                       HexPrefixed(h.required_features & ~kKnownRequiredFeatures) + ")");
-    if (problems->done()) return layout;
-  }
-  if (know_minor) {
-    CheckZeroRegion(b, kOffHeaderReserved, h.header_size - 8, "reserved header bytes", problems);
-    if (problems->done()) return layout;
-  }
+  return !c.problems->done();
+}
 
-  // --- Footer.
-  const uint64_t footer_at = n - kFooterSize;
-  const uint64_t footer_size = Load<uint64_t>(b + footer_at);
-  if (std::memcmp(b + footer_at + 8, kMagic.data(), 8) != 0) {
-    problems->Add("footer",
+bool CheckHeaderReserved(LayoutScan& c) {
+  if (!c.know_minor) return true;
+  CheckZeroRegion(c.b,
+                  kOffHeaderReserved,
+                  c.layout->header.header_size - 8,
+                  "reserved header bytes",
+                  c.problems);
+  return !c.problems->done();
+}
+
+bool CheckFooterMagic(LayoutScan& c) {
+  if (std::memcmp(c.b + c.footer_at + 8, kMagic.data(), 8) == 0) return true;
+  c.problems->Add("footer",
                   StatusCode::kBadMagic,
-                  footer_at + 8,
-                  "trailing magic is [" + HexBytes(b + footer_at + 8, 8, " ") + "], expected [" +
-                      HexBytes(kMagic.data(), 8, " ") + "] (truncated or overwritten end)");
-    if (problems->done()) return layout;
-  }
-  if (footer_size != n) {
-    problems->Add("footer",
-                  footer_size > n ? StatusCode::kTruncated : StatusCode::kSizeMismatch,
-                  footer_at,
-                  "footer says file_size " + std::to_string(footer_size) + ", file is " +
-                      std::to_string(n) + " bytes");
-    if (problems->done()) return layout;
-  }
+                  c.footer_at + 8,
+                  "trailing magic is [" + HexBytes(c.b + c.footer_at + 8, 8, " ") +
+                      "], expected [" + HexBytes(kMagic.data(), 8, " ") +
+                      "] (truncated or overwritten end)");
+  return !c.problems->done();
+}
 
-  // --- Section table.
-  if (h.section_table_offset != h.header_size) {
-    problems->Add("table",
+bool CheckFooterSize(LayoutScan& c) {
+  const uint64_t footer_size = Load<uint64_t>(c.b + c.footer_at);
+  if (footer_size == c.n) return true;
+  c.problems->Add("footer",
+                  footer_size > c.n ? StatusCode::kTruncated : StatusCode::kSizeMismatch,
+                  c.footer_at,
+                  "footer says file_size " + std::to_string(footer_size) + ", file is " +
+                      std::to_string(c.n) + " bytes");
+  return !c.problems->done();
+}
+
+bool CheckTableOffset(LayoutScan& c) {
+  const RawHeader& h = c.layout->header;
+  if (h.section_table_offset == h.header_size) return true;
+  c.problems->Add("table",
                   StatusCode::kBadLayout,
                   kOffSectionTableOffset,
                   "section_table_offset is " + std::to_string(h.section_table_offset) +
                       ", expected header_size " + std::to_string(h.header_size));
-    return layout;
+  return false;
+}
+
+bool CheckTableEntrySize(LayoutScan& c) {
+  const RawHeader& h = c.layout->header;
+  if (h.section_entry_size >= kSectionEntrySize && h.section_entry_size % 8 == 0 &&
+      !(c.know_minor && h.section_entry_size != kSectionEntrySize)) {
+    return true;
   }
-  if (h.section_entry_size < kSectionEntrySize || h.section_entry_size % 8 != 0 ||
-      (know_minor && h.section_entry_size != kSectionEntrySize)) {
-    problems->Add("table",
+  c.problems->Add("table",
                   StatusCode::kBadLayout,
                   kOffSectionEntrySize,
                   "section_entry_size is " + std::to_string(h.section_entry_size) + ", expected " +
                       std::to_string(kSectionEntrySize));
-    return layout;
-  }
-  if (h.section_count > kMaxSections) {
-    problems->Add("table",
+  return false;
+}
+
+bool CheckTableCount(LayoutScan& c) {
+  const RawHeader& h = c.layout->header;
+  if (h.section_count <= kMaxSections) return true;
+  c.problems->Add("table",
                   StatusCode::kOutOfRange,
                   kOffSectionCount,
                   "section_count is " + std::to_string(h.section_count) + ", more than " +
                       std::to_string(kMaxSections));
-    return layout;
-  }
-  const uint64_t table_bytes = uint64_t{h.section_count} * h.section_entry_size;
-  const uint64_t table_end = h.section_table_offset + table_bytes;
-  if (table_end > footer_at) {
-    problems->Add("table",
+  return false;
+}
+
+bool CheckTableEnd(LayoutScan& c) {
+  const RawHeader& h = c.layout->header;
+  c.table_end = h.section_table_offset + uint64_t{h.section_count} * h.section_entry_size;
+  if (c.table_end <= c.footer_at) return true;
+  c.problems->Add("table",
                   StatusCode::kTruncated,
                   h.section_table_offset,
                   "section table of " + std::to_string(h.section_count) + " entries ends at " +
-                      std::to_string(table_end) + ", past the footer at " +
-                      std::to_string(footer_at));
-    return layout;
-  }
-  const uint64_t table_checksum = Checksum(b + h.section_table_offset, table_bytes);
-  if (table_checksum != h.section_table_checksum) {
-    problems->Add("checksum",
+                      std::to_string(c.table_end) + ", past the footer at " +
+                      std::to_string(c.footer_at));
+  return false;
+}
+
+bool CheckTableChecksum(LayoutScan& c) {
+  const RawHeader& h = c.layout->header;
+  const uint64_t table_checksum =
+      Checksum(c.b + h.section_table_offset, c.table_end - h.section_table_offset);
+  if (table_checksum == h.section_table_checksum) return true;
+  c.problems->Add("checksum",
                   StatusCode::kChecksumMismatch,
                   kOffSectionTableChecksum,
                   "section table checksum stored " + ChecksumHex(h.section_table_checksum) +
                       ", computed " + ChecksumHex(table_checksum));
-    if (problems->done()) return layout;
-  }
+  return !c.problems->done();
+}
 
-  bool bounds_ok = true;
-  uint64_t prev_end = table_end;
-  std::string prev_name = "section table";
-  for (uint32_t i = 0; i < h.section_count; ++i) {
-    const uint64_t entry_at = h.section_table_offset + uint64_t{i} * h.section_entry_size;
-    const RawSection s = ParseSection(b + entry_at);
-    layout.sections.push_back(s);
-    const std::string name = SectionName(s.type);
-    const std::string label = "section " + std::to_string(i) + " " + Quote(name);
-    if (know_minor && (s.flags & ~kKnownSectionFlags) != 0) {
-      problems->Add("reserved",
+// Flags with reserved bits and a non-zero reserved field (both reported, checking goes on).
+void CheckSectionReserved(LayoutScan& c,
+                          const RawSection& s,
+                          uint64_t entry_at,
+                          const std::string& label) {
+  if (c.know_minor && (s.flags & ~kKnownSectionFlags) != 0) {
+    c.problems->Add("reserved",
                     StatusCode::kNonZeroReserved,
                     entry_at + kSecOffFlags,
                     label + ": flags " + HexPrefixed(s.flags) + " has reserved bits set");
-    }
-    if (s.reserved != 0) {
-      problems->Add("reserved",
+  }
+  if (s.reserved != 0) {
+    c.problems->Add("reserved",
                     StatusCode::kNonZeroReserved,
                     entry_at + kSecOffReserved,
                     label + ": reserved field is " + HexPrefixed(s.reserved) + ", expected 0");
-    }
-    const uint64_t expected = AlignUp(prev_end);
-    if (s.offset != expected) {
-      problems->Add("layout",
-                    StatusCode::kBadLayout,
-                    entry_at + kSecOffOffset,
-                    label + ": offset is " + std::to_string(s.offset) + ", expected " +
-                        std::to_string(expected) + " (the first 64-byte boundary after the " +
-                        prev_name + ", which ends at " + std::to_string(prev_end) + ")");
-      bounds_ok = false;
-    }
-    if (s.offset > footer_at || s.size > footer_at - s.offset) {
-      problems->Add("bounds",
-                    StatusCode::kTruncated,
-                    entry_at + kSecOffSize,
-                    label + ": [" + std::to_string(s.offset) + ", +" + std::to_string(s.size) +
-                        ") extends past the footer at " + std::to_string(footer_at));
-      bounds_ok = false;
-      if (problems->done()) return layout;
-      break;  // nothing after this entry can be placed
-    }
-    if (s.element_size == 0 || s.count > s.size / s.element_size ||
-        s.count * s.element_size != s.size) {
-      problems->Add("size",
-                    StatusCode::kSizeMismatch,
-                    entry_at + kSecOffCount,
-                    label + ": count " + std::to_string(s.count) + " x element_size " +
-                        std::to_string(s.element_size) + " does not equal size " +
-                        std::to_string(s.size));
-      bounds_ok = false;
-    }
-    if (s.offset == expected && prev_end <= s.offset) {
-      CheckZeroRegion(b, prev_end, s.offset, "padding before " + label, problems);
-    }
-    int* slot = nullptr;
-    uint32_t want_element = 0;
-    switch (s.type) {
-      case kSectionMetadata:
-        slot = &layout.metadata;
-        want_element = 1;
-        break;
-      case kSectionViews:
-        slot = &layout.views;
-        want_element = kViewRecordSize;
-        break;
-      case kSectionPoints:
-        slot = &layout.points;
-        want_element = kPointSize;
-        break;
-      default:
-        if ((s.flags & kSectionFlagRequired) != 0) {
-          problems->Add("features",
+  }
+}
+
+// The section starts at the first 64-byte boundary after the previous one.
+void CheckSectionOffset(LayoutScan& c,
+                        const RawSection& s,
+                        uint64_t entry_at,
+                        const std::string& label) {
+  const uint64_t expected = AlignUp(c.prev_end);
+  if (s.offset == expected) return;
+  c.problems->Add("layout",
+                  StatusCode::kBadLayout,
+                  entry_at + kSecOffOffset,
+                  label + ": offset is " + std::to_string(s.offset) + ", expected " +
+                      std::to_string(expected) + " (the first 64-byte boundary after the " +
+                      c.prev_name + ", which ends at " + std::to_string(c.prev_end) + ")");
+  c.bounds_ok = false;
+}
+
+// False when the section extends past the footer (nothing after this entry can be placed).
+bool CheckSectionBounds(LayoutScan& c,
+                        const RawSection& s,
+                        uint64_t entry_at,
+                        const std::string& label) {
+  if (s.offset <= c.footer_at && s.size <= c.footer_at - s.offset) return true;
+  c.problems->Add("bounds",
+                  StatusCode::kTruncated,
+                  entry_at + kSecOffSize,
+                  label + ": [" + std::to_string(s.offset) + ", +" + std::to_string(s.size) +
+                      ") extends past the footer at " + std::to_string(c.footer_at));
+  c.bounds_ok = false;
+  return false;
+}
+
+// count x element_size == size.
+void CheckSectionSize(LayoutScan& c,
+                      const RawSection& s,
+                      uint64_t entry_at,
+                      const std::string& label) {
+  if (s.element_size != 0 && s.count <= s.size / s.element_size &&
+      s.count * s.element_size == s.size) {
+    return;
+  }
+  c.problems->Add("size",
+                  StatusCode::kSizeMismatch,
+                  entry_at + kSecOffCount,
+                  label + ": count " + std::to_string(s.count) + " x element_size " +
+                      std::to_string(s.element_size) + " does not equal size " +
+                      std::to_string(s.size));
+  c.bounds_ok = false;
+}
+
+// A known type appears once with its element size; an unknown type must not be required.
+void CheckSectionType(LayoutScan& c,
+                      uint32_t i,
+                      const RawSection& s,
+                      uint64_t entry_at,
+                      const std::string& name,
+                      const std::string& label) {
+  Layout& layout = *c.layout;
+  int* slot = nullptr;
+  uint32_t want_element = 0;
+  switch (s.type) {
+    case kSectionMetadata:
+      slot = &layout.metadata;
+      want_element = 1;
+      break;
+    case kSectionViews:
+      slot = &layout.views;
+      want_element = kViewRecordSize;
+      break;
+    case kSectionPoints:
+      slot = &layout.points;
+      want_element = kPointSize;
+      break;
+    default:
+      if ((s.flags & kSectionFlagRequired) != 0) {
+        c.problems->Add("features",
                         StatusCode::kUnknownRequiredFeature,
                         entry_at + kSecOffType,
                         label + ": unknown section type " + HexPrefixed(s.type) +
                             " is marked required (flags " + HexPrefixed(s.flags) + ")");
-        }
-        break;
-    }
-    if (slot != nullptr) {
-      if (*slot >= 0) {
-        problems->Add("layout",
-                      StatusCode::kBadLayout,
-                      entry_at + kSecOffType,
-                      label + ": a second " + Quote(name) + " section (the first is section " +
-                          std::to_string(*slot) + ")");
-        bounds_ok = false;
-      } else {
-        *slot = static_cast<int>(i);
       }
-      const bool element_ok = s.type == kSectionViews && !know_minor
-                                  ? (s.element_size >= want_element && s.element_size % 8 == 0)
-                                  : s.element_size == want_element;
-      if (!element_ok) {
-        problems->Add("size",
-                      StatusCode::kSizeMismatch,
-                      entry_at + kSecOffElementSize,
-                      label + ": element_size is " + std::to_string(s.element_size) +
-                          ", expected " + std::to_string(want_element));
-        bounds_ok = false;
-      }
-    }
-    if (problems->done()) return layout;
-    prev_end = s.offset + s.size;
-    prev_name = label;
+      return;
   }
-  if (bounds_ok) {
-    const uint64_t expected_footer = AlignUp(prev_end);
-    if (expected_footer != footer_at) {
-      problems->Add("layout",
+  if (*slot >= 0) {
+    c.problems->Add("layout",
                     StatusCode::kBadLayout,
-                    footer_at,
-                    "footer is at " + std::to_string(footer_at) + ", expected " +
-                        std::to_string(expected_footer) + " (the first 64-byte boundary after " +
-                        prev_name + ", which ends at " + std::to_string(prev_end) + ")");
-      bounds_ok = false;
-    } else {
-      CheckZeroRegion(b, prev_end, footer_at, "padding before the footer", problems);
-    }
+                    entry_at + kSecOffType,
+                    label + ": a second " + Quote(name) + " section (the first is section " +
+                        std::to_string(*slot) + ")");
+    c.bounds_ok = false;
+  } else {
+    *slot = static_cast<int>(i);
   }
+  const bool element_ok = s.type == kSectionViews && !c.know_minor
+                              ? (s.element_size >= want_element && s.element_size % 8 == 0)
+                              : s.element_size == want_element;
+  if (!element_ok) {
+    c.problems->Add("size",
+                    StatusCode::kSizeMismatch,
+                    entry_at + kSecOffElementSize,
+                    label + ": element_size is " + std::to_string(s.element_size) + ", expected " +
+                        std::to_string(want_element));
+    c.bounds_ok = false;
+  }
+}
+
+// Every table entry in file order, with the zero padding between sections.
+bool CheckSectionEntries(LayoutScan& c) {
+  const RawHeader& h = c.layout->header;
+  c.prev_end = c.table_end;
+  c.prev_name = "section table";
+  for (uint32_t i = 0; i < h.section_count; ++i) {
+    const uint64_t entry_at = h.section_table_offset + uint64_t{i} * h.section_entry_size;
+    const RawSection s = ParseSection(c.b + entry_at);
+    c.layout->sections.push_back(s);
+    const std::string name = SectionName(s.type);
+    const std::string label = "section " + std::to_string(i) + " " + Quote(name);
+    CheckSectionReserved(c, s, entry_at, label);
+    CheckSectionOffset(c, s, entry_at, label);
+    if (!CheckSectionBounds(c, s, entry_at, label)) {
+      if (c.problems->done()) return false;
+      break;  // nothing after this entry can be placed
+    }
+    CheckSectionSize(c, s, entry_at, label);
+    if (s.offset == AlignUp(c.prev_end) && c.prev_end <= s.offset) {
+      CheckZeroRegion(c.b, c.prev_end, s.offset, "padding before " + label, c.problems);
+    }
+    CheckSectionType(c, i, s, entry_at, name, label);
+    if (c.problems->done()) return false;
+    c.prev_end = s.offset + s.size;
+    c.prev_name = label;
+  }
+  return true;
+}
+
+// The footer starts at the first 64-byte boundary after the last section, zero padding between.
+void CheckFooterPlacement(LayoutScan& c) {
+  if (!c.bounds_ok) return;
+  const uint64_t expected_footer = AlignUp(c.prev_end);
+  if (expected_footer != c.footer_at) {
+    c.problems->Add("layout",
+                    StatusCode::kBadLayout,
+                    c.footer_at,
+                    "footer is at " + std::to_string(c.footer_at) + ", expected " +
+                        std::to_string(expected_footer) + " (the first 64-byte boundary after " +
+                        c.prev_name + ", which ends at " + std::to_string(c.prev_end) + ")");
+    c.bounds_ok = false;
+  } else {
+    CheckZeroRegion(c.b, c.prev_end, c.footer_at, "padding before the footer", c.problems);
+  }
+}
+
+// Metadata, views and points are each present.
+bool CheckRequiredSections(LayoutScan& c) {
+  const Layout& layout = *c.layout;
   for (auto [slot, type] : {std::pair{layout.metadata, kSectionMetadata},
                             std::pair{layout.views, kSectionViews},
                             std::pair{layout.points, kSectionPoints}}) {
-    if (slot < 0 && bounds_ok) {
-      problems->Add("layout",
-                    StatusCode::kBadLayout,
-                    kOffSectionCount,
-                    "no " + Quote(SectionName(type)) + " section in the section table (" +
-                        std::to_string(h.section_count) + " entries)");
-      bounds_ok = false;
+    if (slot < 0 && c.bounds_ok) {
+      c.problems->Add("layout",
+                      StatusCode::kBadLayout,
+                      kOffSectionCount,
+                      "no " + Quote(SectionName(type)) + " section in the section table (" +
+                          std::to_string(layout.header.section_count) + " entries)");
+      c.bounds_ok = false;
     }
   }
-  if (problems->done()) return layout;
+  return !c.problems->done();
+}
+
+// The header's num_views / num_points equal the section counts.
+void CheckHeaderCounts(LayoutScan& c) {
+  const Layout& layout = *c.layout;
+  const RawHeader& h = layout.header;
   if (layout.views >= 0 && layout.sections[layout.views].count != h.num_views) {
-    problems->Add("counts",
-                  StatusCode::kSizeMismatch,
-                  kOffNumViews,
-                  "header num_views is " + std::to_string(h.num_views) +
-                      " but the views section holds " +
-                      std::to_string(layout.sections[layout.views].count));
+    c.problems->Add("counts",
+                    StatusCode::kSizeMismatch,
+                    kOffNumViews,
+                    "header num_views is " + std::to_string(h.num_views) +
+                        " but the views section holds " +
+                        std::to_string(layout.sections[layout.views].count));
   }
   if (layout.points >= 0 && layout.sections[layout.points].count != h.num_points) {
-    problems->Add("counts",
-                  StatusCode::kSizeMismatch,
-                  kOffNumPoints,
-                  "header num_points is " + std::to_string(h.num_points) +
-                      " but the points section holds " +
-                      std::to_string(layout.sections[layout.points].count));
+    c.problems->Add("counts",
+                    StatusCode::kSizeMismatch,
+                    kOffNumPoints,
+                    "header num_points is " + std::to_string(h.num_points) +
+                        " but the points section holds " +
+                        std::to_string(layout.sections[layout.points].count));
   }
-  if (!bounds_ok || layout.metadata < 0 || layout.views < 0 || layout.points < 0) return layout;
-  layout.structure_ok = true;
-  if (problems->done()) return layout;
+}
 
-  // --- Every view's point range, before anyone takes a span of it.
+// Every view's point range, before anyone takes a span of it: inside the points section, in
+// order, covering it exactly. Sets layout->views_ok (unless stopped early).
+void CheckViewRanges(LayoutScan& c) {
+  Layout& layout = *c.layout;
   const RawSection& vs = layout.sections[layout.views];
   const RawSection& ps = layout.sections[layout.points];
-  layout.view_stride = vs.element_size;
   bool views_ok = true;
   uint64_t running = 0;
   for (uint64_t i = 0; i < vs.count; ++i) {
     const uint64_t at = vs.offset + i * vs.element_size;
-    const uint8_t* rec = b + at;
+    const uint8_t* rec = c.b + at;
     const uint32_t flags = Load<uint32_t>(rec + kViewOffFlags);
-    if (flags != 0 && know_minor) {
-      problems->Add("reserved",
-                    StatusCode::kNonZeroReserved,
-                    at + kViewOffFlags,
-                    "view " + std::to_string(i) + ": reserved flags are " + HexPrefixed(flags) +
-                        ", expected 0");
+    if (flags != 0 && c.know_minor) {
+      c.problems->Add("reserved",
+                      StatusCode::kNonZeroReserved,
+                      at + kViewOffFlags,
+                      "view " + std::to_string(i) + ": reserved flags are " + HexPrefixed(flags) +
+                          ", expected 0");
     }
     const uint64_t off = Load<uint64_t>(rec + kViewOffPointOffset);
     const uint32_t cnt = Load<uint32_t>(rec + kViewOffPointCount);
     if (off > ps.count || cnt > ps.count - off) {
-      problems->Add("view-range",
-                    StatusCode::kOutOfRange,
-                    at + kViewOffPointOffset,
-                    "view " + std::to_string(i) + ": points [" + std::to_string(off) + ", +" +
-                        std::to_string(cnt) + ") lie outside the points section (" +
-                        std::to_string(ps.count) + " points)");
+      c.problems->Add("view-range",
+                      StatusCode::kOutOfRange,
+                      at + kViewOffPointOffset,
+                      "view " + std::to_string(i) + ": points [" + std::to_string(off) + ", +" +
+                          std::to_string(cnt) + ") lie outside the points section (" +
+                          std::to_string(ps.count) + " points)");
       views_ok = false;
     } else if (off != running) {
-      problems->Add("view-range",
-                    StatusCode::kBadLayout,
-                    at + kViewOffPointOffset,
-                    "view " + std::to_string(i) + ": point_offset is " + std::to_string(off) +
-                        ", expected " + std::to_string(running) +
-                        " (views must cover the points in order without holes or overlaps)");
+      c.problems->Add("view-range",
+                      StatusCode::kBadLayout,
+                      at + kViewOffPointOffset,
+                      "view " + std::to_string(i) + ": point_offset is " + std::to_string(off) +
+                          ", expected " + std::to_string(running) +
+                          " (views must cover the points in order without holes or overlaps)");
       views_ok = false;
     }
-    if (problems->done()) return layout;
+    if (c.problems->done()) return;
     running = (off <= ps.count && cnt <= ps.count - off) ? off + cnt : running + cnt;
   }
   if (running != ps.count) {
-    problems->Add("view-range",
-                  StatusCode::kBadLayout,
-                  vs.offset,
-                  "views cover " + std::to_string(running) + " points, the points section holds " +
-                      std::to_string(ps.count));
+    c.problems->Add("view-range",
+                    StatusCode::kBadLayout,
+                    vs.offset,
+                    "views cover " + std::to_string(running) +
+                        " points, the points section holds " + std::to_string(ps.count));
     views_ok = false;
   }
   layout.views_ok = views_ok;
+}
+
+}  // namespace
+
+Layout CheckLayout(std::span<const uint8_t> bytes, ProblemList* problems) {
+  Layout layout;
+  LayoutScan c;
+  c.b = bytes.data();
+  c.n = bytes.size();
+  c.problems = problems;
+  c.layout = &layout;
+  // Header: fatal problems first (nothing after them can be interpreted).
+  if (!CheckMagic(c) || !CheckMinimumSize(c)) return layout;
+  layout.header = ParseHeader(bytes);
+  c.know_minor = layout.header.version_minor <= kVersionMinor;
+  c.footer_at = c.n - kFooterSize;
+  if (!CheckVersion(c) || !CheckHeaderSize(c) || !CheckHeaderChecksum(c) || !CheckFileSize(c) ||
+      !CheckRequiredFeatures(c) || !CheckHeaderReserved(c)) {
+    return layout;
+  }
+  if (!CheckFooterMagic(c) || !CheckFooterSize(c)) return layout;
+  if (!CheckTableOffset(c) || !CheckTableEntrySize(c) || !CheckTableCount(c) || !CheckTableEnd(c) ||
+      !CheckTableChecksum(c)) {
+    return layout;
+  }
+  if (!CheckSectionEntries(c)) return layout;
+  CheckFooterPlacement(c);
+  if (!CheckRequiredSections(c)) return layout;
+  CheckHeaderCounts(c);
+  if (!c.bounds_ok || layout.metadata < 0 || layout.views < 0 || layout.points < 0) return layout;
+  layout.structure_ok = true;
+  if (problems->done()) return layout;
+  layout.view_stride = layout.sections[layout.views].element_size;
+  CheckViewRanges(c);
   return layout;
 }
 
