@@ -18,7 +18,7 @@
 #include "base/atomic_file.h"
 #include "base/json_schema.h"
 #include "format/manifest.h"
-#include "generator/convert/converter.h"
+#include "edges/view_conversion.h"
 #include "edges/exr_io.h"
 #include "generator/testset/testset.h"
 #include "evaluate/evaluate.h"
@@ -245,28 +245,20 @@ Result<QueryPointsFn> MakeQueryPointsFn(QueryInput input, const fs::path& db_dir
   if (input == QueryInput::kClean) {
     // The label render through the database's own conversion (edges, normalisation): the edge
     // options its manifest records (conversion.edges), else the defaults.
-    ViewConversionOptions view_options;
-    if (auto manifest = ReadManifest(db_dir); manifest.ok()) {
-      auto recorded = ViewConversionOptionsFromMetadata(manifest->metadata,
-                                                        (db_dir / "manifest.json").string());
-      if (recorded.ok()) {
-        view_options = *recorded;
-      } else if (recorded.status().code() == StatusCode::kNotFound) {
-        std::fprintf(stderr,
-                     "handdb evaluate: warning: %s; clean queries use the default edge options\n",
-                     recorded.status().message().c_str());
-      } else {
-        return recorded.status();
-      }
+    std::string fallback;
+    auto recorded = ReadDatabaseViewConversion(db_dir, &fallback);
+    if (!recorded.ok()) return recorded.status();
+    if (!fallback.empty()) {
+      std::fprintf(stderr,
+                   "handdb evaluate: warning: %s; clean queries use the default edge options\n",
+                   fallback.c_str());
     }
+    const ViewConversionOptions view_options = *recorded;
     return QueryPointsFn([view_options](const TestView& view) -> Result<std::vector<Point2f>> {
       auto image = ReadLabelExr(view.label, ExrReadOptions{});
       if (!image.ok()) return image.status();
-      fs::path sidecar_path = view.label;
-      sidecar_path.replace_extension(".json");
-      auto sidecar = ReadSidecar(sidecar_path);
-      if (!sidecar.ok()) return sidecar.status();
-      auto converted = ConvertView(*image, *sidecar, view_options, view.label.string());
+      auto converted =
+          LabelImageToPoints(*image, view_options, BorderContact::kReject, view.label.string());
       if (!converted.ok()) return converted.status();
       std::vector<Point2f> points;
       points.reserve(converted->points.size());

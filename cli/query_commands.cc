@@ -13,7 +13,7 @@
 #include "base/thread_pool.h"
 #include "format/manifest.h"
 #include "format/roll.h"
-#include "generator/convert/converter.h"
+#include "edges/view_conversion.h"
 #include "handdb_version.h"
 #include "query/input/image_edges.h"
 #include "query/searcher.h"
@@ -320,16 +320,10 @@ int RunQuery(int argc, char** argv) {
   const Searcher searcher(shared_db);
 
   // A label EXR is converted with the edge options the database was made with.
-  if (auto manifest = ReadManifest(db_dir); manifest.ok()) {
-    auto recorded = ViewConversionOptionsFromMetadata(
-        manifest->metadata, (std::filesystem::path(db_dir) / "manifest.json").string());
-    if (recorded.ok()) {
-      edge_options.label_edges = recorded->edges;
-      edge_options.label_joint_pairs = recorded->joint_pairs;
-    } else if (recorded.status().code() != StatusCode::kNotFound) {
-      return Fail("query", recorded.status());
-    }
-  }
+  auto recorded = ReadDatabaseViewConversion(db_dir);
+  if (!recorded.ok()) return Fail("query", recorded.status());
+  edge_options.label_edges = recorded->edges;
+  edge_options.label_joint_pairs = recorded->joint_pairs;
   auto query = LoadQueryEdges(flags.image, edge_options);
   if (!query.ok()) return Fail("query", query.status());
   SearchStats stats;

@@ -1,13 +1,6 @@
 #include "cluster/slurm.h"
 
-#include <fcntl.h>
-#include <poll.h>
-#include <spawn.h>
-#include <sys/wait.h>
-#include <unistd.h>
-
 #include <algorithm>
-#include <cerrno>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
@@ -19,8 +12,7 @@
 
 #include "base/atomic_file.h"
 #include "base/progress.h"
-
-extern char** environ;
+#include "base/subprocess.h"
 
 namespace handdb {
 namespace {
@@ -243,66 +235,15 @@ Status WriteJobScripts(const SlurmArrayJob& job, const SlurmOptions& options) {
 
 Result<CommandOutput> RunCommand(const std::vector<std::string>& argv) {
   THROW_CHECK(!argv.empty());
-  int out_pipe[2];
-  int err_pipe[2];
-  if (pipe2(out_pipe, O_CLOEXEC) != 0) {
-    return Status(StatusCode::kIoError, argv[0] + ": pipe: " + std::strerror(errno));
-  }
-  if (pipe2(err_pipe, O_CLOEXEC) != 0) {
-    close(out_pipe[0]);
-    close(out_pipe[1]);
-    return Status(StatusCode::kIoError, argv[0] + ": pipe: " + std::strerror(errno));
-  }
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_addopen(&actions, 0, "/dev/null", O_RDONLY, 0);
-  posix_spawn_file_actions_adddup2(&actions, out_pipe[1], 1);
-  posix_spawn_file_actions_adddup2(&actions, err_pipe[1], 2);
-  std::vector<char*> args;
-  for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
-  args.push_back(nullptr);
-  pid_t pid = -1;
-  const int rc = posix_spawnp(&pid, args[0], &actions, nullptr, args.data(), environ);
-  posix_spawn_file_actions_destroy(&actions);
-  close(out_pipe[1]);
-  close(err_pipe[1]);
-  if (rc != 0) {
-    close(out_pipe[0]);
-    close(err_pipe[0]);
+  RunOptions options;
+  options.own_process_group = false;  // sbatch/scontrol share our terminal's Ctrl-C
+  auto run = RunSubprocess(argv, options);
+  if (!run.ok()) {
+    const bool missing = run.status().code() == StatusCode::kNotFound;
     return Status(StatusCode::kExternalToolFailed,
-                  argv[0] + ": cannot run: " + std::strerror(rc) +
-                      (rc == ENOENT ? " (is Slurm installed and on PATH?)" : ""));
+                  run.status().message() + (missing ? " (is Slurm installed and on PATH?)" : ""));
   }
-  CommandOutput result;
-  pollfd fds[2] = {{out_pipe[0], POLLIN, 0}, {err_pipe[0], POLLIN, 0}};
-  std::string* sinks[2] = {&result.out, &result.err};
-  int open_fds = 2;
-  char buf[4096];
-  while (open_fds > 0) {
-    if (poll(fds, 2, -1) < 0) {
-      if (errno == EINTR) continue;
-      break;
-    }
-    for (int i = 0; i < 2; ++i) {
-      if (fds[i].fd < 0 || fds[i].revents == 0) continue;
-      const ssize_t n = read(fds[i].fd, buf, sizeof(buf));
-      if (n > 0) {
-        sinks[i]->append(buf, static_cast<size_t>(n));
-      } else if (n == 0 || errno != EINTR) {
-        close(fds[i].fd);
-        fds[i].fd = -1;
-        --open_fds;
-      }
-    }
-  }
-  for (auto& fd : fds) {
-    if (fd.fd >= 0) close(fd.fd);
-  }
-  int wstatus = 0;
-  while (waitpid(pid, &wstatus, 0) < 0 && errno == EINTR) {
-  }
-  result.exit_code = WIFEXITED(wstatus) ? WEXITSTATUS(wstatus) : 128 + WTERMSIG(wstatus);
-  return result;
+  return CommandOutput{run->exit_code, std::move(run->out), std::move(run->err)};
 }
 
 namespace {

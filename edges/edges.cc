@@ -30,6 +30,33 @@ bool EdgeOptions::Check() const {
   return true;
 }
 
+nlohmann::json EdgeOptions::ToJson() const {
+  return {{"rule",
+           "4-neighbour label change; joint pairs dropped unless occlusion; silhouette always; "
+           "the nearer pixel of a border is the edge pixel; points at pixel centres"},
+          {"occlusion_edges", occlusion_edges},
+          {"depth_jump", depth_jump},
+          {"depth_jump_unit", "scene units of the Depth pass"}};
+}
+
+Result<EdgeOptions> EdgeOptions::FromJson(const nlohmann::json& doc, const std::string& what) {
+  auto bad = [&](const std::string& problem) {
+    return Status(StatusCode::kBadJson, what + ": " + problem);
+  };
+  if (!doc.is_object()) return bad("not an object");
+  EdgeOptions options;
+  const auto occlusion = doc.find("occlusion_edges");
+  if (occlusion == doc.end() || !occlusion->is_boolean()) {
+    return bad("occlusion_edges missing or not a boolean");
+  }
+  options.occlusion_edges = occlusion->get<bool>();
+  const auto jump = doc.find("depth_jump");
+  if (jump == doc.end() || !jump->is_number()) return bad("depth_jump missing or not a number");
+  options.depth_jump = jump->get<double>();
+  if (!options.Check()) return bad("depth_jump must be finite and positive");
+  return options;
+}
+
 EdgeResult ExtractEdges(const LabelImage& image,
                         const JointPairs& joint_pairs,
                         const EdgeOptions& options) {

@@ -13,6 +13,8 @@
 
 #include <array>
 #include <cstdint>
+#include <nlohmann/json.hpp>
+#include <string>
 #include <vector>
 
 #include "base/status.h"
@@ -60,6 +62,14 @@ struct EdgeOptions {
   // joint-pair border is an occlusion edge.
   double depth_jump = 0.010;
   bool Check() const;
+
+  // The options as a database records them (the manifest's and each shard's `conversion.edges`,
+  // which add the hand's joint_pairs): occlusion_edges, depth_jump, the rule in words and the
+  // depth unit.
+  nlohmann::json ToJson() const;
+  // The inverse; other fields are ignored. kBadJson ("WHAT: not an object", "WHAT: depth_jump
+  // missing or not a number", ...) when a field is missing, mistyped or fails Check().
+  static Result<EdgeOptions> FromJson(const nlohmann::json& doc, const std::string& what);
 };
 
 // Pixels (col, row) of the marked edge pixels, in raster order.

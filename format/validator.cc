@@ -67,15 +67,16 @@ std::string Num(double v) {
   return os.str();
 }
 
-struct JointLimits {
-  std::array<std::array<double, 2>, kNumJointAngles> limits{};
+// A shard's recorded joint limits and the hand model they came from (for messages).
+struct RecordedLimits {
+  JointLimits limits;
   std::string source;
 };
 
 // hand_model.joint_limits from the shard's metadata, when present.
-std::optional<JointLimits> ParseMetadata(std::string_view text,
-                                         uint64_t offset,
-                                         ProblemList* problems) {
+std::optional<RecordedLimits> ParseMetadata(std::string_view text,
+                                            uint64_t offset,
+                                            ProblemList* problems) {
   nlohmann::json doc;
   try {
     doc = nlohmann::json::parse(text);
@@ -113,15 +114,16 @@ std::optional<JointLimits> ParseMetadata(std::string_view text,
   if (!jl->is_array() || jl->size() != kNumJointAngles) {
     return bad("must be an array of " + std::to_string(kNumJointAngles) + " [lo, hi] pairs");
   }
-  JointLimits out;
+  RecordedLimits out;
   out.source = hm->value("name", std::string("hand model"));
   for (int j = 0; j < kNumJointAngles; ++j) {
     const auto& pair = (*jl)[j];
     if (!pair.is_array() || pair.size() != 2 || !pair[0].is_number() || !pair[1].is_number()) {
       return bad("[" + std::to_string(j) + "] is not a [lo, hi] pair of numbers");
     }
-    out.limits[j] = {pair[0].get<double>(), pair[1].get<double>()};
-    if (!(out.limits[j][0] <= out.limits[j][1])) {
+    out.limits.min[j] = pair[0].get<double>();
+    out.limits.max[j] = pair[1].get<double>();
+    if (!(out.limits.min[j] <= out.limits.max[j])) {
       return bad("[" + std::to_string(j) + "] has lo > hi");
     }
   }
@@ -131,7 +133,7 @@ std::optional<JointLimits> ParseMetadata(std::string_view text,
 void CheckLabel(const uint8_t* rec,
                 uint64_t at,
                 uint64_t i,
-                const std::optional<JointLimits>& lim,
+                const std::optional<RecordedLimits>& lim,
                 const ValidateOptions& options,
                 ProblemList* problems) {
   const std::string view = "view " + std::to_string(i) + ": ";
@@ -160,8 +162,8 @@ void CheckLabel(const uint8_t* rec,
   if (!finite) return;
   for (int j = 0; j < kNumJointAngles; ++j) {
     const double a = l.joint_angles[j];
-    const double lo = lim ? lim->limits[j][0] : -2 * kPi;
-    const double hi = lim ? lim->limits[j][1] : 2 * kPi;
+    const double lo = lim ? lim->limits.min[j] : -2 * kPi;
+    const double hi = lim ? lim->limits.max[j] : 2 * kPi;
     const double tol = lim ? options.joint_limit_tolerance : 0.0;
     if (a < lo - tol || a > hi + tol) {
       problems->Add("label-joints",
@@ -285,7 +287,7 @@ ValidationReport ValidateBytes(std::span<const uint8_t> bytes,
   if (layout.structure_ok) {
     const RawSection& ms = layout.sections[layout.metadata];
     const std::string_view meta(reinterpret_cast<const char*>(b + ms.offset), ms.size);
-    const std::optional<JointLimits> limits = ParseMetadata(meta, ms.offset, &problems);
+    const std::optional<RecordedLimits> limits = ParseMetadata(meta, ms.offset, &problems);
     const RawSection& vs = layout.sections[layout.views];
     const RawSection& ps = layout.sections[layout.points];
     for (uint64_t i = 0; i < vs.count; ++i) {

@@ -2,6 +2,7 @@
 // view, and the virtual (view, roll) expansion. Conventions: docs/conventions.md.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdint>
@@ -22,7 +23,34 @@ constexpr render_id_t kInvalidRenderId = std::numeric_limits<render_id_t>::max()
 
 constexpr int kNumJointAngles = 20;
 constexpr int kNumKeypoints = 21;
-constexpr int kNumLinks = 16;                  // link ids 1..16, 0 = background
+constexpr int kNumLinks = 16;  // link ids 1..16, 0 = background
+// Joint angles in the hand model's DOF order (docs/conventions.md), radians.
+using JointVector = std::array<double, kNumJointAngles>;
+
+// Per-DOF [min, max] of a hand model.
+struct JointLimits {
+  JointVector min{};
+  JointVector max{};
+  bool Contains(const JointVector& joints, double tolerance = 1e-9) const {
+    for (int i = 0; i < kNumJointAngles; ++i) {
+      if (!(joints[i] >= min[i] - tolerance && joints[i] <= max[i] + tolerance)) return false;
+    }
+    return true;
+  }
+  // Clamps in place; returns true when any joint changed.
+  bool Clamp(JointVector* joints) const {
+    bool changed = false;
+    for (int i = 0; i < kNumJointAngles; ++i) {
+      const double c = std::clamp((*joints)[i], min[i], max[i]);
+      if (c != (*joints)[i]) {
+        (*joints)[i] = c;
+        changed = true;
+      }
+    }
+    return changed;
+  }
+};
+
 constexpr float kNormalisedDiameter = 192.0f;  // px, largest distance between two contour points
 
 // Edge points are stored as fixed point in the canonical normalised frame: origin at the

@@ -21,50 +21,11 @@
 #include <vector>
 
 #include "base/status.h"
-#include "format/view.h"
 #include "edges/edges.h"
+#include "edges/view_conversion.h"
+#include "format/view.h"
 
 namespace handdb {
-
-// The fields of a render sidecar the converter uses (docs/conventions.md "Sidecar JSON").
-struct Sidecar {
-  uint32_t render_id = 0;
-  uint32_t unit = 0;
-  uint32_t shape_id = 0;
-  uint32_t dir_id = 0;
-  std::array<double, kNumJointAngles> joint_angles{};
-  std::array<double, 3> view_direction{};
-  double view_theta = 0;
-  double view_phi = 0;
-  double camera_roll = 0;
-  int resolution = 0;
-  std::array<std::array<double, 3>, kNumKeypoints> keypoints_px{};
-  std::string blender_version;
-  std::string script_version;
-  std::string hand_model_sha256;
-};
-
-// Errors (kBadJson, kSchemaViolation) name `what` and the field.
-Result<Sidecar> ParseSidecar(const nlohmann::json& doc, const std::string& what);
-Result<Sidecar> ReadSidecar(const std::filesystem::path& path);
-
-struct ViewConversionOptions {
-  EdgeOptions edges;
-  JointPairs joint_pairs = DefaultJointPairs();
-  bool Check() const { return edges.Check(); }
-};
-
-struct CanonicalView {
-  ViewLabel label;
-  std::vector<PointQ> points;  // normalised frame, sorted by (y, x), no duplicates
-};
-
-// One rendered view -> canonical view. `what` names the image in messages. Errors: kNoHand (no
-// hand pixels), kOutOfRange (hand touches the image border).
-Result<CanonicalView> ConvertView(const LabelImage& image,
-                                  const Sidecar& sidecar,
-                                  const ViewConversionOptions& options,
-                                  const std::string& what);
 
 struct ConvertOptions {
   int num_threads = -1;  // -1: all cores
@@ -118,13 +79,5 @@ Result<std::vector<bool>> FindCompleteShards(const std::filesystem::path& render
 
 // "shard-00007.hdb"
 std::string ShardFileName(uint32_t unit_id);
-
-// The view conversion a database was made with, read back from its manifest metadata
-// (`conversion.edges`: occlusion_edges, depth_jump, joint_pairs, as ConvertRenderDir writes
-// them), so that a clean label query is converted exactly like the database (handdb evaluate).
-// kNotFound when the metadata does not record the edge options; kBadJson when they are malformed.
-// `what` (e.g. the manifest path) starts the messages.
-Result<ViewConversionOptions> ViewConversionOptionsFromMetadata(const nlohmann::json& metadata,
-                                                                const std::string& what);
 
 }  // namespace handdb

@@ -57,28 +57,9 @@ std::array<double, 3> Vec3(const json& v, const std::string& where) {
 
 }  // namespace
 
-bool JointLimits::Contains(const JointVector& joints, double tolerance) const {
-  for (int i = 0; i < kNumJoints; ++i) {
-    if (!(joints[i] >= min[i] - tolerance && joints[i] <= max[i] + tolerance)) return false;
-  }
-  return true;
-}
-
-bool JointLimits::Clamp(JointVector* joints) const {
-  bool changed = false;
-  for (int i = 0; i < kNumJoints; ++i) {
-    const double c = std::clamp((*joints)[i], min[i], max[i]);
-    if (c != (*joints)[i]) {
-      (*joints)[i] = c;
-      changed = true;
-    }
-  }
-  return changed;
-}
-
 JointLimits HandModel::limits() const {
   JointLimits l;
-  for (int i = 0; i < kNumJoints; ++i) {
+  for (int i = 0; i < kNumJointAngles; ++i) {
     l.min[i] = dofs[static_cast<size_t>(i)].min;
     l.max[i] = dofs[static_cast<size_t>(i)].max;
   }
@@ -138,7 +119,7 @@ Result<HandModel> LoadHandModel(const std::filesystem::path& path) {
     }
 
     const json& dofs = Array(Field(d, "dofs", file), file + ": dofs");
-    if (dofs.size() != kNumJoints) {
+    if (dofs.size() != kNumJointAngles) {
       throw FieldError{file + ": dofs: " + std::to_string(dofs.size()) + " DOFs, expected 20"};
     }
     for (size_t i = 0; i < dofs.size(); ++i) {
@@ -212,11 +193,11 @@ Result<std::vector<NamedShape>> LoadShapes(const std::filesystem::path& path,
         shape.description = String(list[i]["description"], where + "/description");
       }
       const json& joints = Array(Field(list[i], "joints", where), where + "/joints");
-      if (joints.size() != kNumJoints) {
+      if (joints.size() != kNumJointAngles) {
         throw FieldError{where + " ('" + shape.name + "'): " + std::to_string(joints.size()) +
                          " joint angles, expected 20"};
       }
-      for (int j = 0; j < kNumJoints; ++j) {
+      for (int j = 0; j < kNumJointAngles; ++j) {
         shape.joints[j] = Number(joints[j], where + "/joints/" + std::to_string(j));
         if (shape.joints[j] < limits.min[j] - 1e-9 || shape.joints[j] > limits.max[j] + 1e-9) {
           std::ostringstream os;

@@ -11,20 +11,10 @@
 #include <vector>
 
 #include "base/status.h"
+#include "format/view.h"
 #include "generator/plan/plan.h"
 
 namespace handdb {
-
-constexpr int kNumLinks = 16;  // link ids 1..16; 0 is background
-constexpr int kNumKeypoints = 21;
-
-struct JointLimits {
-  JointVector min{};
-  JointVector max{};
-  bool Contains(const JointVector& joints, double tolerance = 1e-9) const;
-  // Clamps in place; returns true when any joint changed.
-  bool Clamp(JointVector* joints) const;
-};
 
 struct HandDof {
   int index = 0;

@@ -43,7 +43,7 @@ TEST(HandModel, LoadsTheShippedModel) {
   ASSERT_TRUE(digest.ok());
   EXPECT_EQ(model->sha256, *digest);
   const JointLimits limits = model->limits();
-  for (int i = 0; i < kNumJoints; ++i) EXPECT_LT(limits.min[i], limits.max[i]) << i;
+  for (int i = 0; i < kNumJointAngles; ++i) EXPECT_LT(limits.min[i], limits.max[i]) << i;
 }
 
 TEST(HandModel, ShippedShapesAreWithinLimits) {

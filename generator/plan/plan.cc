@@ -20,36 +20,6 @@ namespace fs = std::filesystem;
 constexpr const char* kDefaultHandModel = "configs/hands/webxr_generic_right.json";
 constexpr const char* kDefaultLibrary = "configs/shapes/basic.json";
 
-// A relative config path: next to the config first, then under the repository root.
-Result<fs::path> ResolveConfigPath(const std::string& value,
-                                   const fs::path& config_path,
-                                   const char* field) {
-  const fs::path p(value);
-  std::error_code ec;
-  if (p.is_absolute()) {
-    if (fs::exists(p, ec)) return p;
-    return Status(StatusCode::kNotFound,
-                  config_path.string() + ": " + field + ": " + value + ": no such file");
-  }
-  const fs::path next_to_config = config_path.parent_path() / p;
-  if (fs::exists(next_to_config, ec)) return next_to_config;
-  const fs::path in_repo = RepoRoot() / p;
-  if (fs::exists(in_repo, ec)) return in_repo;
-  return Status(StatusCode::kNotFound,
-                config_path.string() + ": " + field + ": " + value + ": no such file (looked in " +
-                    next_to_config.parent_path().string() + " and " + RepoRoot().string() + ")");
-}
-
-// Repository-relative when inside the repository, else absolute (see plan.h).
-std::string PathForPlan(const fs::path& resolved) {
-  std::error_code ec;
-  const fs::path abs = fs::weakly_canonical(fs::absolute(resolved), ec);
-  const fs::path root = fs::weakly_canonical(fs::absolute(RepoRoot()), ec);
-  const fs::path rel = abs.lexically_relative(root);
-  if (!rel.empty() && *rel.begin() != "..") return rel.generic_string();
-  return abs.generic_string();
-}
-
 double Round(double x) {
   // Directions come from sin/cos and PCA samples from sums of products: rounding to 1e-15 hides
   // last-ulp differences between libm versions and FMA contraction, so plans stay byte-identical.
@@ -240,6 +210,34 @@ fs::path ResolvePlanPath(const std::string& path_in_plan) {
   return RepoRoot() / p;
 }
 
+Result<fs::path> ResolveConfigPath(const std::string& value,
+                                   const fs::path& config_path,
+                                   const std::string& field) {
+  const fs::path p(value);
+  std::error_code ec;
+  if (p.is_absolute()) {
+    if (fs::exists(p, ec)) return p;
+    return Status(StatusCode::kNotFound,
+                  config_path.string() + ": " + field + ": " + value + ": no such file");
+  }
+  const fs::path next_to_config = config_path.parent_path() / p;
+  if (fs::exists(next_to_config, ec)) return next_to_config;
+  const fs::path in_repo = RepoRoot() / p;
+  if (fs::exists(in_repo, ec)) return in_repo;
+  return Status(StatusCode::kNotFound,
+                config_path.string() + ": " + field + ": " + value + ": no such file (looked in " +
+                    next_to_config.parent_path().string() + " and " + RepoRoot().string() + ")");
+}
+
+std::string PathForPlan(const fs::path& resolved) {
+  std::error_code ec;
+  const fs::path abs = fs::weakly_canonical(fs::absolute(resolved), ec);
+  const fs::path root = fs::weakly_canonical(fs::absolute(RepoRoot()), ec);
+  const fs::path rel = abs.lexically_relative(root);
+  if (!rel.empty() && *rel.begin() != "..") return rel.generic_string();
+  return abs.generic_string();
+}
+
 std::string UnitDirName(uint32_t unit_id) {
   char buf[16];
   std::snprintf(buf, sizeof(buf), "u%05u", unit_id);
@@ -401,7 +399,7 @@ Result<Plan> ParsePlan(const json& doc, const std::string& what) {
       return bad("/shapes/" + std::to_string(i) + "/id: " + std::to_string(s.id) + ", expected " +
                  std::to_string(i));
     s.name = shapes[i]["name"].get<std::string>();
-    for (int j = 0; j < kNumJoints; ++j) s.joints[j] = shapes[i]["joints"][j].get<double>();
+    for (int j = 0; j < kNumJointAngles; ++j) s.joints[j] = shapes[i]["joints"][j].get<double>();
     s.coeffs = shapes[i]["coeffs"].get<std::vector<double>>();
     plan.shapes.push_back(std::move(s));
   }
@@ -457,7 +455,7 @@ Result<Plan> ParsePlan(const json& doc, const std::string& what) {
                    std::to_string(r.dir_id) + " do not match render_id " +
                    std::to_string(r.render_id) + " (shape-major)");
       }
-      for (int j = 0; j < kNumJoints; ++j) {
+      for (int j = 0; j < kNumJointAngles; ++j) {
         if (jr["joints"][j].get<double>() != plan.shapes[r.shape_id].joints[j]) {
           return bad(rw + "/joints/" + std::to_string(j) + ": differs from shape " +
                      std::to_string(r.shape_id));

@@ -19,18 +19,24 @@
 #include <vector>
 
 #include "base/status.h"
+#include "format/view.h"
 
 namespace handdb {
 
 constexpr int kPlanFormatVersion = 1;
-constexpr int kNumJoints = 20;
-
-using JointVector = std::array<double, kNumJoints>;
-
 // The repository root: $HANDDB_SOURCE_DIR if set, else the source dir this binary was built from.
 std::filesystem::path RepoRoot();
 // A path as written in a plan / hand-model / shapes file -> a path to open.
 std::filesystem::path ResolvePlanPath(const std::string& path_in_plan);
+// A path as written in a config (generation or test-set) -> an existing file: absolute as is,
+// relative next to `config_path` first, then under RepoRoot(). kNotFound names the config, the
+// field and both places looked in.
+Result<std::filesystem::path> ResolveConfigPath(const std::string& value,
+                                                const std::filesystem::path& config_path,
+                                                const std::string& field);
+// A resolved file -> the path written into a plan: repository-relative when inside the
+// repository, else absolute.
+std::string PathForPlan(const std::filesystem::path& resolved);
 
 struct PlanShape {
   uint32_t id = 0;

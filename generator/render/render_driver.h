@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "base/status.h"
+#include "generator/render/blender.h"
 
 namespace handdb {
 
@@ -47,9 +48,6 @@ struct RenderSummary {
   uint64_t renders_done = 0;    // .exr files present at the end in the selected units
   double seconds = 0;
 };
-
-// The Blender executable to use (options.blender, $HANDDB_BLENDER, PATH); kNotFound otherwise.
-Result<std::filesystem::path> FindBlender(const std::filesystem::path& requested);
 
 // Renders `plan_path` into `out_dir` (copying the plan to out_dir/plan.json when it is elsewhere;
 // an existing different out_dir/plan.json is an error).

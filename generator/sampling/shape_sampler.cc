@@ -27,13 +27,13 @@ JointVector PcaBasis::Reconstruct(const std::vector<double>& coeffs) const {
   for (int c = 0; c < num_components(); ++c)
     x += coeffs[static_cast<size_t>(c)] * components.col(c);
   JointVector out;
-  for (int i = 0; i < kNumJoints; ++i) out[i] = x(i);
+  for (int i = 0; i < kNumJointAngles; ++i) out[i] = x(i);
   return out;
 }
 
 std::vector<double> PcaBasis::Project(const JointVector& joints) const {
-  Eigen::VectorXd x(kNumJoints);
-  for (int i = 0; i < kNumJoints; ++i) x(i) = joints[i];
+  Eigen::VectorXd x(kNumJointAngles);
+  for (int i = 0; i < kNumJointAngles; ++i) x(i) = joints[i];
   const Eigen::VectorXd c = components.transpose() * (x - mean);
   return std::vector<double>(c.data(), c.data() + c.size());
 }
@@ -44,15 +44,15 @@ Result<PcaBasis> ComputePca(const std::vector<JointVector>& set, int k) {
     return Status(StatusCode::kInvalidArgument,
                   "PCA needs at least 2 shapes, got " + std::to_string(n));
   }
-  const int max_k = std::min(kNumJoints, n - 1);
+  const int max_k = std::min(kNumJointAngles, n - 1);
   if (k < 1 || k > max_k) {
     return Status(StatusCode::kInvalidArgument,
                   "PCA components " + std::to_string(k) + " not in 1.." + std::to_string(max_k) +
                       " for " + std::to_string(n) + " shapes");
   }
-  Eigen::MatrixXd x(n, kNumJoints);
+  Eigen::MatrixXd x(n, kNumJointAngles);
   for (int r = 0; r < n; ++r) {
-    for (int c = 0; c < kNumJoints; ++c) x(r, c) = set[static_cast<size_t>(r)][c];
+    for (int c = 0; c < kNumJointAngles; ++c) x(r, c) = set[static_cast<size_t>(r)][c];
   }
   PcaBasis basis;
   basis.mean = x.colwise().mean().transpose();
@@ -65,11 +65,11 @@ Result<PcaBasis> ComputePca(const std::vector<JointVector>& set, int k) {
   // Eigen sorts ascending; take the k largest.
   const Eigen::VectorXd values = eig.eigenvalues();
   const double total = std::max(values.sum(), 0.0);
-  basis.components.resize(kNumJoints, k);
+  basis.components.resize(kNumJointAngles, k);
   basis.stddev.resize(k);
   double kept = 0;
   for (int c = 0; c < k; ++c) {
-    const int src = kNumJoints - 1 - c;
+    const int src = kNumJointAngles - 1 - c;
     Eigen::VectorXd v = eig.eigenvectors().col(src);
     Eigen::Index arg = 0;
     v.cwiseAbs().maxCoeff(&arg);
@@ -130,7 +130,7 @@ std::vector<ShapeSample> SamplePairs(const std::vector<ShapeSample>& basic,
         ShapeSample s;
         s.name = basic[i].name + "~" + basic[j].name + "@" + std::to_string(m) + "/" +
                  std::to_string(k + 1);
-        for (int d = 0; d < kNumJoints; ++d)
+        for (int d = 0; d < kNumJointAngles; ++d)
           s.joints[d] = (1 - t) * basic[i].joints[d] + t * basic[j].joints[d];
         s.coeffs = {t};
         out.push_back(std::move(s));

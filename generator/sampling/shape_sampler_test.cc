@@ -52,7 +52,7 @@ TEST(ShapeSampler, PairsLieOnSegments) {
   ASSERT_EQ(pairs.size(), 10u * 3);  // C(5,2) * k
   // The second point of the first pair is the midpoint of shapes 0 and 1.
   EXPECT_DOUBLE_EQ(pairs[1].coeffs[0], 0.5);
-  for (int d = 0; d < kNumJoints; ++d) {
+  for (int d = 0; d < kNumJointAngles; ++d) {
     EXPECT_NEAR(pairs[1].joints[d], 0.5 * ((*basic)[0].joints[d] + (*basic)[1].joints[d]), 1e-12);
   }
   for (const auto& p : pairs) EXPECT_TRUE(Shipped().model.limits().Contains(p.joints)) << p.name;
@@ -76,7 +76,7 @@ TEST(ShapeSampler, PcaBasisIsOrthonormalAndOrdered) {
   ASSERT_TRUE(full.ok()) << full.status().message();
   const JointVector& x = Shipped().joints[4];
   const JointVector back = full->Reconstruct(full->Project(x));
-  for (int d = 0; d < kNumJoints; ++d) EXPECT_NEAR(back[d], x[d], 1e-9);
+  for (int d = 0; d < kNumJointAngles; ++d) EXPECT_NEAR(back[d], x[d], 1e-9);
   EXPECT_FALSE(ComputePca(Shipped().joints, 0).ok());
   EXPECT_FALSE(ComputePca(Shipped().joints, 21).ok());
   EXPECT_FALSE(ComputePca({Shipped().joints[0]}, 1).ok());

@@ -1,10 +1,5 @@
 #include "generator/testset/testset.h"
 
-#include <fcntl.h>
-#include <signal.h>
-#include <sys/wait.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -18,8 +13,8 @@
 #include "base/progress.h"
 #include "base/thread_pool.h"
 #include "generator/hand/hand_model.h"
+#include "generator/render/blender.h"
 #include "generator/sampling/random.h"
-#include "generator/render/render_driver.h"
 #include "generator/sampling/shape_sampler.h"
 #include "handdb_version.h"
 
@@ -34,25 +29,6 @@ std::string Numbered(const char* prefix, uint64_t i, int width) {
   char buf[48];
   std::snprintf(buf, sizeof buf, "%s%0*llu", prefix, width, static_cast<unsigned long long>(i));
   return buf;
-}
-
-// A relative path in a config: next to the config first, then under the repository root.
-fs::path ResolveConfigPath(const fs::path& config_path, const std::string& p) {
-  const fs::path path(p);
-  if (path.is_absolute()) return path;
-  const fs::path beside = config_path.parent_path() / path;
-  if (fs::exists(beside)) return beside;
-  return RepoRoot() / path;
-}
-
-// Repository-relative when inside the repository (plans are then identical across checkouts).
-std::string PathForPlan(const fs::path& path) {
-  std::error_code ec;
-  const fs::path abs = fs::weakly_canonical(path, ec);
-  const fs::path root = fs::weakly_canonical(RepoRoot(), ec);
-  const fs::path rel = abs.lexically_relative(root);
-  if (!rel.empty() && *rel.begin() != "..") return rel.generic_string();
-  return abs.generic_string();
 }
 
 std::array<double, 3> Vec3FromJson(const nlohmann::json& j) {
@@ -91,16 +67,20 @@ Result<nlohmann::json> MakeTestSetPlan(const nlohmann::json& config,
   HANDDB_RETURN_IF_ERROR(ValidateJson(config, kConfigSchema, what));
 
   // Hand model: limits and hash from the loader, reference axes and scale from the JSON itself.
-  const fs::path hand_path =
-      ResolveConfigPath(config_path, config.at("hand_model").get<std::string>());
+  auto hand_file =
+      ResolveConfigPath(config.at("hand_model").get<std::string>(), config_path, "hand_model");
+  if (!hand_file.ok()) return hand_file.status();
+  const fs::path hand_path = *hand_file;
   auto hand = LoadHandModel(hand_path);
   if (!hand.ok()) return hand.status();
   auto hand_doc = ReadJsonFile(hand_path, "hand_model.schema.json");
   if (!hand_doc.ok()) return hand_doc.status();
   const JointLimits limits = hand->limits();
 
-  const fs::path shapes_path =
-      ResolveConfigPath(config_path, config.at("shapes").get<std::string>());
+  auto shapes_file =
+      ResolveConfigPath(config.at("shapes").get<std::string>(), config_path, "shapes");
+  if (!shapes_file.ok()) return shapes_file.status();
+  const fs::path shapes_path = *shapes_file;
   auto library = LoadShapes(shapes_path, limits);
   if (!library.ok()) return library.status();
   std::vector<std::string> basic_names;
@@ -123,12 +103,13 @@ Result<nlohmann::json> MakeTestSetPlan(const nlohmann::json& config,
   if (num_pca > 0) {
     std::vector<JointVector> basis_set;
     if (pca_cfg.contains("source")) {
-      const fs::path basis_path =
-          ResolveConfigPath(config_path, pca_cfg["source"].get<std::string>());
-      auto basis_shapes = LoadShapes(basis_path, limits);
+      auto basis_path =
+          ResolveConfigPath(pca_cfg["source"].get<std::string>(), config_path, "pca.source");
+      if (!basis_path.ok()) return basis_path.status();
+      auto basis_shapes = LoadShapes(*basis_path, limits);
       if (!basis_shapes.ok()) return basis_shapes.status();
       for (const auto& s : *basis_shapes) basis_set.push_back(s.joints);
-      pca_report["basis"] = PathForPlan(basis_path);
+      pca_report["basis"] = PathForPlan(*basis_path);
     } else {
       for (const auto& s : *library) basis_set.push_back(s.joints);
       pca_report["basis"] = PathForPlan(shapes_path);
@@ -284,7 +265,7 @@ Result<TestSetPlan> ParseTestSetPlan(const nlohmann::json& doc, const std::strin
     }
     item.basic = j.at("basic").get<bool>();
     item.shape_name = j.at("shape_name").get<std::string>();
-    for (int k = 0; k < kNumJoints; ++k) item.joints[k] = j.at("joints").at(k).get<double>();
+    for (int k = 0; k < kNumJointAngles; ++k) item.joints[k] = j.at("joints").at(k).get<double>();
     item.coeffs = j.at("coeffs").get<std::vector<double>>();
     item.clamped = j.at("clamped").get<bool>();
     item.direction = Vec3FromJson(j.at("direction"));
@@ -340,47 +321,6 @@ std::string LastNonEmptyLine(const fs::path& log) {
   return last;
 }
 
-// Runs argv with stdout and stderr appended to `log`; returns the exit code (or 128 + signal),
-// -1 when it could not start. Polls the two flags and kills the child when either turns true.
-int RunLogged(const std::vector<std::string>& argv,
-              const fs::path& log,
-              const std::atomic<bool>* stop,
-              const std::atomic<bool>* cancel) {
-  const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
-  if (fd < 0) return -1;
-  std::vector<char*> cargv;
-  for (const auto& a : argv) cargv.push_back(const_cast<char*>(a.c_str()));
-  cargv.push_back(nullptr);
-  const pid_t pid = ::fork();
-  if (pid < 0) {
-    ::close(fd);
-    return -1;
-  }
-  if (pid == 0) {
-    ::dup2(fd, STDOUT_FILENO);
-    ::dup2(fd, STDERR_FILENO);
-    ::execvp(cargv[0], cargv.data());
-    std::fprintf(stderr, "handdb-render: cannot run %s\n", cargv[0]);
-    ::_exit(127);
-  }
-  ::close(fd);
-  int status = 0;
-  while (true) {
-    const pid_t r = ::waitpid(pid, &status, WNOHANG);
-    if (r == pid) break;
-    if (r < 0) return -1;
-    if (stop->load() || (cancel != nullptr && cancel->load())) {
-      ::kill(pid, SIGTERM);
-      ::waitpid(pid, &status, 0);
-      return 128 + SIGTERM;
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
-  }
-  if (WIFEXITED(status)) return WEXITSTATUS(status);
-  if (WIFSIGNALED(status)) return 128 + WTERMSIG(status);
-  return -1;
-}
-
 }  // namespace
 
 Result<TestSetRenderSummary> RenderTestSet(const fs::path& dir,
@@ -389,17 +329,8 @@ Result<TestSetRenderSummary> RenderTestSet(const fs::path& dir,
   const auto start = std::chrono::steady_clock::now();
   auto plan = ReadTestSetPlan(dir / "testset_plan.json");
   if (!plan.ok()) return plan.status();
-  auto blender = FindBlender(options.blender);
+  auto blender = BlenderLauncher::Find(options.blender, options.scripts_dir, "render_testset.py");
   if (!blender.ok()) return blender.status();
-  fs::path scripts = options.scripts_dir;
-  if (scripts.empty()) {
-    const char* env = std::getenv("HANDDB_SCRIPTS_DIR");
-    scripts = env != nullptr && *env != '\0' ? fs::path(env) : RepoRoot() / "blender_scripts";
-  }
-  const fs::path script = scripts / "render_testset.py";
-  if (!fs::exists(script)) {
-    return Status(StatusCode::kNotFound, script.string() + ": Blender script not found");
-  }
   const fs::path hand_path = ResolvePlanPath(plan->hand_model_path);
   if (!fs::exists(hand_path)) {
     return Status(StatusCode::kNotFound,
@@ -426,23 +357,20 @@ Result<TestSetRenderSummary> RenderTestSet(const fs::path& dir,
       ParallelForStatus(todo.size(), options.jobs, options.cancel, [&](size_t i) {
         const uint32_t unit = todo[i];
         const fs::path log = dir / "logs" / (UnitDirName(unit) + ".log");
-        std::vector<std::string> argv = {blender->string(),
-                                         "-b",
-                                         "--factory-startup",
-                                         "-noaudio",
-                                         "-t",
-                                         "1",
-                                         "-P",
-                                         script.string(),
-                                         "--",
-                                         "--plan",
+        std::vector<std::string> args = {"--plan",
                                          (dir / "testset_plan.json").string(),
                                          "--unit",
                                          std::to_string(unit),
                                          "--out",
                                          dir.string()};
-        if (!options.photos) argv.push_back("--no-photos");
-        const int code = RunLogged(argv, log, &stop, options.cancel);
+        if (!options.photos) args.push_back("--no-photos");
+        // No retries: a failing unit stops the run at once (see RenderTestSet in testset.h).
+        RunOptions run;
+        run.log = log;
+        run.stop_flags = {&stop, options.cancel};
+        auto ran = blender->Run(args, run);
+        if (!ran.ok()) std::ofstream(log, std::ios::app) << ran.status().message() << "\n";
+        const int code = ran.ok() ? ran->exit_code : -1;
         if (code != 0 || !UnitComplete(dir, unit, options.photos)) {
           stop = true;
           // A cancelled run is reported as such below, not as this unit's failure.

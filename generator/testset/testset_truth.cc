@@ -52,7 +52,7 @@ Status WriteTestSetGroundTruth(const fs::path& dir, int num_threads, bool progre
     }
     // The render must be of this item.
     double joint_diff = 0;
-    for (int k = 0; k < kNumJoints; ++k) {
+    for (int k = 0; k < kNumJointAngles; ++k) {
       joint_diff = std::max(joint_diff, std::abs(sidecar->joint_angles[k] - item.joints[k]));
     }
     const double roll_diff = std::abs(std::remainder(sidecar->camera_roll - item.roll, 2 * M_PI));

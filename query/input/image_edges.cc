@@ -6,10 +6,12 @@
 #include <opencv2/imgproc.hpp>
 #include <string>
 #include <system_error>
+#include <utility>
 
 #include "edges/edges.h"
 #include "edges/exr_io.h"
 #include "edges/normalise.h"
+#include "edges/view_conversion.h"
 
 namespace handdb {
 namespace {
@@ -19,33 +21,50 @@ std::string Lower(std::string s) {
   return s;
 }
 
+Status CheckEnoughPixels(const std::string& what,
+                         const std::vector<EdgePixel>& edges,
+                         const std::vector<EdgePixel>& contour) {
+  if (edges.size() < 2 || contour.size() < 2) {
+    return Status(StatusCode::kNoHand,
+                  what + ": no hand found (" + std::to_string(edges.size()) + " edge pixels)");
+  }
+  return Status::Ok();
+}
+
+// Fills `out` from the edge pixels, the contour that defined `norm` and the normalised points.
+Status Fill(const std::string& what,
+            const std::vector<EdgePixel>& edges,
+            const std::vector<EdgePixel>& contour,
+            const Normalisation& norm,
+            std::vector<PointQ> points,
+            QueryEdges* out) {
+  if (norm.diameter < 8) {
+    return Status(
+        StatusCode::kNoHand,
+        what + ": no hand found (the edges span only " + std::to_string(norm.diameter) + " px)");
+  }
+  out->centre_x = norm.centre_x;
+  out->centre_y = norm.centre_y;
+  out->diameter_px = norm.diameter;
+  out->scale = norm.scale;
+  out->points = std::move(points);
+  out->edge_pixels.clear();
+  for (const EdgePixel& p : edges) out->edge_pixels.push_back({p.col, p.row});
+  out->contour_pixels.clear();
+  for (const EdgePixel& p : contour) out->contour_pixels.push_back({p.col, p.row});
+  return Status::Ok();
+}
+
 // Fills contour (via the converter's silhouette rule), normalisation and points from the edge
 // pixels; `contour` holds the silhouette pixels that define the normalisation.
 Status Finish(const std::string& what,
               const std::vector<EdgePixel>& edges,
               const std::vector<EdgePixel>& contour,
               QueryEdges* out) {
-  if (edges.size() < 2 || contour.size() < 2) {
-    return Status(StatusCode::kNoHand,
-                  what + ": no hand found (" + std::to_string(edges.size()) + " edge pixels)");
-  }
+  HANDDB_RETURN_IF_ERROR(CheckEnoughPixels(what, edges, contour));
   Result<Normalisation> norm = ComputeNormalisation(contour);
   if (!norm.ok()) return Status(norm.status().code(), what + ": " + norm.status().message());
-  if (norm->diameter < 8) {
-    return Status(
-        StatusCode::kNoHand,
-        what + ": no hand found (the edges span only " + std::to_string(norm->diameter) + " px)");
-  }
-  out->centre_x = norm->centre_x;
-  out->centre_y = norm->centre_y;
-  out->diameter_px = norm->diameter;
-  out->scale = norm->scale;
-  out->points = NormalisePixels(edges, *norm);
-  out->edge_pixels.clear();
-  for (const EdgePixel& p : edges) out->edge_pixels.push_back({p.col, p.row});
-  out->contour_pixels.clear();
-  for (const EdgePixel& p : contour) out->contour_pixels.push_back({p.col, p.row});
-  return Status::Ok();
+  return Fill(what, edges, contour, *norm, NormalisePixels(edges, *norm), out);
 }
 
 std::vector<EdgePixel> NonZeroPixels(const cv::Mat& m) {
@@ -104,22 +123,32 @@ Result<QueryEdges> FromEdgeImage(const std::filesystem::path& path, const cv::Ma
   return out;
 }
 
+// Through the converter's own path (edges/view_conversion.h), a cropped hand allowed.
 Result<QueryEdges> FromLabels(const std::filesystem::path& path, const ImageEdgeOptions& options) {
   ExrReadOptions exr;
   exr.require_depth = false;
   Result<LabelImage> image = ReadLabelExr(path, exr);
   if (!image.ok()) return image.status();
-  const EdgeResult edges = ExtractEdges(*image, options.label_joint_pairs, options.label_edges);
+  ViewConversionOptions conversion;
+  conversion.edges = options.label_edges;
+  conversion.joint_pairs = options.label_joint_pairs;
+  const std::string what = path.string();
+  auto converted = LabelImageToPoints(*image, conversion, BorderContact::kAllow, what);
+  if (!converted.ok()) return converted.status();
+  const EdgeResult& edges = converted->edges;
   QueryEdges out;
   out.kind = QueryInputKind::kLabels;
   out.width = image->width;
   out.height = image->height;
   out.hand_pixels = edges.num_hand_pixels;
   out.touches_border = edges.touches_border;
-  if (edges.num_hand_pixels == 0) {
-    return Status(StatusCode::kNoHand, path.string() + ": no hand pixels in the label image");
-  }
-  HANDDB_RETURN_IF_ERROR(Finish(path.string(), edges.edges, edges.silhouette, &out));
+  HANDDB_RETURN_IF_ERROR(CheckEnoughPixels(what, edges.edges, edges.silhouette));
+  HANDDB_RETURN_IF_ERROR(Fill(what,
+                              edges.edges,
+                              edges.silhouette,
+                              converted->normalisation,
+                              std::move(converted->points),
+                              &out));
   return out;
 }
 

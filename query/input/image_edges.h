@@ -7,7 +7,7 @@
 //    the silhouette contour;
 //  - an edge image (non-zero pixels are edges);
 //  - a Blender label EXR (clean synthetic edges through the converter's own code:
-//    edges/exr_io.h + edges/edges.h).
+//    edges/exr_io.h + edges/view_conversion.h, BorderContact::kAllow).
 // Then exactly the database's normalisation (edges/normalise.h, the converter's code): the
 // silhouette's diameter is scaled to 192 px and its centre rule applied, points quantised to
 // PointQ. For edge images the silhouette is unknown and all edge pixels stand in for it (the
