@@ -17,6 +17,7 @@
 #include "base/json_schema.h"
 #include "base/progress.h"
 #include "base/sha256.h"
+#include "base/thread_pool.h"
 #include "edges/exr_io.h"
 #include "edges/normalise.h"
 #include "format/manifest.h"
@@ -24,8 +25,6 @@
 #include "format/shard_writer.h"
 #include "generator/hand/hand_model.h"
 #include "generator/plan/plan.h"
-#include "base/sha256.h"
-#include "base/thread_pool.h"
 #include "handdb_version.h"
 
 namespace handdb {
@@ -295,17 +294,8 @@ SkippedView MakeSkipped(const RunContext& ctx,
 
 namespace {
 
-// ConvertRenderDir, or with `complete` only the check which shards would be kept.
-Result<ConvertSummary> ConvertOrCheck(const fs::path& render_dir,
-                                      const fs::path& db_dir,
-                                      const ConvertOptions& options,
-                                      std::vector<SkippedView>* bad,
-                                      std::vector<bool>* complete) {
-  THROW_CHECK(options.Check());
-  const auto start = std::chrono::steady_clock::now();
-  const int threads = ResolveNumThreads(options.num_threads);
-
-  // Inputs: plan, hand model, completeness of every unit.
+// Step 1: the inputs every unit shares (plan, its hash, the hand model, the view conversion).
+Result<RunContext> LoadRunContext(const fs::path& render_dir, const ConvertOptions& options) {
   RunContext ctx;
   ctx.render_dir = render_dir;
   const fs::path plan_path = render_dir / "plan.json";
@@ -336,6 +326,17 @@ Result<ConvertSummary> ConvertOrCheck(const fs::path& render_dir,
   // Parallelism is across views; OpenEXR's own pool would only add hand-offs on small images.
   OIIO::attribute("exr_threads", -1);
 
+  return ctx;
+}
+
+// Step 2: the state of every unit of the plan; `selected` marks the units this run converts
+// (options.units, or all). Unless `check_only`, a selected unit must be completely rendered.
+Result<std::vector<UnitState>> PrepareUnits(const RunContext& ctx,
+                                            const fs::path& db_dir,
+                                            const ConvertOptions& options,
+                                            bool check_only,
+                                            std::vector<bool>* selected_out) {
+  const fs::path plan_path = ctx.render_dir / "plan.json";
   std::vector<UnitState> units(ctx.plan.units.size());
   std::vector<bool> selected(units.size(), options.units.empty());
   for (uint32_t id : options.units) {
@@ -351,8 +352,8 @@ Result<ConvertSummary> ConvertOrCheck(const fs::path& render_dir,
     st.unit = &ctx.plan.units[u];
     st.shard_path = db_dir / ShardFileName(st.unit->id);
     st.key = ConversionKey(ctx, st.unit->id, options.edges);
-    if (!selected[u] || complete != nullptr) continue;
-    const fs::path unit_dir = render_dir / "units" / UnitDirName(st.unit->id);
+    if (!selected[u] || check_only) continue;
+    const fs::path unit_dir = ctx.render_dir / "units" / UnitDirName(st.unit->id);
     std::error_code ec;
     if (!fs::exists(unit_dir / "DONE", ec)) {
       return Status(StatusCode::kNotFound,
@@ -362,23 +363,16 @@ Result<ConvertSummary> ConvertOrCheck(const fs::path& render_dir,
     }
   }
 
-  // Shards already done on an earlier run.
-  HANDDB_RETURN_IF_ERROR(ParallelForStatus(units.size(), threads, options.cancel, [&](size_t u) {
-    if (selected[u]) units[u].kept = KeepExistingShard(&units[u], options.skip_bad);
-    return Status::Ok();
-  }));
-  if (complete != nullptr) {
-    complete->assign(units.size(), false);
-    for (size_t u = 0; u < units.size(); ++u) (*complete)[u] = units[u].kept;
-    return ConvertSummary{};
-  }
-  // Units outside options.units are left as they are.
-  for (size_t u = 0; u < units.size(); ++u) {
-    if (!selected[u]) units[u].kept = true;
-  }
+  *selected_out = std::move(selected);
+  return units;
+}
 
-  // Checking pass: convert every view of the units to (re)write, keep results in memory up to
-  // the budget, collect every bad view.
+// Step 4: convert every view of the units to (re)write, keeping results in memory up to the
+// budget; a bad view's error is kept in its unit's state.
+Status CheckViews(const RunContext& ctx,
+                  std::vector<UnitState>& units,
+                  const ConvertOptions& options,
+                  int threads) {
   struct Task {
     size_t unit;
     size_t render;
@@ -422,6 +416,15 @@ Result<ConvertSummary> ConvertOrCheck(const fs::path& render_dir,
     }));
   }
 
+  return Status::Ok();
+}
+
+// Step 5: every bad view as a skipped-view record (also into *bad when given); without
+// skip_bad any bad view is the error.
+Status CollectBadViews(const RunContext& ctx,
+                       std::vector<UnitState>& units,
+                       const ConvertOptions& options,
+                       std::vector<SkippedView>* bad) {
   std::vector<SkippedView> all_bad;
   Status first_bad;
   for (UnitState& st : units) {
@@ -443,6 +446,15 @@ Result<ConvertSummary> ConvertOrCheck(const fs::path& render_dir,
                   msg + "; nothing written (use --skip-bad to leave bad views out)");
   }
 
+  return Status::Ok();
+}
+
+// Step 6: write the shards of the units not kept.
+Status WriteShards(const RunContext& ctx,
+                   const fs::path& db_dir,
+                   std::vector<UnitState>& units,
+                   const ConvertOptions& options,
+                   int threads) {
   // Writing pass. The old manifest goes first: while shards are replaced no manifest may list
   // a shard whose checksum is about to change.
   std::error_code ec;
@@ -507,6 +519,19 @@ Result<ConvertSummary> ConvertOrCheck(const fs::path& render_dir,
     return Status::Ok();
   }));
 
+  return Status::Ok();
+}
+
+// Step 7: the summary of the selected units and, for a run over all units, the manifest.
+Result<ConvertSummary> FinishRun(const RunContext& ctx,
+                                 const fs::path& db_dir,
+                                 std::vector<UnitState>& units,
+                                 const std::vector<bool>& selected,
+                                 const ConvertOptions& options) {
+  const json generation = GenerationJson(ctx);
+  const json hand_json = HandModelJson(ctx.hand);
+  const json label_names = LabelNamesJson(ctx.hand);
+  const json shapes = ShapesJson(ctx.plan);
   // The manifest, last: exactly the complete shards, in unit order.
   Manifest manifest;
   manifest.tool_version = HANDDB_VERSION;
@@ -539,7 +564,48 @@ Result<ConvertSummary> ConvertOrCheck(const fs::path& render_dir,
   manifest.UpdateTotals();
   // The manifest lists every shard: only a run over all units writes it.
   if (options.units.empty()) HANDDB_RETURN_IF_ERROR(WriteManifest(db_dir, manifest));
-  summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return summary;
+}
+
+// ConvertRenderDir, or with `complete` only the check which shards would be kept.
+Result<ConvertSummary> ConvertOrCheck(const fs::path& render_dir,
+                                      const fs::path& db_dir,
+                                      const ConvertOptions& options,
+                                      std::vector<SkippedView>* bad,
+                                      std::vector<bool>* complete) {
+  THROW_CHECK(options.Check());
+  const auto start = std::chrono::steady_clock::now();
+  const int threads = ResolveNumThreads(options.num_threads);
+  Result<RunContext> context = LoadRunContext(render_dir, options);
+  if (!context.ok()) return context.status();
+  const RunContext& ctx = *context;
+  std::vector<bool> selected;
+  Result<std::vector<UnitState>> prepared =
+      PrepareUnits(ctx, db_dir, options, complete != nullptr, &selected);
+  if (!prepared.ok()) return prepared.status();
+  std::vector<UnitState>& units = *prepared;
+
+  // Step 3: shards already done on an earlier run.
+  HANDDB_RETURN_IF_ERROR(ParallelForStatus(units.size(), threads, options.cancel, [&](size_t u) {
+    if (selected[u]) units[u].kept = KeepExistingShard(&units[u], options.skip_bad);
+    return Status::Ok();
+  }));
+  if (complete != nullptr) {
+    complete->assign(units.size(), false);
+    for (size_t u = 0; u < units.size(); ++u) (*complete)[u] = units[u].kept;
+    return ConvertSummary{};
+  }
+  // Units outside options.units are left as they are.
+  for (size_t u = 0; u < units.size(); ++u) {
+    if (!selected[u]) units[u].kept = true;
+  }
+  HANDDB_RETURN_IF_ERROR(CheckViews(ctx, units, options, threads));
+  HANDDB_RETURN_IF_ERROR(CollectBadViews(ctx, units, options, bad));
+  HANDDB_RETURN_IF_ERROR(WriteShards(ctx, db_dir, units, options, threads));
+  Result<ConvertSummary> summary = FinishRun(ctx, db_dir, units, selected, options);
+  if (!summary.ok()) return summary.status();
+  summary->seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return summary;
 }
 
