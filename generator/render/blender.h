@@ -26,8 +26,6 @@ class BlenderLauncher {
                                       const std::filesystem::path& scripts_dir,
                                       const std::string& script);
 
-  const std::filesystem::path& blender() const { return blender_; }
-  const std::filesystem::path& script() const { return script_; }
   // The full command line for one worker (each worker uses one thread: `-t 1`).
   std::vector<std::string> Argv(const std::vector<std::string>& script_args) const;
   // Starts one worker in its own process group, its output appended to `log`.
