@@ -21,11 +21,11 @@
 
 #include "base/atomic_file.h"
 #include "base/json_schema.h"
+#include "edges/exr_io.h"
+#include "edges/synthetic_hand.h"
 #include "format/manifest.h"
 #include "generator/convert/converter.h"
-#include "edges/exr_io.h"
 #include "generator/plan/plan.h"
-#include "edges/synthetic_hand.h"
 
 namespace handdb {
 namespace {

@@ -12,13 +12,13 @@
 #include <string>
 #include <vector>
 
+#include "base/atomic_file.h"
+#include "base/json_schema.h"
+#include "base/thread_pool.h"
 #include "cli/cli_util.h"
 #include "cli/commands.h"
 #include "cli/slurm_cli.h"
 #include "cli/slurm_commands.h"
-#include "base/atomic_file.h"
-#include "base/json_schema.h"
-#include "base/thread_pool.h"
 #include "format/roll.h"
 #include "format/validator.h"
 #include "format/view.h"

@@ -12,16 +12,16 @@
 #include <string>
 #include <vector>
 
+#include "base/atomic_file.h"
+#include "base/json_schema.h"
 #include "cli/cli_util.h"
 #include "cli/commands.h"
 #include "cli/evaluate_cli.h"
-#include "base/atomic_file.h"
-#include "base/json_schema.h"
-#include "format/manifest.h"
-#include "edges/view_conversion.h"
 #include "edges/exr_io.h"
-#include "generator/testset/testset.h"
+#include "edges/view_conversion.h"
 #include "evaluate/evaluate.h"
+#include "format/manifest.h"
+#include "generator/testset/testset.h"
 #include "query/input/image_edges.h"
 #include "query/searcher.h"
 

@@ -7,17 +7,17 @@
 #include <string>
 #include <vector>
 
-#include "cli/cli_util.h"
-#include "cli/commands.h"
 #include "base/json_schema.h"
 #include "base/thread_pool.h"
+#include "cli/cli_util.h"
+#include "cli/commands.h"
+#include "edges/view_conversion.h"
 #include "format/manifest.h"
 #include "format/roll.h"
-#include "edges/view_conversion.h"
 #include "handdb_version.h"
 #include "query/input/image_edges.h"
-#include "query/searcher.h"
 #include "query/input/sheet.h"
+#include "query/searcher.h"
 
 namespace handdb::cli {
 namespace {

@@ -11,8 +11,8 @@
 #include <vector>
 
 #include "base/status.h"
-#include "format/view.h"
 #include "edges/edges.h"
+#include "format/view.h"
 
 namespace handdb {
 

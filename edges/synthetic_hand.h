@@ -7,8 +7,8 @@
 
 #include <array>
 
-#include "format/view.h"
 #include "edges/edges.h"
+#include "format/view.h"
 
 namespace handdb {
 

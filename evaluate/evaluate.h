@@ -1,6 +1,6 @@
-// `handdb evaluate DB TESTSET`: runs every test view of a held-out test set (generator/testset/testset.h,
-// schemas/testset.schema.json) through the real search and scores the matches with the rules of
-// evaluate/metrics.h (docs/evaluation.md):
+// `handdb evaluate DB TESTSET`: runs every test view of a held-out test set
+// (generator/testset/testset.h, schemas/testset.schema.json) through the real search and scores the
+// matches with the rules of evaluate/metrics.h (docs/evaluation.md):
 //  - the paper's Table 1: how many test views have their highest-ranking correct match at rank 1,
 //    2-4, 5-16, 17-64, 65-256, 257-1024, > 1024;
 //  - success@(d, n) for n = 1, 10, 100 over a grid of joint distances d;
@@ -25,9 +25,9 @@
 #include <string>
 #include <vector>
 
-#include "format/roll.h"
 #include "base/status.h"
 #include "evaluate/metrics.h"
+#include "format/roll.h"
 #include "query/searcher.h"
 
 namespace handdb {

@@ -6,10 +6,10 @@
 #include <memory>
 #include <string>
 
+#include "evaluate/evaluate.h"
+#include "evaluate/metrics.h"
 #include "format/roll.h"
 #include "query/database.h"
-#include "evaluate/metrics.h"
-#include "evaluate/evaluate.h"
 #include "query/search_testing.h"
 
 namespace handdb::testing {

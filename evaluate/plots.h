@@ -9,9 +9,9 @@
 #include <string>
 #include <vector>
 
-#include "format/roll.h"
 #include "base/status.h"
 #include "evaluate/metrics.h"
+#include "format/roll.h"
 
 namespace handdb {
 

@@ -9,8 +9,8 @@
 #include <string>
 #include <vector>
 
-#include "format/shard_writer.h"
 #include "base/status.h"
+#include "format/shard_writer.h"
 #include "format/view.h"
 
 namespace handdb {

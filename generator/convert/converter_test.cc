@@ -10,12 +10,12 @@
 
 #include "base/atomic_file.h"
 #include "base/json_schema.h"
+#include "edges/exr_io.h"
+#include "edges/synthetic_hand.h"
 #include "format/manifest.h"
 #include "format/roll.h"
 #include "format/shard_reader.h"
-#include "edges/exr_io.h"
 #include "generator/plan/plan.h"
-#include "edges/synthetic_hand.h"
 
 namespace handdb {
 namespace {

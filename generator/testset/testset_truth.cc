@@ -1,14 +1,14 @@
-// The ground truth of a rendered test set (generator/testset/testset.h): label renders converted exactly
-// as the database converter does. Kept apart from testset.cc, which includes the hand-model and
-// sampler headers.
+// The ground truth of a rendered test set (generator/testset/testset.h): label renders converted
+// exactly as the database converter does. Kept apart from testset.cc, which includes the hand-model
+// and sampler headers.
 #include <algorithm>
 #include <cmath>
 
 #include "base/json_schema.h"
 #include "base/progress.h"
 #include "base/thread_pool.h"
-#include "generator/convert/converter.h"
 #include "edges/exr_io.h"
+#include "generator/convert/converter.h"
 #include "generator/testset/testset.h"
 #include "handdb_version.h"
 

@@ -21,10 +21,10 @@
 #include <string_view>
 #include <vector>
 
-#include "format/roll.h"
 #include "base/status.h"
-#include "format/view.h"
 #include "edges/edges.h"
+#include "format/roll.h"
+#include "format/view.h"
 
 namespace handdb {
 

@@ -15,8 +15,8 @@
 #include "edges/exr_io.h"
 #include "edges/normalise.h"
 #include "edges/synthetic_hand.h"
-#include "query/searcher.h"
 #include "query/input/sheet.h"
+#include "query/searcher.h"
 
 namespace handdb {
 namespace {
