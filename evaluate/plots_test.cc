@@ -6,9 +6,9 @@
 #include <filesystem>
 #include <limits>
 #include <opencv2/imgcodecs.hpp>
-#include <random>
 
 #include "base/atomic_file.h"
+#include "base/testing.h"
 
 namespace handdb {
 namespace {
@@ -16,9 +16,9 @@ namespace {
 class EvalPlots : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = std::filesystem::temp_directory_path() /
-           ("handdb_eval_plots_" + std::to_string(std::random_device()()));
-    std::filesystem::create_directories(dir_);
+    dir_ =
+        handdb::testing::TempDir(std::string("eval_plots_") +
+                                 ::testing::UnitTest::GetInstance()->current_test_info()->name());
   }
   void TearDown() override { std::filesystem::remove_all(dir_); }
   std::filesystem::path dir_;

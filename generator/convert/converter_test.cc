@@ -10,6 +10,7 @@
 
 #include "base/atomic_file.h"
 #include "base/json_schema.h"
+#include "base/testing.h"
 #include "edges/exr_io.h"
 #include "edges/synthetic_hand.h"
 #include "format/manifest.h"
@@ -130,10 +131,9 @@ TEST(ConvertView, RejectsEmptyAndCroppedViews) {
 class ConvertDir : public ::testing::Test {
  protected:
   void SetUp() override {
-    root_ = fs::temp_directory_path() /
-            ("handdb_converter_test_" + std::to_string(::getpid()) + "_" +
-             ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(root_);
+    root_ =
+        handdb::testing::TempDir(std::string("converter_") +
+                                 ::testing::UnitTest::GetInstance()->current_test_info()->name());
     run_ = root_ / "run";
     fs::create_directories(run_);
     const json config = {{"seed", 7},

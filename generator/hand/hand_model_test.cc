@@ -8,6 +8,7 @@
 #include "base/atomic_file.h"
 #include "base/json_schema.h"
 #include "base/sha256.h"
+#include "base/testing.h"
 
 namespace handdb {
 namespace {
@@ -17,13 +18,6 @@ namespace fs = std::filesystem;
 
 fs::path HandPath() { return RepoRoot() / "configs/hands/webxr_generic_right.json"; }
 fs::path ShapesPath() { return RepoRoot() / "configs/shapes/basic.json"; }
-
-fs::path TempDir(const std::string& name) {
-  auto dir = fs::temp_directory_path() / ("handdb_hand_" + name + "_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
-}
 
 TEST(HandModel, LoadsTheShippedModel) {
   auto model = LoadHandModel(HandPath());
@@ -70,7 +64,7 @@ TEST(HandModel, ClampReportsChanges) {
 }
 
 TEST(HandModel, RejectsBrokenFiles) {
-  auto dir = TempDir("broken");
+  auto dir = handdb::testing::TempDir("hand_broken");
   auto text = ReadFileToString(HandPath());
   ASSERT_TRUE(text.ok());
   const json good = json::parse(*text);
@@ -100,7 +94,7 @@ TEST(HandModel, RejectsBrokenFiles) {
 }
 
 TEST(HandModel, RejectsShapesOutsideTheLimits) {
-  auto dir = TempDir("shapes");
+  auto dir = handdb::testing::TempDir("hand_shapes");
   auto model = LoadHandModel(HandPath());
   ASSERT_TRUE(model.ok());
   auto text = ReadFileToString(ShapesPath());

@@ -5,19 +5,13 @@
 
 #include "base/atomic_file.h"
 #include "base/json_schema.h"
+#include "base/testing.h"
 
 namespace handdb {
 namespace {
 
 using nlohmann::json;
 namespace fs = std::filesystem;
-
-fs::path TempDir(const std::string& name) {
-  auto dir = fs::temp_directory_path() / ("handdb_plan_" + name + "_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
-}
 
 json SmallConfig() {
   return json::parse(R"({
@@ -77,7 +71,7 @@ TEST(Plan, SameConfigSameBytesAndTheSeedMatters) {
 }
 
 TEST(Plan, WritesAndReadsBack) {
-  auto dir = TempDir("write");
+  auto dir = handdb::testing::TempDir("plan_write");
   ASSERT_TRUE(WriteJsonFileAtomic(dir / "config.json", SmallConfig()).ok());
   PlanSummary summary;
   ASSERT_TRUE(WritePlanFromConfig(dir / "config.json", dir / "plan.json", &summary).ok());

@@ -16,6 +16,7 @@
 
 #include "base/atomic_file.h"
 #include "base/json_schema.h"
+#include "base/testing.h"
 #include "generator/plan/plan.h"
 
 namespace handdb {
@@ -60,11 +61,8 @@ if mode != "no_done":
 class RenderDriverTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("handdb_render_" +
-            std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()) + "_" +
-            std::to_string(::getpid()));
-    fs::remove_all(dir_);
+    dir_ = handdb::testing::TempDir(
+        std::string("render_") + ::testing::UnitTest::GetInstance()->current_test_info()->name());
     fs::create_directories(dir_ / "scripts");
     ASSERT_TRUE(WriteFileAtomic(dir_ / "fake-blender", kFakeBlender).ok());
     ::chmod((dir_ / "fake-blender").c_str(), 0755);
