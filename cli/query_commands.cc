@@ -54,10 +54,15 @@ double Deg0To360(double rad) {
   return d >= 360.0 ? 0.0 : d;
 }
 
-json MatchJson(const Match& m, int rank) {
+json MatchJson(const Match& m, int rank, const QueryEdges& query) {
   const ViewLabel& l = m.label;
   json kps = json::array();
-  for (const auto& k : l.keypoints) kps.push_back({k[0], k[1], k[2]});
+  json kps_image = json::array();
+  for (const auto& k : l.keypoints) {
+    kps.push_back({k[0], k[1], k[2]});
+    const Point2f p = query.ImageFromNormalised({k[0], k[1]});
+    kps_image.push_back({p.x, p.y});
+  }
   return {{"rank", rank},
           {"view_id", m.view_id},
           {"roll", m.roll},
@@ -76,7 +81,9 @@ json MatchJson(const Match& m, int rank) {
           {"view_theta_deg", l.view_theta * kDeg},
           {"view_phi_deg", l.view_phi * kDeg},
           {"camera_roll", l.camera_roll},
-          {"keypoints", kps}};
+          {"hand", std::string(HandName(m.hand))},
+          {"keypoints", kps},
+          {"keypoints_image_px", kps_image}};
 }
 
 void PrintTable(const std::vector<Match>& matches,
@@ -102,10 +109,11 @@ void PrintTable(const std::vector<Match>& matches,
           : 0.0,
       st.seconds_total * 1e3);
   // Key joint angles: the flexion of each finger's base joint (thumb CMC, index..pinky MCP).
-  std::printf("%4s  %8s  %-16s  %7s %7s  %6s  %29s\n",
+  std::printf("%4s  %8s  %-16s  %-5s  %7s %7s  %6s  %29s\n",
               "rank",
               "D_c",
               "shape",
+              "hand",
               "theta",
               "phi",
               "roll",
@@ -115,10 +123,11 @@ void PrintTable(const std::vector<Match>& matches,
     const ViewLabel& l = m.label;
     const std::string shape =
         m.shape_name.empty() ? "#" + std::to_string(l.shape_id) : m.shape_name;
-    std::printf("%4d  %8.3f  %-16.16s  %7.1f %7.1f  %6.1f  %5.0f %5.0f %5.0f %5.0f %5.0f\n",
+    std::printf("%4d  %8.3f  %-16.16s  %-5s  %7.1f %7.1f  %6.1f  %5.0f %5.0f %5.0f %5.0f %5.0f\n",
                 rank++,
                 m.distance,
                 shape.c_str(),
+                std::string(HandName(m.hand)).c_str(),
                 l.view_theta * kDeg,
                 l.view_phi * kDeg,
                 Deg0To360(m.roll_angle),
@@ -134,6 +143,7 @@ void PrintTable(const std::vector<Match>& matches,
 struct QueryFlags {
   std::string db_dir, image, sheet, mask, roi, skin, canny;
   std::string input = "auto";
+  std::string hand = "either";  // the query default; the library's SearchOptions keeps kRight
   std::string kdtree = std::string(KdTreeBackendName(SearchOptions{}.kdtree));
   bool as_json = false, verify = false;
   SearchOptions search;
@@ -152,6 +162,12 @@ void QueryFlags::Add(CLI::App& app) {
   app.add_flag("--json", as_json, "print the result as JSON (schemas/query_result.schema.json)");
   app.add_option("--sheet", sheet, "write a contact sheet PNG: input, its edges, the top matches");
   app.add_option("--threads", search.num_threads, "worker threads (-1: all cores)")
+      ->capture_default_str();
+  app.add_option("--hand",
+                 hand,
+                 "which hand IMAGE shows: right (the database's), left (mirrored before the "
+                 "search) or either (both searched, one merged top-k)")
+      ->check(CLI::IsMember({"right", "left", "either"}))
       ->capture_default_str();
   app.add_flag("--bruteforce",
                search.brute_force,
@@ -214,6 +230,7 @@ bool QueryFlags::Finish() {
     return false;
   }
   search.kdtree = *ParseKdTreeBackend(kdtree);
+  search.hand = *ParseHand(hand);
   if (!search.Check()) {
     std::fprintf(stderr, "handdb query: invalid search options (see above)\n");
     return false;
@@ -233,17 +250,20 @@ Status WriteSheet(const QueryFlags& flags,
     char caption[128];
     std::snprintf(caption,
                   sizeof(caption),
-                  "#%d  D=%.2f  %s  r=%.0f",
+                  "#%d  D=%.2f  %s  r=%.0f%s",
                   rank++,
                   m.distance,
                   m.shape_name.empty() ? ("shape " + std::to_string(m.label.shape_id)).c_str()
                                        : m.shape_name.c_str(),
-                  Deg0To360(m.roll_angle));
+                  Deg0To360(m.roll_angle),
+                  m.hand == Hand::kLeft ? "  left" : "");
     t.caption = caption;
     std::vector<Point2f> rolled;
     RollPoints(db.points(m.view_id), m.roll_angle, &rolled);
+    // A left-hand match is the mirror image of the view: draw it in the query's frame.
+    const float mirror = m.hand == Hand::kLeft ? -1.0f : 1.0f;
     for (const Point2f& p : rolled) {
-      t.points.push_back({static_cast<int16_t>(std::lround(p.x * kPointScale)),
+      t.points.push_back({static_cast<int16_t>(std::lround(mirror * p.x * kPointScale)),
                           static_cast<int16_t>(std::lround(p.y * kPointScale))});
     }
     tiles.push_back(std::move(t));
@@ -259,7 +279,7 @@ json ResultJson(const QueryFlags& flags,
                 const Database& db) {
   json matches_json = json::array();
   int rank = 1;
-  for (const Match& m : matches) matches_json.push_back(MatchJson(m, rank++));
+  for (const Match& m : matches) matches_json.push_back(MatchJson(m, rank++, query));
   const SearchOptions& search = flags.search;
   return {{"format", "handdb-query-result"},
           {"version", 1},
@@ -280,6 +300,7 @@ json ResultJson(const QueryFlags& flags,
            {{"top_k", search.top_k},
             {"threads", ResolveNumThreads(search.num_threads)},
             {"brute_force", search.brute_force},
+            {"hand", flags.hand},
             {"kdtree", flags.kdtree},
             {"dt_cell_px", search.dt_cell_px}}},
           {"stats",
@@ -289,6 +310,7 @@ json ResultJson(const QueryFlags& flags,
             {"refined", stats.refined},
             {"abandoned", stats.abandoned},
             {"view_kdtrees", stats.view_trees},
+            {"searches", stats.searches},
             {"seconds", stats.seconds_total},
             {"seconds_bounds", stats.seconds_bounds},
             {"seconds_refine", stats.seconds_refine}}},

@@ -44,7 +44,8 @@ bool Before(const Scored& x, const Scored& y) {
 // readable without the lock.
 class TopK {
  public:
-  explicit TopK(size_t k) : k_(k) { items_.reserve(k + 1); }
+  // `bound`: pairs above it are never wanted (the other hand's k-th best, or +inf).
+  TopK(size_t k, double bound) : k_(k), threshold_(bound) { items_.reserve(k + 1); }
 
   void Insert(const Scored& s) {
     if (s.distance > threshold_.load(std::memory_order_relaxed)) return;
@@ -55,7 +56,10 @@ class TopK {
     }
     items_.insert(std::upper_bound(items_.begin(), items_.end(), s, Before), s);
     if (items_.size() > k_) items_.pop_back();
-    if (items_.size() == k_) threshold_.store(items_.back().distance, std::memory_order_relaxed);
+    if (items_.size() == k_) {
+      threshold_.store(std::min(threshold_.load(std::memory_order_relaxed), items_.back().distance),
+                       std::memory_order_relaxed);
+    }
   }
   double threshold() const { return threshold_.load(std::memory_order_relaxed); }
   std::vector<Scored> items() const { return items_; }
@@ -64,7 +68,7 @@ class TopK {
   size_t k_;
   std::mutex mu_;
   std::vector<Scored> items_;
-  std::atomic<double> threshold_{kInf};
+  std::atomic<double> threshold_;
 };
 
 // Lower bounds are stored per (view, roll) as uint16 in 1/64 px, rounded down (a lower bound
@@ -273,6 +277,7 @@ class QueryRun {
            std::span<const int32_t> max_abs,
            std::span<const Point2f> query_px,
            const SearchOptions& options,
+           double threshold,
            int threads,
            ThreadPool* pool)
       : db_(db),
@@ -284,7 +289,7 @@ class QueryRun {
         num_rolls_(db.num_rolls()),
         k_(static_cast<size_t>(options.top_k)),
         ctx_(db, max_abs, query_px, options),
-        top_(k_) {}
+        top_(k_, threshold) {}
 
   // The reference: exact D_c for every (view, roll).
   void BruteForce(SearchStats* stats, std::chrono::steady_clock::time_point start) {
@@ -377,8 +382,8 @@ class QueryRun {
     Visit(bound, rest);
   }
 
-  // The top k, best first, with labels rolled and shape names.
-  std::vector<Match> Matches() const {
+  // The top k, best first, with labels rolled (and mirrored back for kLeft) and shape names.
+  std::vector<Match> Matches(Hand hand) const {
     std::vector<Match> matches;
     for (const Scored& s : top_.items()) {
       Match m;
@@ -390,17 +395,19 @@ class QueryRun {
       m.b = s.b;
       m.lower_bound = s.lower_bound;
       m.label = RollLabel(db_.label(s.view), m.roll_angle);
+      if (hand == Hand::kLeft) m.label = MirrorLabel(m.label);
+      m.hand = hand;
       m.shape_name = std::string(db_.shape_name(m.label.shape_id));
       matches.push_back(std::move(m));
     }
     return matches;
   }
 
-  void CountInto(SearchStats* stats) const {
-    stats->refined = refined_.load();
-    stats->abandoned = abandoned_.load();
-    stats->view_trees = ctx_.num_view_trees();
-    stats->probe_abandoned = ctx_.num_probe_abandoned();
+  void AddInto(SearchStats* stats) const {
+    stats->refined += refined_.load();
+    stats->abandoned += abandoned_.load();
+    stats->view_trees += ctx_.num_view_trees();
+    stats->probe_abandoned += ctx_.num_probe_abandoned();
   }
 
  private:
@@ -496,21 +503,45 @@ class QueryRun {
 
 }  // namespace
 
-Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
-                                            const SearchOptions& options,
-                                            SearchStats* stats) const {
+std::string_view HandName(Hand hand) {
+  switch (hand) {
+    case Hand::kRight:
+      return "right";
+    case Hand::kLeft:
+      return "left";
+    case Hand::kEither:
+      return "either";
+  }
+  return "?";
+}
+
+Result<Hand> ParseHand(std::string_view name) {
+  for (Hand h : {Hand::kRight, Hand::kLeft, Hand::kEither}) {
+    if (name == HandName(h)) return h;
+  }
+  return Status(StatusCode::kInvalidArgument,
+                "unknown hand '" + std::string(name) + "' (right, left or either)");
+}
+
+ViewLabel MirrorLabel(const ViewLabel& label) {
+  ViewLabel out = label;
+  for (auto& kp : out.keypoints) kp[0] = -kp[0];
+  out.camera_roll = -label.camera_roll;
+  out.view_direction[1] = -label.view_direction[1];
+  out.view_phi = -label.view_phi;
+  return out;
+}
+
+std::vector<Match> Searcher::SearchOnce(std::span<const Point2f> query_px,
+                                        const SearchOptions& options,
+                                        double threshold,
+                                        Hand hand,
+                                        int threads,
+                                        ThreadPool* pool,
+                                        SearchStats* stats) const {
   const auto start = std::chrono::steady_clock::now();
-  if (Status s = CheckQuery(query_px, options); !s.ok()) return s;
-
-  const int threads = ResolveNumThreads(options.num_threads);
-  // One pool for the query's parallel loops; the calling thread is worker 0.
-  std::optional<ThreadPool> pool_storage;
-  ThreadPool* pool = threads > 1 ? &pool_storage.emplace(threads - 1) : nullptr;
+  QueryRun run(*db_, max_abs_, query_px, options, threshold, threads, pool);
   SearchStats local;
-  local.virtual_views = db_->num_virtual_views();
-  local.query_points = query_px.size();
-
-  QueryRun run(*db_, max_abs_, query_px, options, threads, pool);
   if (options.brute_force) {
     run.BruteForce(&local, start);
   } else {
@@ -521,8 +552,52 @@ Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
     run.Refine(bound);
     local.seconds_refine = Seconds(refine_start);
   }
-  std::vector<Match> matches = run.Matches();
-  run.CountInto(&local);
+  stats->bounded += local.bounded;
+  stats->seconds_bounds += local.seconds_bounds;
+  stats->seconds_refine += local.seconds_refine;
+  stats->searches += 1;
+  run.AddInto(stats);
+  return run.Matches(hand);
+}
+
+Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
+                                            const SearchOptions& options,
+                                            SearchStats* stats) const {
+  const auto start = std::chrono::steady_clock::now();
+  if (Status s = CheckQuery(query_px, options); !s.ok()) return s;
+
+  const int threads = ResolveNumThreads(options.num_threads);
+  // One pool for the query's parallel loops (both hands); the calling thread is worker 0.
+  std::optional<ThreadPool> pool_storage;
+  ThreadPool* pool = threads > 1 ? &pool_storage.emplace(threads - 1) : nullptr;
+  SearchStats local;
+  local.virtual_views = db_->num_virtual_views();
+  local.query_points = query_px.size();
+
+  std::vector<Match> matches;
+  if (options.hand != Hand::kLeft) {
+    matches = SearchOnce(query_px, options, kInf, Hand::kRight, threads, pool, &local);
+  }
+  if (options.hand != Hand::kRight) {
+    // x -> -x is exact in float, so the mirrored query of a mirrored view is the view itself.
+    std::vector<Point2f> mirrored(query_px.begin(), query_px.end());
+    for (Point2f& p : mirrored) p.x = -p.x;
+    // Only pairs that can enter the merged top-k matter: those at or below the right hand's
+    // k-th best. Brute force stays the plain reference and searches both in full.
+    const size_t k = static_cast<size_t>(options.top_k);
+    const double threshold =
+        !options.brute_force && matches.size() == k ? matches.back().distance : kInf;
+    std::vector<Match> left =
+        SearchOnce(mirrored, options, threshold, Hand::kLeft, threads, pool, &local);
+    for (Match& m : left) matches.push_back(std::move(m));
+    std::stable_sort(matches.begin(), matches.end(), [](const Match& x, const Match& y) {
+      if (x.distance != y.distance) return x.distance < y.distance;
+      if (x.view_id != y.view_id) return x.view_id < y.view_id;
+      if (x.roll != y.roll) return x.roll < y.roll;
+      return x.hand == Hand::kRight && y.hand == Hand::kLeft;
+    });
+    if (matches.size() > k) matches.resize(k);
+  }
   local.seconds_total = Seconds(start);
   if (stats != nullptr) *stats = local;
   return matches;

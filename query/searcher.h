@@ -15,6 +15,7 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "base/status.h"
@@ -25,8 +26,21 @@
 
 namespace handdb {
 
+// Which hand the query shows. The database is a right hand; a left hand is its mirror image, and
+// mirroring the query's normalised points (x -> -x, exact in float and on the PointQ grid) matches
+// it against the right-hand views exactly (docs/query.md, "Either hand").
+enum class Hand { kRight, kLeft, kEither };
+std::string_view HandName(Hand hand);  // "right", "left", "either"
+Result<Hand> ParseHand(std::string_view name);
+
 struct SearchOptions {
-  int top_k = 10;            // number of matches returned
+  int top_k = 10;  // number of matches returned
+  // kRight: today's search. kLeft: the query is mirrored before searching. kEither: both, merged
+  // into one top-k by (D_c, view id, roll, right before left); the mirrored search starts from
+  // the first one's k-th best D_c as its threshold, which keeps the result exact. The library
+  // default stays kRight (the rendered test sets are right hands); `handdb query` defaults to
+  // kEither.
+  Hand hand = Hand::kRight;
   int num_threads = -1;      // -1: all cores
   bool brute_force = false;  // D_c for every (view, roll), no pruning (the reference)
   KdTreeBackend kdtree = KdTreeBackend::kNanoflann;
@@ -45,7 +59,18 @@ struct Match {
                            // down to 1/64 px (0 in brute force)
   ViewLabel label;         // rolled: camera_roll += angle, keypoints rotated (RollLabel)
   std::string shape_name;  // from the database's shape table, "" if unknown
+  // kRight, or kLeft when the mirrored query matched: then `label` is mirrored back into the
+  // query's frame (MirrorLabel), so keypoints are where the left hand's joints are.
+  Hand hand = Hand::kRight;
 };
+
+// A right-hand view's label as the left hand seen in the mirrored picture: keypoint x -> -x
+// (the normalised frame's origin is on the mirror line), camera_roll -> -camera_roll (the mirror
+// turns rotations round); joint angles are unchanged (the same flexions of a left hand). The view
+// direction is expressed in the left hand's frame, defined as the right hand's frame with y
+// negated (for the WebXR hand y is the lateral axis: forward_axis -z and palm_normal -x stay),
+// so view_direction.y and view_phi change sign and view_theta stays. Its own inverse.
+ViewLabel MirrorLabel(const ViewLabel& label);
 
 struct SearchStats {
   uint64_t virtual_views = 0;    // (view, roll) pairs in the database
@@ -55,10 +80,13 @@ struct SearchStats {
   uint64_t probe_abandoned = 0;  // of those, decided by the probe before a view kd-tree
   uint64_t view_trees = 0;       // kd-trees built over view points
   uint64_t query_points = 0;
+  uint32_t searches = 0;      // 1, or 2 for Hand::kEither (the counters and seconds add up both)
   double seconds_bounds = 0;  // step 1 (rotations, distance transforms, lower bounds)
   double seconds_refine = 0;  // step 2
   double seconds_total = 0;
 };
+
+class ThreadPool;
 
 class Searcher {
  public:
@@ -80,6 +108,16 @@ class Searcher {
   const Database& database() const { return *db_; }
 
  private:
+  // One search of `query_px` as given; matches with D_c above `threshold` may be left out (the
+  // result is the exact top-k of the pairs with D_c <= threshold). Stats are added to `stats`.
+  std::vector<Match> SearchOnce(std::span<const Point2f> query_px,
+                                const SearchOptions& options,
+                                double threshold,
+                                Hand hand,
+                                int threads,
+                                ThreadPool* pool,
+                                SearchStats* stats) const;
+
   std::shared_ptr<const Database> db_;
   std::vector<int32_t> max_abs_;  // per view: max |x|, |y| of its points (PointQ units)
 };

@@ -57,7 +57,13 @@ void ExpectSameResults(const std::vector<Match>& a, const std::vector<Match>& b)
     EXPECT_EQ(a[i].distance, b[i].distance) << "rank " << i;
     EXPECT_EQ(a[i].a, b[i].a) << "rank " << i;
     EXPECT_EQ(a[i].b, b[i].b) << "rank " << i;
+    EXPECT_EQ(a[i].hand, b[i].hand) << "rank " << i;
   }
+}
+
+std::vector<Point2f> Mirrored(std::vector<Point2f> pts) {
+  for (Point2f& p : pts) p.x = -p.x;
+  return pts;
 }
 
 TEST(SearchOptions, Check) {
@@ -221,6 +227,101 @@ TEST(Searcher, BadInputs) {
   res = searcher.Search(RolledView(*TestDatabase(), 0, 0), bad);
   ASSERT_FALSE(res.ok());
   EXPECT_EQ(res.status().code(), StatusCode::kInvalidArgument);
+}
+
+TEST(Hand, NamesRoundTripAndMirrorLabelIsItsOwnInverse) {
+  for (Hand h : {Hand::kRight, Hand::kLeft, Hand::kEither}) EXPECT_EQ(*ParseHand(HandName(h)), h);
+  EXPECT_FALSE(ParseHand("both").ok());
+  ViewLabel l = TestDatabase()->label(4);
+  l.keypoints[3] = {12.5f, -7.25f, 3.0f};
+  l.view_direction = {0.6f, 0.8f, 0.0f};
+  l.view_phi = std::atan2(0.8f, 0.6f);
+  l.camera_roll = 0.5f;
+  const ViewLabel m = MirrorLabel(l);
+  EXPECT_EQ(m.keypoints[3][0], -12.5f);
+  EXPECT_EQ(m.keypoints[3][1], -7.25f);
+  EXPECT_EQ(m.keypoints[3][2], 3.0f);
+  EXPECT_EQ(m.camera_roll, -0.5f);
+  EXPECT_EQ(m.view_direction[1], -0.8f);
+  EXPECT_FLOAT_EQ(m.view_phi, std::atan2(m.view_direction[1], m.view_direction[0]));
+  EXPECT_EQ(m.joint_angles, l.joint_angles);
+  const ViewLabel back = MirrorLabel(m);
+  EXPECT_EQ(back.keypoints, l.keypoints);
+  EXPECT_EQ(back.camera_roll, l.camera_roll);
+  EXPECT_EQ(back.view_direction, l.view_direction);
+}
+
+// A left hand is a mirrored right hand: a mirrored (rolled) view comes back at rank 1, D_c exactly
+// 0, as a left-hand match whose keypoints are the view's mirrored into the query's frame; the
+// unmirrored view is still a right-hand match under every option but kLeft.
+TEST(Searcher, MirroredViewIsFoundAsALeftHand) {
+  const Searcher searcher(TestDatabase());
+  for (view_id_t v : {0u, 7u, 35u}) {
+    for (roll_id_t r : {0u, 5u, 11u}) {
+      const auto right = RolledView(*TestDatabase(), v, r);
+      const auto left = Mirrored(right);
+      const ViewLabel rolled = RollLabel(TestDatabase()->label(v), RollAngle(r, kRolls));
+      for (Hand h : {Hand::kLeft, Hand::kEither}) {
+        SearchOptions o = Options();
+        o.hand = h;
+        SearchStats stats;
+        auto res = searcher.Search(left, o, &stats);
+        ASSERT_TRUE(res.ok());
+        EXPECT_EQ(stats.searches, h == Hand::kEither ? 2u : 1u);
+        EXPECT_EQ((*res)[0].view_id, v);
+        EXPECT_EQ((*res)[0].roll, r);
+        EXPECT_EQ((*res)[0].distance, 0.0);
+        EXPECT_EQ((*res)[0].hand, Hand::kLeft);
+        for (int k = 0; k < kNumKeypoints; ++k) {
+          EXPECT_EQ((*res)[0].label.keypoints[k][0], -rolled.keypoints[k][0]);
+          EXPECT_EQ((*res)[0].label.keypoints[k][1], rolled.keypoints[k][1]);
+        }
+        EXPECT_EQ((*res)[0].label.camera_roll, -rolled.camera_roll);
+      }
+      for (Hand h : {Hand::kRight, Hand::kEither}) {
+        SearchOptions o = Options();
+        o.hand = h;
+        auto res = searcher.Search(right, o);
+        ASSERT_TRUE(res.ok());
+        EXPECT_EQ((*res)[0].view_id, v);
+        EXPECT_EQ((*res)[0].roll, r);
+        EXPECT_EQ((*res)[0].distance, 0.0);
+        EXPECT_EQ((*res)[0].hand, Hand::kRight);
+        EXPECT_EQ((*res)[0].label.keypoints, rolled.keypoints);
+      }
+    }
+  }
+}
+
+// kEither's second (mirrored) search starts from the first one's k-th best; the merged top-k
+// must still equal brute force over both hands, and kLeft must equal brute force on the mirror.
+TEST(Searcher, EitherHandPrunedEqualsBruteForce) {
+  const Searcher searcher(TestDatabase());
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<uint32_t> view(0, kViews - 1);
+  std::uniform_int_distribution<uint32_t> roll(0, kRolls - 1);
+  std::uniform_real_distribution<float> u(-1, 1);
+  int left_won = 0;
+  for (int i = 0; i < 24; ++i) {
+    std::vector<Point2f> q = Transform(RolledView(*TestDatabase(), view(rng), roll(rng)),
+                                       0.3f * u(rng),
+                                       3 * u(rng),
+                                       3 * u(rng),
+                                       0.6 + 0.4 * (u(rng) + 1) / 2,
+                                       100 + i);
+    if (i % 2) q = Mirrored(q);
+    SearchOptions pruned = Options(1 + i % 6, 1 + i % 2);
+    pruned.hand = i % 3 == 2 ? Hand::kLeft : Hand::kEither;
+    SearchOptions brute = pruned;
+    brute.brute_force = true;
+    auto a = searcher.Search(q, pruned);
+    auto b = searcher.Search(q, brute);
+    ASSERT_TRUE(a.ok() && b.ok());
+    ExpectSameResults(*a, *b);
+    if ((*a)[0].hand == Hand::kLeft) ++left_won;
+  }
+  EXPECT_GT(left_won, 4);  // both hands won somewhere, so the merge was exercised
+  EXPECT_LT(left_won, 20);
 }
 
 TEST(Searcher, MissingDatabaseDirectory) {

@@ -164,6 +164,70 @@ TEST_F(QueryCli, PhotoFindsTheView) {
   EXPECT_EQ(doc["matches"][0]["roll"], 2);
 }
 
+// A left hand is a mirrored right hand: the mirrored edge image of view 9 comes back as view 9,
+// hand "left", at D_c ~ 0 under --hand left and the default (either); its keypoints in the input
+// image are the unmirrored answer's mirrored about the image's vertical centre line.
+TEST_F(QueryCli, MirroredImageIsALeftHandWithKeypointsInTheImage) {
+  const cv::Mat right = Draw(9, 4, false);
+  cv::Mat left;
+  cv::flip(right, left, 1);
+  const fs::path right_png = *dir_ / "right.png";
+  const fs::path left_png = *dir_ / "left.png";
+  ASSERT_TRUE(cv::imwrite(right_png.string(), right));
+  ASSERT_TRUE(cv::imwrite(left_png.string(), left));
+  const std::string db = (*dir_ / "db").string();
+
+  CliRun r = Handdb(db + " " + right_png.string() + " --json --top 3 --hand right");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto rdoc = nlohmann::json::parse(r.out);
+  EXPECT_TRUE(ValidateJson(rdoc, "query_result.schema.json", "output").ok());
+  const auto& rm = rdoc["matches"][0];
+  EXPECT_EQ(rm["view_id"], 9);
+  EXPECT_EQ(rm["hand"], "right");
+  EXPECT_EQ(rdoc["stats"]["searches"], 1);
+  // keypoints_image_px undoes the normalisation of the keypoints.
+  const double scale = rdoc["query"]["scale"];
+  const double cx = rdoc["query"]["centre_px"][0];
+  const double cy = rdoc["query"]["centre_px"][1];
+  ASSERT_EQ(rm["keypoints_image_px"].size(), 21u);
+  for (size_t k = 0; k < 21; ++k) {
+    EXPECT_NEAR(rm["keypoints_image_px"][k][0].get<double>(),
+                rm["keypoints"][k][0].get<double>() / scale + cx,
+                1e-3);
+    EXPECT_NEAR(rm["keypoints_image_px"][k][1].get<double>(),
+                rm["keypoints"][k][1].get<double>() / scale + cy,
+                1e-3);
+  }
+
+  for (const std::string hand : {" --hand left", " --hand either", ""}) {
+    CliRun l = Handdb(db + " " + left_png.string() + " --json --top 3" + hand);
+    ASSERT_EQ(l.code, 0) << l.err;
+    const auto ldoc = nlohmann::json::parse(l.out);
+    EXPECT_TRUE(ValidateJson(ldoc, "query_result.schema.json", "output").ok());
+    EXPECT_EQ(ldoc["stats"]["searches"], hand == " --hand left" ? 1 : 2) << hand;
+    const auto& lm = ldoc["matches"][0];
+    EXPECT_EQ(lm["view_id"], 9) << hand;
+    EXPECT_EQ(lm["roll"], 4) << hand;
+    EXPECT_EQ(lm["hand"], "left") << hand;
+    // The drawn image is not exactly the view (1.5x, rounded), but its mirror is as far away.
+    EXPECT_NEAR(lm["distance"].get<double>(), rm["distance"].get<double>(), 0.05) << hand;
+    for (size_t k = 0; k < 21; ++k) {
+      EXPECT_NEAR(lm["keypoints_image_px"][k][0].get<double>(),
+                  right.cols - rm["keypoints_image_px"][k][0].get<double>(),
+                  0.5)
+          << hand << " keypoint " << k;
+      EXPECT_NEAR(lm["keypoints_image_px"][k][1].get<double>(),
+                  rm["keypoints_image_px"][k][1].get<double>(),
+                  0.5)
+          << hand << " keypoint " << k;
+    }
+  }
+  CliRun table = Handdb(db + " " + left_png.string() + " --top 2");
+  ASSERT_EQ(table.code, 0) << table.err;
+  EXPECT_NE(table.out.find("left"), std::string::npos);
+  EXPECT_EQ(Handdb(db + " " + left_png.string() + " --hand both").code, 2);
+}
+
 TEST_F(QueryCli, ErrorsAreOneLineWithExitCodes) {
   const std::string db = (*dir_ / "db").string();
   auto one_line = [](const CliRun& r) {

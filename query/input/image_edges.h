@@ -84,6 +84,13 @@ struct QueryEdges {
   double centre_x = 0, centre_y = 0, diameter_px = 0, scale = 0;
   std::vector<PointQ> points;              // normalised frame, sorted by (y, x), unique
   std::vector<Point2f> points_px() const;  // the same in px
+  // The inverse map, normalised px -> source image px (pixel centres at integer + 0.5, the
+  // origin at the top-left corner of the top-left pixel): where a match's keypoint (already in
+  // the query's normalised frame: rolled, and mirrored back for a left hand) lies in the input.
+  Point2f ImageFromNormalised(Point2f normalised) const {
+    return {static_cast<float>(normalised.x / scale + centre_x),
+            static_cast<float>(normalised.y / scale + centre_y)};
+  }
 };
 
 // Errors, each naming the file: kNotFound, kBadImage (unreadable / wrong size mask / not an

@@ -152,6 +152,73 @@ TEST_F(ImageEdgesTest, LabelQueryUsesTheGivenEdgeOptions) {
   EXPECT_FALSE(bad.Check());
 }
 
+// keypoints_image_px (issue 16 item 5): a database of label-path synthetic hands whose labels carry
+// their exact keypoints in the normalised frame; photos of one of them, as is (a right hand) and
+// mirrored (a left hand), must give that hand's true keypoints in the photo's pixels within ~1 px
+// after undoing the roll, the mirror and the normalisation.
+TEST_F(ImageEdgesTest, KeypointsInTheInputImageForRightAndLeftHands) {
+  std::vector<ViewLabel> db_labels;
+  std::vector<std::vector<PointQ>> db_points;
+  for (int i = 0; i < 8; ++i) {
+    const SyntheticHand h = Hand(0.0, 0.06 * i);
+    const fs::path exr = dir_ / ("v" + std::to_string(i) + ".exr");
+    ASSERT_TRUE(WriteLabelExr(exr, h.image).ok());
+    auto q = LoadQueryEdges(exr, ImageEdgeOptions{});
+    ASSERT_TRUE(q.ok());
+    ViewLabel l;
+    l.render_id = i;
+    l.shape_id = 0;
+    for (int k = 0; k < kNumKeypoints; ++k) {
+      l.keypoints[k] = {static_cast<float>((h.keypoints_px[k][0] - q->centre_x) * q->scale),
+                        static_cast<float>((h.keypoints_px[k][1] - q->centre_y) * q->scale),
+                        0.0f};
+    }
+    db_labels.push_back(l);
+    db_points.push_back(q->points);
+  }
+  // 16 rolls of 22.5 degrees: the photographed hand is turned by 3 of them.
+  const auto db = std::make_shared<const Database>(
+      Database::FromMemory(db_labels, db_points, 16, {"synthetic"}));
+  const Searcher searcher(db);
+  const SyntheticHand target = Hand(3 * 2 * M_PI / 16, 0.06 * 5);
+  LabelImage flipped = target.image;
+  for (int y = 0; y < flipped.height; ++y) {
+    for (int x = 0; x < flipped.width; ++x) {
+      const size_t from = static_cast<size_t>(y) * flipped.width + (flipped.width - 1 - x);
+      flipped.labels[static_cast<size_t>(y) * flipped.width + x] = target.image.labels[from];
+      if (flipped.has_depth()) {
+        flipped.depth[static_cast<size_t>(y) * flipped.width + x] = target.image.depth[from];
+      }
+    }
+  }
+  for (const bool left : {false, true}) {
+    const fs::path png = WritePhoto(left ? flipped : target.image, left ? "l.png" : "r.png", 5);
+    auto photo = LoadQueryEdges(png, ImageEdgeOptions{});
+    ASSERT_TRUE(photo.ok());
+    SearchOptions o;
+    o.top_k = 2;
+    o.num_threads = 2;
+    o.hand = Hand::kEither;
+    auto res = searcher.Search(photo->points_px(), o);
+    ASSERT_TRUE(res.ok());
+    const Match& m = (*res)[0];
+    EXPECT_EQ(m.view_id, 5u) << "left " << left;
+    EXPECT_EQ(m.roll, 3u) << "left " << left;
+    EXPECT_EQ(m.hand, left ? Hand::kLeft : Hand::kRight);
+    double worst = 0;
+    for (int k = 0; k < kNumKeypoints; ++k) {
+      const Point2f p =
+          photo->ImageFromNormalised({m.label.keypoints[k][0], m.label.keypoints[k][1]});
+      // Mirroring the picture about its vertical centre line: u -> width - u.
+      const double tx =
+          left ? target.image.width - target.keypoints_px[k][0] : target.keypoints_px[k][0];
+      const double ty = target.keypoints_px[k][1];
+      worst = std::max(worst, std::hypot(p.x - tx, p.y - ty));
+    }
+    EXPECT_LT(worst, 1.0) << "left " << left;
+  }
+}
+
 TEST_F(ImageEdgesTest, PhotoOfADatabaseViewFindsIt) {
   // A small database of label-path views at several in-plane angles and bends; the photo of one
   // of them must come back first.
