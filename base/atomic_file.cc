@@ -6,9 +6,7 @@
 
 #include <cerrno>
 #include <cstring>
-#include <fstream>
 #include <random>
-#include <sstream>
 
 #include "base/hex.h"
 
@@ -120,20 +118,77 @@ Status WriteFileAtomic(const std::filesystem::path& target, std::string_view dat
   return w.Commit();
 }
 
-Result<std::string> ReadFileToString(const std::filesystem::path& path) {
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec)) {
-    return Status(StatusCode::kNotFound, path.string() + ": no such file");
+Status CheckRegularFile(const std::filesystem::path& path) {
+  const std::string name = path.string();
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) {
+    switch (errno) {
+      case ENOENT:
+      case ENOTDIR:
+        return Status(StatusCode::kNotFound, name + ": no such file");
+      case EACCES:
+        return Status(StatusCode::kIoError, name + ": permission denied");
+      case ELOOP:
+        return Status(StatusCode::kIoError,
+                      name + ": too many levels of symbolic links (a symlink loop?)");
+      default:
+        return Errno("cannot stat", path);
+    }
   }
-  if (std::filesystem::is_directory(path, ec)) {
-    return Status(StatusCode::kIoError, path.string() + ": is a directory, expected a file");
+  if (S_ISDIR(st.st_mode)) {
+    return Status(StatusCode::kIoError, name + ": is a directory, expected a file");
   }
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return Status(StatusCode::kIoError, path.string() + ": cannot open for reading");
-  std::ostringstream os;
-  os << in.rdbuf();
-  if (in.bad()) return Status(StatusCode::kIoError, path.string() + ": read failed");
-  return os.str();
+  if (!S_ISREG(st.st_mode)) return Status(StatusCode::kIoError, name + ": not a regular file");
+  // stat() needs only the directory's permissions; say so here rather than as a library's
+  // "cannot read" later.
+  if (::access(path.c_str(), R_OK) != 0 && errno == EACCES) {
+    return Status(StatusCode::kIoError, name + ": permission denied");
+  }
+  return Status::Ok();
+}
+
+Result<std::string> ReadFileToString(const std::filesystem::path& path, uint64_t max_bytes) {
+  if (Status s = CheckRegularFile(path); !s.ok()) return s;
+  // O_NONBLOCK: if the path was swapped for a FIFO since the stat, open does not block either;
+  // fstat on the descriptor is the check that counts.
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
+  if (fd < 0) {
+    if (errno == EACCES) return Status(StatusCode::kIoError, path.string() + ": permission denied");
+    return Errno("cannot open for reading", path);
+  }
+  struct stat st {};
+  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+    ::close(fd);
+    return Status(StatusCode::kIoError, path.string() + ": not a regular file");
+  }
+  if (static_cast<uint64_t>(st.st_size) > max_bytes) {
+    ::close(fd);
+    return Status(StatusCode::kIoError,
+                  path.string() + ": " + std::to_string(st.st_size) + " bytes, more than the " +
+                      std::to_string(max_bytes) + " allowed for this kind of file");
+  }
+  std::string text;
+  text.reserve(static_cast<size_t>(st.st_size));
+  char buf[1 << 16];
+  for (;;) {
+    const ssize_t n = ::read(fd, buf, sizeof buf);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) {
+      Status s = Errno("read failed", path);
+      ::close(fd);
+      return s;
+    }
+    if (n == 0) break;
+    text.append(buf, static_cast<size_t>(n));
+    if (text.size() > max_bytes) {  // grew while we read
+      ::close(fd);
+      return Status(StatusCode::kIoError,
+                    path.string() + ": more than the " + std::to_string(max_bytes) +
+                        " bytes allowed for this kind of file");
+    }
+  }
+  ::close(fd);
+  return text;
 }
 
 Status SyncDirectory(const std::filesystem::path& dir) {

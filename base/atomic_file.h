@@ -43,8 +43,17 @@ class AtomicFileWriter {
 // Convenience: the whole content at once.
 Status WriteFileAtomic(const std::filesystem::path& target, std::string_view data);
 
-// Reads a whole (small) file; kNotFound / kIoError name the path.
-Result<std::string> ReadFileToString(const std::filesystem::path& path);
+// Ok when `path` (symlinks followed) is a regular file, checked with stat() before anything opens
+// it, so a FIFO, a device (/dev/zero, /dev/urandom) or a directory never blocks or floods a read.
+// Errors name the path: kNotFound "no such file"; kIoError "permission denied", "symlink loop",
+// "is a directory, expected a file", "not a regular file" (FIFO, socket, device).
+Status CheckRegularFile(const std::filesystem::path& path);
+
+// Reads a whole (small) regular file (CheckRegularFile first); kNotFound / kIoError name the path.
+// A file larger than `max_bytes` is refused before it is read (kIoError "... bytes, more than the
+// N allowed").
+Result<std::string> ReadFileToString(const std::filesystem::path& path,
+                                     uint64_t max_bytes = UINT64_MAX);
 
 // fsync a directory (after creating/renaming entries in it).
 Status SyncDirectory(const std::filesystem::path& dir);

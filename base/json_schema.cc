@@ -537,7 +537,7 @@ class Validator {
 };
 
 // 1-based line and column of a byte offset.
-std::pair<size_t, size_t> LineColumn(const std::string& text, size_t offset) {
+std::pair<size_t, size_t> LineColumn(std::string_view text, size_t offset) {
   size_t line = 1;
   size_t column = 1;
   for (size_t i = 0; i < offset && i < text.size(); ++i) {
@@ -584,26 +584,76 @@ Status ValidateJsonWithSchema(const nlohmann::json& doc,
       what + ": " + failure.pointer + ": " + failure.problem + " (value: " + failure.raw + ")");
 }
 
-Result<nlohmann::json> ReadJsonFile(const std::filesystem::path& path,
-                                    std::string_view schema_name) {
-  Result<std::string> text = ReadFileToString(path);
-  if (!text.ok()) return text.status();
+uint64_t MaxJsonFileBytes(std::string_view schema_name) {
+  constexpr uint64_t kMiB = uint64_t{1} << 20;
+  for (std::string_view small : {"config.schema.json",
+                                 "testset_config.schema.json",
+                                 "render_sidecar.schema.json",
+                                 "hand_model.schema.json",
+                                 "shapes.schema.json"}) {
+    if (schema_name == small) return kMiB;
+  }
+  if (schema_name == "manifest.schema.json") return 64 * kMiB;
+  return 256 * kMiB;  // plans (1.6 MB for the paper's 107,328 views), test sets, reports
+}
+
+Status CheckJsonDepth(std::string_view text, const std::string& what, int max_depth) {
+  int depth = 0;
+  bool in_string = false;
+  for (size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (in_string) {
+      if (c == '\\') {
+        ++i;  // skip the escaped character (\" does not end the string)
+      } else if (c == '"') {
+        in_string = false;
+      }
+      continue;
+    }
+    if (c == '"') {
+      in_string = true;
+    } else if (c == '[' || c == '{') {
+      if (++depth > max_depth) {
+        return Status(StatusCode::kBadJson,
+                      what + ": JSON nested deeper than " + std::to_string(max_depth) +
+                          " levels at byte " + std::to_string(i));
+      }
+    } else if ((c == ']' || c == '}') && depth > 0) {
+      --depth;  // unbalanced closers are the parser's to report
+    }
+  }
+  return Status::Ok();
+}
+
+Result<nlohmann::json> ParseJsonText(std::string_view text, const std::string& what) {
+  if (Status s = CheckJsonDepth(text, what); !s.ok()) return s;
   nlohmann::json doc;
   try {
-    doc = nlohmann::json::parse(*text);
+    doc = nlohmann::json::parse(text);
   } catch (const nlohmann::json::parse_error& e) {
     // e.byte is 1-based and points just past the offending character.
     const size_t offset = e.byte > 0 ? e.byte - 1 : 0;
-    auto [line, column] = LineColumn(*text, offset);
-    std::string what = e.what();
+    auto [line, column] = LineColumn(text, offset);
+    std::string problem = e.what();
     // Drop nlohmann's "[json.exception.parse_error.101] parse error at line 1, column 2: " prefix.
-    if (auto colon = what.find(": "); colon != std::string::npos) what = what.substr(colon + 2);
+    if (auto colon = problem.find(": "); colon != std::string::npos) {
+      problem = problem.substr(colon + 2);
+    }
     return Status(StatusCode::kBadJson,
-                  path.string() + ": line " + std::to_string(line) + ", column " +
-                      std::to_string(column) + ": " + what);
+                  what + ": line " + std::to_string(line) + ", column " + std::to_string(column) +
+                      ": " + problem);
   }
+  return doc;
+}
+
+Result<nlohmann::json> ReadJsonFile(const std::filesystem::path& path,
+                                    std::string_view schema_name) {
+  Result<std::string> text = ReadFileToString(path, MaxJsonFileBytes(schema_name));
+  if (!text.ok()) return text.status();
+  Result<nlohmann::json> doc = ParseJsonText(*text, path.string());
+  if (!doc.ok()) return doc.status();
   if (!schema_name.empty()) {
-    Status s = ValidateJson(doc, schema_name, path.string());
+    Status s = ValidateJson(*doc, schema_name, path.string());
     if (!s.ok()) return s;
   }
   return doc;

@@ -29,7 +29,27 @@ Status ValidateJsonWithSchema(const nlohmann::json& doc,
                               const nlohmann::json& schema,
                               const std::string& what);
 
-// Reads and parses a JSON file, then validates it (skipped when schema_name is empty).
+// Limits on every JSON document handdb reads (docs/conventions.md, "JSON limits"): our own files
+// nest 6 levels deep at most, so anything past kMaxJsonDepth is refused before it is parsed (deep
+// nesting would overflow the stack in the recursive schema check and in dump()).
+constexpr int kMaxJsonDepth = 64;
+
+// The largest file ReadJsonFile accepts for a kind of file, by its schema name: 1 MiB for configs,
+// sidecars and hand models, 64 MiB for manifests, 256 MiB for plans, test sets and the rest (""
+// included). Checked with stat() before the file is read.
+uint64_t MaxJsonFileBytes(std::string_view schema_name);
+
+// kBadJson "<what>: JSON nested deeper than <max_depth> levels at byte N" (N 0-based) when arrays
+// and objects nest deeper than max_depth. One linear pass that skips strings; no allocation.
+Status CheckJsonDepth(std::string_view text,
+                      const std::string& what,
+                      int max_depth = kMaxJsonDepth);
+
+// CheckJsonDepth, then parse. kBadJson "<what>: line L, column C: <problem>".
+Result<nlohmann::json> ParseJsonText(std::string_view text, const std::string& what);
+
+// Reads (at most MaxJsonFileBytes(schema_name) bytes of a regular file), parses (at most
+// kMaxJsonDepth levels) and validates a JSON file (skipped when schema_name is empty).
 // Errors: kNotFound, kIoError, kBadJson ("<path>: line L, column C: ..."), kSchemaViolation.
 Result<nlohmann::json> ReadJsonFile(const std::filesystem::path& path,
                                     std::string_view schema_name);

@@ -165,6 +165,36 @@ TEST(JsonSchema, ReadJsonFileReportsLineAndColumn) {
   EXPECT_EQ(missing.status().code(), StatusCode::kNotFound);
 }
 
+// Issue 14 item 2: 100,000 nested '[' overflowed the stack; refused before parsing, with the byte.
+TEST(JsonSchema, DepthIsBoundedBeforeParsing) {
+  EXPECT_TRUE(CheckJsonDepth(std::string(64, '[') + std::string(64, ']'), "x").ok());
+  const Status s = CheckJsonDepth(std::string(65, '[') + std::string(65, ']'), "x");
+  EXPECT_EQ(s.code(), StatusCode::kBadJson);
+  EXPECT_EQ(s.message(), "x: JSON nested deeper than 64 levels at byte 64");
+  // Brackets inside strings (escaped quotes included) do not count.
+  EXPECT_TRUE(CheckJsonDepth("[\"\\\"" + std::string(100, '[') + "\"]", "x").ok());
+  EXPECT_FALSE(CheckJsonDepth("{\"a\": [{\"b\": [[]]}]}", "x", 4).ok());
+  EXPECT_TRUE(CheckJsonDepth("{\"a\": [{\"b\": [[]]}]}", "x", 5).ok());
+
+  auto dir = TempDir("deep");
+  ASSERT_TRUE(WriteFileAtomic(dir / "deep.json", std::string(100000, '[')).ok());
+  auto r = ReadJsonFile(dir / "deep.json", "config.schema.json");
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().message(),
+            (dir / "deep.json").string() + ": JSON nested deeper than 64 levels at byte 64");
+}
+
+TEST(JsonSchema, ReadJsonFileBoundsTheSizeByKind) {
+  auto dir = TempDir("big");
+  const std::string big = "[" + std::string(MaxJsonFileBytes("config.schema.json"), ' ') + "]";
+  ASSERT_TRUE(WriteFileAtomic(dir / "big.json", big).ok());
+  auto r = ReadJsonFile(dir / "big.json", "config.schema.json");
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find("more than the 1048576 allowed"), std::string::npos)
+      << r.status().message();
+  EXPECT_TRUE(ReadJsonFile(dir / "big.json", "").ok());  // plans may be larger
+}
+
 TEST(JsonSchema, WriteThenReadRoundTripsWithStableBytes) {
   auto dir = TempDir("write");
   json doc = Good();

@@ -11,6 +11,8 @@
 #include <string>
 #include <utility>
 
+#include "base/atomic_file.h"
+
 namespace handdb {
 namespace {
 
@@ -24,7 +26,10 @@ struct FdCloser {
 
 Result<MappedFile> MappedFile::Open(const std::filesystem::path& path, Advice advice) {
   const std::string name = path.string();
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  // Refuse FIFOs and devices before open() (which would block on a FIFO); O_NONBLOCK and the
+  // fstat below cover a path swapped in between.
+  if (Status s = CheckRegularFile(path); !s.ok()) return s;
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
   if (fd < 0) {
     const StatusCode code = errno == ENOENT ? StatusCode::kNotFound : StatusCode::kIoError;
     return Status(code, name + ": cannot open: " + std::strerror(errno));

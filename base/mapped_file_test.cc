@@ -48,12 +48,12 @@ TEST(MappedFile, ErrorsNameThePath) {
   auto file = MappedFile::Open(missing);
   ASSERT_FALSE(file.ok());
   EXPECT_EQ(file.status().code(), StatusCode::kNotFound);
-  EXPECT_EQ(file.status().message().rfind(missing.string() + ": cannot open: ", 0), 0u);
+  EXPECT_EQ(file.status().message(), missing.string() + ": no such file");
   const auto dir = std::filesystem::temp_directory_path();
   auto not_regular = MappedFile::Open(dir);
   ASSERT_FALSE(not_regular.ok());
   EXPECT_EQ(not_regular.status().code(), StatusCode::kIoError);
-  EXPECT_EQ(not_regular.status().message(), dir.string() + ": not a regular file");
+  EXPECT_EQ(not_regular.status().message(), dir.string() + ": is a directory, expected a file");
 }
 
 }  // namespace

@@ -1,4 +1,5 @@
 // One `handdb` binary dispatching subcommands from a table (after COLMAP).
+#include <cerrno>
 #include <cstdio>
 #include <cstring>
 #include <exception>
@@ -59,6 +60,23 @@ void PrintHelp(std::FILE* out) {
   std::fprintf(out, "  %-10s %s\n", "help", "show this help");
 }
 
+// Output that never reached its file is a failure (a full disk, /dev/full, a closed pipe): flush
+// stdout once the command is done and turn a write error into exit 1 with one line, so
+// `handdb info DB --json > out.json` never exits 0 over an empty file.
+int CheckStdout(const char* command, int code) {
+  // A command may have flushed (and failed) already: its errno is the best reason left.
+  const int earlier_errno = errno;
+  std::cout.flush();
+  errno = 0;
+  const bool flush_failed = std::fflush(stdout) != 0;
+  const int flush_errno = errno;
+  if (!flush_failed && !std::ferror(stdout) && std::cout.good()) return code;
+  const int reason = flush_failed && flush_errno != 0 ? flush_errno : earlier_errno;
+  const char* why = reason != 0 ? std::strerror(reason) : "write error";
+  std::fprintf(stderr, "handdb %s: cannot write to stdout: %s\n", command, why);
+  return code == kExitOk ? kExitError : code;
+}
+
 }  // namespace
 
 int RunVersion(int argc, char** argv) {
@@ -81,13 +99,13 @@ int main(int argc, char** argv) {
   const std::string name = argv[1];
   if (name == "help" || name == "--help" || name == "-h") {
     PrintHelp(stdout);
-    return kExitOk;
+    return CheckStdout("help", kExitOk);
   }
   if (name == "--version") return RunVersion(1, argv + 1);
   for (const auto& c : Commands()) {
     if (name == c.name) {
       try {
-        return c.run(argc - 1, argv + 1);
+        return CheckStdout(c.name, c.run(argc - 1, argv + 1));
       } catch (const std::exception& e) {
         // A broken internal invariant: report it, never crash silently.
         std::fprintf(stderr, "handdb %s: internal error: %s\n", c.name, e.what());

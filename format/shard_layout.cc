@@ -8,6 +8,7 @@
 #include <cerrno>
 #include <sstream>
 
+#include "base/atomic_file.h"
 #include "base/hex.h"
 
 namespace handdb::shard {
@@ -54,7 +55,8 @@ uint64_t StreamingChecksum::Digest() const {
 }
 
 Result<uint64_t> FileChecksum(const std::string& path) {
-  int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (Status s = CheckRegularFile(path); !s.ok()) return s;  // a FIFO would block open() and read()
+  int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
   if (fd < 0) {
     const StatusCode code = errno == ENOENT ? StatusCode::kNotFound : StatusCode::kIoError;
     return Status(code, path + ": cannot open: " + std::strerror(errno));

@@ -4,6 +4,7 @@
 #include <cerrno>
 #include <cstring>
 
+#include "base/json_schema.h"
 #include "base/mapped_file.h"
 #include "format/shard_layout.h"
 
@@ -89,6 +90,14 @@ Result<ShardReader> ShardReader::Init(std::unique_ptr<Impl> impl) {
   const RawSection& meta = layout.sections[layout.metadata];
   impl->metadata = std::string_view(reinterpret_cast<const char*>(b + meta.offset),
                                     static_cast<size_t>(meta.size));
+  // Every reader of the metadata (info, query, convert's keep check) parses and dumps it: refuse
+  // nesting that would overflow their stacks, here once.
+  if (Status s = CheckJsonDepth(
+          impl->metadata,
+          impl->name + ": metadata section at offset " + std::to_string(meta.offset));
+      !s.ok()) {
+    return s;
+  }
   const RawSection& views = layout.sections[layout.views];
   impl->views = b + views.offset;
   impl->view_stride = views.element_size;

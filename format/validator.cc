@@ -12,6 +12,7 @@
 #include <sstream>
 #include <unordered_map>
 
+#include "base/json_schema.h"
 #include "base/mapped_file.h"
 #include "base/progress.h"
 #include "format/manifest.h"
@@ -77,6 +78,10 @@ struct RecordedLimits {
 std::optional<RecordedLimits> ParseMetadata(std::string_view text,
                                             uint64_t offset,
                                             ProblemList* problems) {
+  if (Status s = CheckJsonDepth(text, "metadata section"); !s.ok()) {
+    problems->Add("metadata", StatusCode::kBadJson, offset, s.message());
+    return std::nullopt;
+  }
   nlohmann::json doc;
   try {
     doc = nlohmann::json::parse(text);

@@ -141,6 +141,25 @@ TEST(Validator, BadMetadataJson) {
   fs::remove_all(dir);
 }
 
+// Issue 14 item 2: metadata nested 100,000 deep overflowed the stack of every reader (info dumps
+// it); the reader refuses it at open and validate reports it as one metadata problem.
+TEST(Validator, DeeplyNestedMetadataIsRefused) {
+  ShardWriterOptions options;
+  options.metadata_json = "{\"a\": " + std::string(100000, '[') + std::string(100000, ']') + "}";
+  auto dir = TempDir("deepmeta");
+  ASSERT_TRUE(testing::WriteSyntheticShard(dir / "d.hdb", 2, 0, options).ok());
+  auto report = ValidateShardFile(dir / "d.hdb");
+  EXPECT_EQ(Count(report, StatusCode::kBadJson, "nested deeper than 64 levels"), 1u)
+      << Dump(report);
+  auto reader = ShardReader::Open(dir / "d.hdb");
+  ASSERT_FALSE(reader.ok());
+  EXPECT_EQ(reader.status().code(), StatusCode::kBadJson);
+  EXPECT_NE(reader.status().message().find("d.hdb: metadata section at offset "),
+            std::string::npos)
+      << reader.status().message();
+  fs::remove_all(dir);
+}
+
 TEST(Validator, TruncatedFileIsReportedNotCrashed) {
   auto bytes = Sample("trunc");
   for (size_t len : {size_t{0}, size_t{5}, size_t{100}, bytes.size() / 2, bytes.size() - 1}) {

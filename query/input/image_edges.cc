@@ -8,6 +8,7 @@
 #include <system_error>
 #include <utility>
 
+#include "base/image_file.h"
 #include "edges/edges.h"
 #include "edges/exr_io.h"
 #include "edges/normalise.h"
@@ -344,10 +345,7 @@ Result<QueryEdges> LoadQueryEdges(const std::filesystem::path& image,
   if (!options.Check()) {
     return Status(StatusCode::kInvalidArgument, "invalid image edge options (see the line above)");
   }
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(image, ec)) {
-    return Status(StatusCode::kNotFound, image.string() + ": no such image file");
-  }
+  if (Status s = CheckImageFileComplete(image); !s.ok()) return s;  // issue 14 items 6, 7, 8
   QueryInputKind kind = options.kind;
   if (kind == QueryInputKind::kAuto && Lower(image.extension().string()) == ".exr") {
     kind = QueryInputKind::kLabels;

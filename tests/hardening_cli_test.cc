@@ -1,0 +1,224 @@
+// The `handdb` binary against hostile inputs and outputs (issue 14): stdout on a full disk
+// (/dev/full) is exit 1 with one line, never exit 0 over an empty file (item 1); 100,000 nested
+// brackets in a config or manifest are refused with one line instead of a SIGSEGV (item 2); a FIFO
+// or /dev/zero as a manifest or shard is refused at once instead of blocking or growing memory
+// forever (item 7); a truncated PNG / JPEG, a directory or a symlink loop as the query image is one
+// line (items 6 and 8). Every command runs under `timeout`, so a regression fails instead of
+// hanging.
+#include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <opencv2/imgcodecs.hpp>
+#include <sstream>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "format/manifest.h"
+#include "format/shard_writer.h"
+#include "query/search_testing.h"
+
+namespace handdb {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct CliRun {
+  int code = -1;  // exit code; 124 when `timeout` killed it; -1 when killed by a signal
+  std::string err;
+};
+
+std::string Slurp(const fs::path& path) {
+  std::ifstream in(path);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+// Runs `handdb ARGS > STDOUT` (from the source directory, so configs/ resolves) with a 20 s
+// timeout.
+CliRun Handdb(const std::string& args, const std::string& stdout_to = "/dev/null") {
+  static int n = 0;
+  const fs::path err = fs::temp_directory_path() /
+                       ("handdb-hard-err-" + std::to_string(getpid()) + "-" + std::to_string(n++));
+  const std::string cmd = std::string("cd ") + HANDDB_SOURCE_DIR + " && timeout 20 " +
+                          HANDDB_BINARY + " " + args + " >" + stdout_to + " 2>" + err.string();
+  const int status = std::system(cmd.c_str());
+  CliRun r;
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  r.err = Slurp(err);
+  fs::remove(err);
+  return r;
+}
+
+int Lines(const std::string& s) {
+  int n = 0;
+  for (char c : s) n += c == '\n';
+  return n;
+}
+
+class HardeningCli : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = new fs::path(fs::temp_directory_path() / ("handdb-hard-" + std::to_string(getpid())));
+    fs::create_directories(*dir_ / "db");
+    Manifest manifest;
+    manifest.tool_version = "hardening_cli_test";
+    manifest.rolls = 12;
+    ShardWriter w;
+    ASSERT_TRUE(w.Open(*dir_ / "db" / "shard-00000.hdb", ShardWriterOptions{}).ok());
+    for (uint32_t v = 0; v < 4; ++v) {
+      ASSERT_TRUE(
+          w.AddView(testing::SyntheticViewLabel(v, 4), testing::SyntheticEdgeSet(v, 300)).ok());
+    }
+    auto summary = w.Finish();
+    ASSERT_TRUE(summary.ok());
+    manifest.AddShard(*summary);
+    ASSERT_TRUE(WriteManifest(*dir_ / "db", manifest).ok());
+    // A query image: view 1's points as white pixels.
+    std::ofstream pgm(*dir_ / "q.pgm", std::ios::binary);
+    pgm << "P5\n300 300\n255\n";
+    std::string pixels(300 * 300, '\0');
+    for (const auto& p : testing::SyntheticEdgeSet(1, 300)) {
+      const int x = static_cast<int>(150 + p.x), y = static_cast<int>(150 + p.y);
+      if (x >= 0 && x < 300 && y >= 0 && y < 300) pixels[static_cast<size_t>(y) * 300 + x] = '\xff';
+    }
+    pgm << pixels;
+  }
+  static void TearDownTestSuite() {
+    fs::remove_all(*dir_);
+    delete dir_;
+  }
+  static std::string Db() { return (*dir_ / "db").string(); }
+  // A copy of the database whose manifest.json is replaced by `make_manifest(path)`.
+  template <typename F>
+  static std::string DbWithManifest(const std::string& name, F make_manifest) {
+    const fs::path db = *dir_ / name;
+    fs::create_directories(db);
+    fs::copy_file(*dir_ / "db" / "shard-00000.hdb",
+                  db / "shard-00000.hdb",
+                  fs::copy_options::overwrite_existing);
+    fs::remove(db / "manifest.json");
+    make_manifest(db / "manifest.json");
+    return db.string();
+  }
+  static fs::path* dir_;
+};
+fs::path* HardeningCli::dir_ = nullptr;
+
+// Item 1: each --json command writing into a full disk.
+TEST_F(HardeningCli, StdoutOnFullDiskIsExitOneWithOneLine) {
+  // The same commands succeed with a working stdout, so the failure below is the write's.
+  const std::string q = (*dir_ / "q.pgm").string();
+  const std::string plan = (*dir_ / "plan.json").string();
+  const std::vector<std::pair<std::string, std::string>> runs = {
+      {"info", "info " + Db() + " --json"},
+      {"validate", "validate " + Db() + " --json -q"},
+      {"query", "query " + Db() + " " + q + " --input edges --json"},
+      {"plan", "plan configs/demo.json -o " + plan + " --json"},
+      {"version", "version"},
+  };
+  for (const auto& [name, args] : runs) {
+    SCOPED_TRACE(args);
+    const CliRun ok = Handdb(args);
+    ASSERT_EQ(ok.code, 0) << ok.err;
+    const CliRun full = Handdb(args, "/dev/full");
+    EXPECT_EQ(full.code, 1) << full.err;
+    // The reason is errno's text when one is left (ENOSPC: "No space left on device").
+    EXPECT_EQ(full.err.rfind("handdb " + name + ": cannot write to stdout: ", 0), 0u) << full.err;
+    EXPECT_EQ(Lines(full.err), 1) << full.err;
+  }
+}
+
+// Item 2: 100,000 nested '[' crashed plan / validate / info / query (stack overflow).
+TEST_F(HardeningCli, DeeplyNestedJsonIsRefusedWithOneLine) {
+  const std::string deep = std::string(100000, '[') + std::string(100000, ']');
+  const fs::path config = *dir_ / "deep-config.json";
+  std::ofstream(config) << deep;
+  CliRun r = Handdb("plan " + config.string() + " -o " + (*dir_ / "p.json").string());
+  EXPECT_EQ(r.code, 1) << r.err;
+  EXPECT_EQ(r.err,
+            "handdb plan: " + config.string() + ": JSON nested deeper than 64 levels at byte 64\n");
+
+  const std::string db = DbWithManifest("deep-db", [&](const fs::path& m) {
+    std::ofstream(m) << "{\"a\": \"[[[[\", \"b\": " << deep << "}";
+  });
+  for (const std::string cmd : {"info", "validate", "query"}) {
+    SCOPED_TRACE(cmd);
+    const std::string extra = cmd == "query" ? " " + (*dir_ / "q.pgm").string() : "";
+    r = Handdb(cmd + " " + db + extra + (cmd == "validate" ? " -q" : ""));
+    EXPECT_EQ(r.code, 1) << r.err;
+    EXPECT_NE(r.err.find("manifest.json: JSON nested deeper than 64 levels at byte"),
+              std::string::npos)
+        << r.err;
+    EXPECT_EQ(Lines(r.err), 1) << r.err;
+  }
+}
+
+// Item 7: a FIFO (nobody writing) or /dev/zero as the manifest, a FIFO as a shard.
+TEST_F(HardeningCli, FifosAndDevicesAreRefusedNotOpened) {
+  const std::string fifo_db =
+      DbWithManifest("fifo-db", [](const fs::path& m) { ASSERT_EQ(::mkfifo(m.c_str(), 0644), 0); });
+  const std::string zero_db =
+      DbWithManifest("zero-db", [](const fs::path& m) { fs::create_symlink("/dev/zero", m); });
+  const std::string q = (*dir_ / "q.pgm").string();
+  for (const std::string& db : {fifo_db, zero_db}) {
+    for (const std::string cmd : {"info", "validate", "query"}) {
+      SCOPED_TRACE(cmd + " " + db);
+      const CliRun r = Handdb(cmd + " " + db + (cmd == "query" ? " " + q : "") +
+                              (cmd == "validate" ? " -q" : ""));
+      EXPECT_EQ(r.code, 1) << r.err;
+      EXPECT_NE(r.err.find(db + "/manifest.json: not a regular file"), std::string::npos) << r.err;
+      EXPECT_EQ(Lines(r.err), 1) << r.err;
+    }
+  }
+  const fs::path fifo_shard = *dir_ / "fifo.hdb";
+  ASSERT_EQ(::mkfifo(fifo_shard.c_str(), 0644), 0);
+  for (const std::string cmd : {"info", "validate"}) {
+    SCOPED_TRACE(cmd);
+    const CliRun r = Handdb(cmd + " " + fifo_shard.string() + (cmd == "validate" ? " -q" : ""));
+    EXPECT_EQ(r.code, 1) << r.err;
+    EXPECT_NE(r.err.find(fifo_shard.string() + ": not a regular file"), std::string::npos) << r.err;
+  }
+}
+
+// Item 6: a truncated PNG / JPEG was searched with only a libpng / libjpeg warning. Item 8: a
+// directory or a symlink loop given as the image said "no such image file".
+TEST_F(HardeningCli, TruncatedOrMissingImagesAreRefusedWithOneLine) {
+  const cv::Mat img = cv::imread((*dir_ / "q.pgm").string(), cv::IMREAD_GRAYSCALE);
+  ASSERT_FALSE(img.empty());
+  for (const std::string ext : {"png", "jpg"}) {
+    SCOPED_TRACE(ext);
+    const fs::path whole = *dir_ / ("whole." + ext);
+    ASSERT_TRUE(cv::imwrite(whole.string(), img));
+    EXPECT_EQ(Handdb("query " + Db() + " " + whole.string() + " --input edges").code, 0);
+    const fs::path cut = *dir_ / ("cut." + ext);
+    fs::copy_file(whole, cut, fs::copy_options::overwrite_existing);
+    fs::resize_file(cut, fs::file_size(whole) * 2 / 3);
+    const CliRun r = Handdb("query " + Db() + " " + cut.string() + " --input edges");
+    EXPECT_EQ(r.code, 1) << r.err;
+    EXPECT_EQ(r.err,
+              "handdb query: " + cut.string() + ": truncated " + (ext == "png" ? "PNG" : "JPEG") +
+                  (ext == "png" ? " (no IEND chunk)\n" : " (no end-of-image marker)\n"));
+  }
+  CliRun r = Handdb("query " + Db() + " " + dir_->string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_EQ(r.err, "handdb query: " + dir_->string() + ": is a directory, expected a file\n");
+  const fs::path loop = *dir_ / "loop.png";
+  fs::create_symlink(loop, loop);
+  r = Handdb("query " + Db() + " " + loop.string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_EQ(
+      r.err,
+      "handdb query: " + loop.string() + ": too many levels of symbolic links (a symlink loop?)\n");
+}
+
+}  // namespace
+}  // namespace handdb
