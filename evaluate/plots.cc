@@ -235,4 +235,79 @@ Status WriteExampleSheetPng(const std::filesystem::path& path,
   return WritePng(path, sheet);
 }
 
+Status WriteConfusionMatrixPng(const std::filesystem::path& path,
+                               const std::vector<std::string>& rows,
+                               const std::vector<std::string>& cols,
+                               const std::vector<std::vector<int64_t>>& counts,
+                               const std::string& title,
+                               const std::string& row_axis,
+                               const std::string& col_axis) {
+  THROW_CHECK_EQ(counts.size(), rows.size());
+  constexpr int kCell = 34;
+  constexpr double kLabelScale = 0.45;
+  int baseline = 0;
+  int label_w = 0;  // widest label, for the left margin and the vertical column labels
+  for (const auto* labels : {&rows, &cols}) {
+    for (const std::string& l : *labels) {
+      label_w = std::max(label_w, cv::getTextSize(l, kFont, kLabelScale, 1, &baseline).width);
+    }
+  }
+  const int left = label_w + 40;
+  const int top = 50 + label_w + 12;
+  const int n_rows = static_cast<int>(rows.size());
+  const int n_cols = static_cast<int>(cols.size());
+  const int width = std::max(left + n_cols * kCell + 70, 420);
+  const int height = top + n_rows * kCell + 40;
+  cv::Mat image(height, width, CV_8UC3, kWhite);
+  Text(image, title, {8, 24}, 0.6);
+  Text(image, col_axis + " (columns)", {left, 44}, 0.45, kDarkGrey);
+  // Column labels: drawn horizontally into a strip, rotated to read bottom-up.
+  for (int c = 0; c < n_cols; ++c) {
+    cv::Mat strip(kCell, label_w + 8, CV_8UC3, kWhite);
+    Text(strip, cols[c], {4, kCell / 2 + 5}, kLabelScale);
+    cv::Mat rotated;
+    cv::rotate(strip, rotated, cv::ROTATE_90_COUNTERCLOCKWISE);
+    rotated.copyTo(image(cv::Rect(left + c * kCell, top - rotated.rows - 4, kCell, rotated.rows)));
+  }
+  for (int r = 0; r < n_rows; ++r) {
+    THROW_CHECK_EQ(counts[r].size(), cols.size());
+    int64_t row_total = 0;
+    for (int64_t v : counts[r]) row_total += v;
+    const int y0 = top + r * kCell;
+    const int text_w = cv::getTextSize(rows[r], kFont, kLabelScale, 1, &baseline).width;
+    Text(image, rows[r], {left - 8 - text_w, y0 + kCell / 2 + 5}, kLabelScale);
+    for (int c = 0; c < n_cols; ++c) {
+      const int64_t v = counts[r][c];
+      const double share = row_total > 0 ? static_cast<double>(v) / row_total : 0;
+      const int x0 = left + c * kCell;
+      // White to dark blue with the row share; text turns white on dark cells.
+      const cv::Scalar fill(255 - 105 * share, 255 - 200 * share, 255 - 225 * share);
+      cv::rectangle(image, {x0, y0}, {x0 + kCell, y0 + kCell}, fill, cv::FILLED);
+      cv::rectangle(image, {x0, y0}, {x0 + kCell, y0 + kCell}, kGrey, 1);
+      if (v > 0) {
+        const std::string text = std::to_string(v);
+        const int tw = cv::getTextSize(text, kFont, 0.45, 1, &baseline).width;
+        Text(image,
+             text,
+             {x0 + (kCell - tw) / 2, y0 + kCell / 2 + 5},
+             0.45,
+             share > 0.5 ? kWhite : kBlack);
+      }
+    }
+    for (int c = 0; c < n_cols; ++c) {
+      if (cols[c] == rows[r]) {
+        const int x0 = left + c * kCell;
+        cv::rectangle(image, {x0, y0}, {x0 + kCell, y0 + kCell}, cv::Scalar(40, 160, 40), 2);
+      }
+    }
+    Text(image,
+         std::to_string(row_total),
+         {left + n_cols * kCell + 8, y0 + kCell / 2 + 5},
+         0.4,
+         kDarkGrey);
+  }
+  Text(image, row_axis + " (rows)", {8, height - 14}, 0.45, kDarkGrey);
+  return WritePng(path, image);
+}
+
 }  // namespace handdb

@@ -46,4 +46,15 @@ Status WriteExampleSheetPng(const std::filesystem::path& path,
                             const std::vector<ExampleTile>& tiles,
                             const std::string& title);
 
+// A confusion matrix: counts[r][c] for row labels `rows` (e.g. expected shape) and column labels
+// `cols` (e.g. top-1 shape); cells shaded by their share of the row, diagonal-like cells (same
+// label) outlined in green, column labels written vertically so long names stay readable.
+Status WriteConfusionMatrixPng(const std::filesystem::path& path,
+                               const std::vector<std::string>& rows,
+                               const std::vector<std::string>& cols,
+                               const std::vector<std::vector<int64_t>>& counts,
+                               const std::string& title,
+                               const std::string& row_axis,
+                               const std::string& col_axis);
+
 }  // namespace handdb
