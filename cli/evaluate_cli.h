@@ -75,4 +75,20 @@ class UnitEvaluateCommands {
   EvaluateFlags flags_;
 };
 
+// `handdb evaluate DB --photos DIR` (cli/evaluate_photos_commands.cc, evaluate/photos.h).
+struct PhotoEvaluateRequest {
+  std::string db;
+  std::string dir;  // --photos
+  std::string json_out;
+  std::string out_dir;  // --out: confusion.png, successes.png, failures.png
+  bool skip_unknown = false;
+  bool quiet = false;
+  int threads = -1;
+};
+// --photos, --out and --skip-unknown, added to `handdb evaluate`'s app.
+void AddPhotoEvaluateFlags(CLI::App& app, PhotoEvaluateRequest* request);
+// false (message printed) when a TESTSET, --slurm or a test-set-only flag comes with --photos.
+bool CheckPhotoEvaluateUsage(const CLI::App& app, const std::string& testset, bool slurm);
+int RunEvaluatePhotos(const PhotoEvaluateRequest& request);
+
 }  // namespace handdb::cli

@@ -309,7 +309,9 @@ int RunEvaluate(int argc, char** argv) {
       "and queries per second. A match is correct when its joint vector is within d of the truth, "
       "its view direction within 30 deg and its roll within 30 deg (docs/evaluation.md). With "
       "--slurm the test views are split over a Slurm job array and the parts merged into the same "
-      "report (docs/cluster.md).",
+      "report (docs/cluster.md). With --photos DIR instead of TESTSET: shape accuracy on real "
+      "photos in DIR/<shape name>/*.jpg|png (top-1/5/10 against a chance baseline, per-shape "
+      "table, confusion matrix, contact sheets).",
       "handdb evaluate");
   // Bound to the request of a Slurm run; a local run reads the same fields.
   EvaluateSlurmRequest request;
@@ -321,8 +323,9 @@ int RunEvaluate(int argc, char** argv) {
   const bool& quiet = request.quiet;
   SlurmFlags slurm;
   app.add_option("db", request.db, "database directory (manifest.json + shards)")->required();
-  app.add_option("testset", request.testset, "test-set directory (or its testset.json)")
-      ->required();
+  app.add_option("testset", request.testset, "test-set directory (or its testset.json)");
+  PhotoEvaluateRequest photos;
+  AddPhotoEvaluateFlags(app, &photos);
   app.add_option(
       "--json", request.json_out, "write the full report (schemas/evaluation.schema.json)");
   app.add_option(
@@ -341,6 +344,18 @@ int RunEvaluate(int argc, char** argv) {
                  "TESTSET/slurm-evaluations/<fingerprint>)")
       ->group(group);
   if (int rc = ParseArgs(app, argc, argv); rc >= 0) return rc;
+  if (!photos.dir.empty()) {
+    photos.db = request.db;
+    photos.json_out = request.json_out;
+    photos.quiet = request.quiet;
+    photos.threads = flags.options.num_threads;
+    if (!CheckPhotoEvaluateUsage(app, request.testset, slurm.enabled)) return kExitUsage;
+    return RunEvaluatePhotos(photos);
+  }
+  if (testset_path.empty()) {
+    std::fprintf(stderr, "handdb evaluate: give a TESTSET or --photos DIR (see --help)\n");
+    return kExitUsage;
+  }
   if (!flags.Finish("evaluate", quiet)) return kExitUsage;
   if (!slurm.enabled && (request.tasks != 0 || !request.work.empty())) {
     std::fprintf(stderr, "handdb evaluate: --tasks and --work need --slurm\n");
