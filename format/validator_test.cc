@@ -154,8 +154,7 @@ TEST(Validator, DeeplyNestedMetadataIsRefused) {
   auto reader = ShardReader::Open(dir / "d.hdb");
   ASSERT_FALSE(reader.ok());
   EXPECT_EQ(reader.status().code(), StatusCode::kBadJson);
-  EXPECT_NE(reader.status().message().find("d.hdb: metadata section at offset "),
-            std::string::npos)
+  EXPECT_NE(reader.status().message().find("d.hdb: metadata section at offset "), std::string::npos)
       << reader.status().message();
   fs::remove_all(dir);
 }
