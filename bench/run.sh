@@ -18,6 +18,8 @@
 #   testset   handdb testset configs/testset-paper.json (plain photos) and --clutter
 #   evaluate  handdb evaluate: clean labels, plain photos, cluttered photos (Table 1,
 #             success@(d,n) with the chance baseline, keypoint error, queries/s)
+#   photos    handdb evaluate --photos: the real-photo development set (../shared/photos/asl-digits)
+#             against the paper database: top-1/5/10 shape accuracy, chance, confusion matrix
 #   report    bench/report.py -> bench/results.json, docs/results.md
 # Databases and test sets are kept in $HANDDB_BENCH_DIR (default /tmp/handdb-bench) and reused by
 # a rerun (generate and testset resume); the benchmarks themselves always run again.
@@ -30,7 +32,7 @@ cd "$here"
 work="${HANDDB_BENCH_DIR:-/tmp/handdb-bench}"
 build="${HANDDB_BENCH_BUILD:-$here/build-bench}"
 jobs="${HANDDB_BENCH_JOBS:-$(nproc)}"
-steps="${HANDDB_BENCH_STEPS:-build format render generate convert query testset evaluate report}"
+steps="${HANDDB_BENCH_STEPS:-build format render generate convert query testset evaluate photos report}"
 if [ "${HANDDB_BENCH_PCA_LARGE:-0}" = 1 ] && [ -z "${HANDDB_BENCH_STEPS:-}" ]; then
   steps="$steps pca_large_generate pca_large_query pca_large_evaluate"
 fi
@@ -110,6 +112,12 @@ if want evaluate; then
   evaluate paper_clean "$work/db-paper" "$work/ts-paper" clean
   evaluate paper_photo "$work/db-paper" "$work/ts-paper" photo
   evaluate paper_clutter "$work/db-paper" "$work/ts-paper-clutter" photo
+fi
+
+if want photos; then
+  photos="${HANDDB_BENCH_PHOTOS:-$here/../shared/photos/asl-digits}"
+  run eval_photos "$handdb" evaluate "$work/db-paper" --photos "$photos" --threads "$jobs" \
+    --json "$out/eval_photos.json" --out "$work/plots/photos"
 fi
 
 if want pca_large_generate; then
