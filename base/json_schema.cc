@@ -630,6 +630,13 @@ Result<nlohmann::json> ParseJsonText(std::string_view text, const std::string& w
   nlohmann::json doc;
   try {
     doc = nlohmann::json::parse(text);
+  } catch (const nlohmann::json::out_of_range& e) {
+    // A number too large for a double ("1e999") is a range error, not a parse error.
+    std::string problem = e.what();
+    if (auto bracket = problem.find("] "); bracket != std::string::npos) {
+      problem = problem.substr(bracket + 2);
+    }
+    return Status(StatusCode::kBadJson, what + ": " + problem);
   } catch (const nlohmann::json::parse_error& e) {
     // e.byte is 1-based and points just past the offending character.
     const size_t offset = e.byte > 0 ? e.byte - 1 : 0;

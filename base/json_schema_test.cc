@@ -165,6 +165,15 @@ TEST(JsonSchema, ReadJsonFileReportsLineAndColumn) {
   EXPECT_EQ(missing.status().code(), StatusCode::kNotFound);
 }
 
+// Found by the manifest fuzzer: nlohmann reports a number beyond a double's range as out_of_range,
+// not parse_error; it escaped ParseJsonText and terminated the process.
+TEST(JsonSchema, NumberOverflowIsBadJsonNotACrash) {
+  auto r = ParseJsonText("{\"views\": 81335e719}", "m.json");
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), StatusCode::kBadJson);
+  EXPECT_EQ(r.status().message(), "m.json: number overflow parsing '81335e719'");
+}
+
 // Issue 14 item 2: 100,000 nested '[' overflowed the stack; refused before parsing, with the byte.
 TEST(JsonSchema, DepthIsBoundedBeforeParsing) {
   EXPECT_TRUE(CheckJsonDepth(std::string(64, '[') + std::string(64, ']'), "x").ok());

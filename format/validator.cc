@@ -91,6 +91,12 @@ std::optional<RecordedLimits> ParseMetadata(std::string_view text,
                   offset + std::min<uint64_t>(e.byte, text.size()),
                   std::string("metadata section is not valid JSON: ") + e.what());
     return std::nullopt;
+  } catch (const nlohmann::json::out_of_range& e) {  // a number beyond a double's range
+    problems->Add("metadata",
+                  StatusCode::kBadJson,
+                  offset,
+                  std::string("metadata section is not valid JSON: ") + e.what());
+    return std::nullopt;
   }
   if (!doc.is_object()) {
     problems->Add("metadata",
