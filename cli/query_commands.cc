@@ -178,6 +178,11 @@ void QueryFlags::Add(CLI::App& app) {
   app.add_option(
          "--dt-cell", search.dt_cell_px, "distance-transform grid step in px (1, 0.5, 0.25, ...)")
       ->capture_default_str();
+  app.add_flag_callback(
+      "--no-coarse-bound",
+      [this] { search.coarse_bound = false; },
+      "prune with the view -> query bound alone, without the coarse query -> view bound (for "
+      "comparison: the results are identical)");
   app.add_option("--input",
                  input,
                  "kind of IMAGE (auto: .exr -> labels, binary image -> edges, else photo)")
@@ -302,7 +307,8 @@ json ResultJson(const QueryFlags& flags,
             {"brute_force", search.brute_force},
             {"hand", flags.hand},
             {"kdtree", flags.kdtree},
-            {"dt_cell_px", search.dt_cell_px}}},
+            {"dt_cell_px", search.dt_cell_px},
+            {"coarse_bound", search.coarse_bound}}},
           {"stats",
            {{"virtual_views", stats.virtual_views},
             {"canonical_views", db.num_views()},

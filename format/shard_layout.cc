@@ -165,6 +165,8 @@ std::string SectionName(uint32_t type) {
       return "views";
     case kSectionPoints:
       return "points";
+    case kSectionCoarseFields:
+      return "coarse_fields";
     default:
       return "unknown(" + HexPrefixed(type) + ")";
   }
@@ -499,6 +501,10 @@ void CheckSectionType(LayoutScan& c,
       slot = &layout.points;
       want_element = kPointSize;
       break;
+    case kSectionCoarseFields:
+      slot = &layout.coarse_fields;
+      want_element = kCoarseFieldSize;
+      break;
     default:
       if ((s.flags & kSectionFlagRequired) != 0) {
         c.problems->Add("features",
@@ -607,6 +613,14 @@ void CheckHeaderCounts(LayoutScan& c) {
                     "header num_views is " + std::to_string(h.num_views) +
                         " but the views section holds " +
                         std::to_string(layout.sections[layout.views].count));
+  }
+  if (layout.coarse_fields >= 0 && layout.sections[layout.coarse_fields].count != h.num_views) {
+    c.problems->Add("counts",
+                    StatusCode::kSizeMismatch,
+                    kOffNumViews,
+                    "header num_views is " + std::to_string(h.num_views) +
+                        " but the coarse_fields section holds " +
+                        std::to_string(layout.sections[layout.coarse_fields].count) + " fields");
   }
   if (layout.points >= 0 && layout.sections[layout.points].count != h.num_points) {
     c.problems->Add("counts",

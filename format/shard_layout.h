@@ -26,7 +26,7 @@ static_assert(std::endian::native == std::endian::little,
 // `type` on DOS (after PNG).
 constexpr std::array<uint8_t, 8> kMagic = {0x89, 'H', 'D', 'B', '\r', '\n', 0x1a, '\n'};
 constexpr uint16_t kVersionMajor = 1;
-constexpr uint16_t kVersionMinor = 0;
+constexpr uint16_t kVersionMinor = 1;  // 1.1: the optional coarse-fields section
 
 constexpr uint64_t kAlignment = 64;
 constexpr uint32_t kHeaderSize = 128;       // v1.0 header; newer minors may grow it
@@ -59,6 +59,10 @@ constexpr uint64_t kKnownRequiredFeatures = 0;
 constexpr uint32_t kSectionMetadata = 1;  // UTF-8 JSON object, element_size 1
 constexpr uint32_t kSectionViews = 2;     // fixed-stride view records, element_size kViewRecordSize
 constexpr uint32_t kSectionPoints = 3;    // PointQ array, element_size 4
+// v1.1, optional: one coarse distance field per view (format/coarse_field.h), in view order;
+// element_size kCoarseFieldSize, count = num_views. Readers that do not know it skip it.
+constexpr uint32_t kSectionCoarseFields = 4;
+constexpr uint32_t kCoarseFieldSize = 1849;  // CoarseGrid::kCells
 // Section flags.
 constexpr uint32_t kSectionFlagRequired = 1u
                                           << 0;  // a reader that does not know the type must refuse
@@ -216,6 +220,7 @@ struct Layout {
   int metadata = -1;                 // indices into sections
   int views = -1;
   int points = -1;
+  int coarse_fields = -1;  // optional (v1.1)
   uint32_t view_stride = kViewRecordSize;
   bool structure_ok = false;  // header, table, section bounds and footer are usable
   bool views_ok = false;      // every view's point range lies inside the points section

@@ -121,6 +121,21 @@ const std::string& ShardReader::name() const { return impl_->name; }
 size_t ShardReader::num_views() const { return impl_->num_views; }
 std::span<const uint8_t> ShardReader::bytes() const { return impl_->bytes; }
 
+std::span<const uint8_t> ShardReader::coarse_fields() const {
+  const Layout& l = impl_->layout;
+  if (l.coarse_fields < 0) return {};
+  const RawSection& s = l.sections[static_cast<size_t>(l.coarse_fields)];
+  return impl_->bytes.subspan(s.offset, s.size);
+}
+
+bool ShardReader::has_coarse_fields() const { return impl_->layout.coarse_fields >= 0; }
+
+const uint8_t* ShardReader::coarse_field(size_t i) const {
+  THROW_CHECK_LT(i, impl_->num_views);
+  const std::span<const uint8_t> all = coarse_fields();
+  return all.empty() ? nullptr : all.data() + i * kCoarseFieldSize;
+}
+
 void ShardReader::ReleaseViewTablePages() const {
   const Impl& r = *impl_;
   const RawSection& vs = r.layout.sections[r.layout.views];

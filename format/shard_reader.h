@@ -82,6 +82,13 @@ class ShardReader {
   // Stops at fn's first error.
   Status ScanViews(const ViewCallback& fn, const ScanOptions& options = {}) const;
 
+  // The v1.1 coarse-fields section (format/coarse_field.h): num_views() fields of
+  // shard::kCoarseFieldSize bytes in view order, zero-copy; empty for a shard without one.
+  std::span<const uint8_t> coarse_fields() const;
+  bool has_coarse_fields() const;
+  // View i's field, or nullptr without the section. Bounds-checked (THROW_CHECK).
+  const uint8_t* coarse_field(size_t i) const;
+
   // The whole file (the mapping or the caller's memory).
   std::span<const uint8_t> bytes() const;
 

@@ -9,6 +9,7 @@
 
 #include "base/atomic_file.h"
 #include "base/testing.h"
+#include "format/coarse_field.h"
 #include "format/shard_layout.h"
 #include "format/shard_testing.h"
 #include "format/shard_writer.h"
@@ -105,17 +106,19 @@ TEST(ShardWriter, SectionsAreAlignedAndInFileOrder) {
   auto bytes = SampleShard("aligned");
   auto reader = ShardReader::FromMemory(bytes, "sample.hdb");
   ASSERT_TRUE(reader.ok()) << reader.status().ToString();
-  ASSERT_EQ(reader->sections().size(), 3u);
+  ASSERT_EQ(reader->sections().size(), 4u);
   uint64_t prev = 0;
   std::set<std::string> names;
   for (const auto& s : reader->sections()) {
     EXPECT_EQ(s.offset % 64, 0u) << s.name;
     EXPECT_GE(s.offset, prev);
-    EXPECT_EQ(s.flags & shard::kSectionFlagRequired, shard::kSectionFlagRequired);
+    // The coarse fields are optional (a v1.0 reader skips them); the rest are required.
+    EXPECT_EQ(s.flags & shard::kSectionFlagRequired,
+              s.name == "coarse_fields" ? 0u : shard::kSectionFlagRequired);
     prev = s.offset + s.size;
     names.insert(s.name);
   }
-  EXPECT_EQ(names, (std::set<std::string>{"metadata", "views", "points"}));
+  EXPECT_EQ(names, (std::set<std::string>{"metadata", "views", "points", "coarse_fields"}));
   EXPECT_EQ(reinterpret_cast<uintptr_t>(reader->all_points().data()) % 64,
             reinterpret_cast<uintptr_t>(bytes.data()) % 64);
 }
@@ -256,7 +259,9 @@ TEST(ShardReader, RejectsNewerMajorVersion) {
   auto r = ShardReader::FromMemory(bytes, "sample.hdb");
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.status().code(), StatusCode::kUnsupportedVersion);
-  EXPECT_NE(r.status().message().find("version 2.0"), std::string::npos);
+  EXPECT_NE(r.status().message().find("version 2." + std::to_string(shard::kVersionMinor)),
+            std::string::npos)
+      << r.status().message();
   const uint16_t zero = 0;
   PatchHeader(&bytes, shard::kOffVersionMajor, &zero, 2);
   EXPECT_EQ(ShardReader::FromMemory(bytes, "s").status().code(), StatusCode::kUnsupportedVersion);
@@ -297,14 +302,57 @@ TEST(ShardReader, SkipsUnknownOptionalSection) {
   auto bytes = SampleShard("optsection", options);
   auto r = ShardReader::FromMemory(bytes, "sample.hdb");
   ASSERT_TRUE(r.ok()) << r.status().ToString();
-  ASSERT_EQ(r->sections().size(), 4u);
-  EXPECT_EQ(r->sections()[3].name, "unknown(0x7777)");
+  ASSERT_EQ(r->sections().size(), 5u);
+  EXPECT_EQ(r->sections()[4].name, "unknown(0x7777)");
   EXPECT_TRUE(r->VerifyChecksums().ok());
   EXPECT_EQ(r->num_views(), 5u);
   ExpectSameLabel(r->label(4), testing::SyntheticLabel(4));
   // Its bytes are still checksummed.
-  bytes[r->sections()[3].offset + 2] ^= 1;
+  bytes[r->sections()[4].offset + 2] ^= 1;
   EXPECT_EQ(OpenAndVerify(bytes).code(), StatusCode::kChecksumMismatch);
+}
+
+// v1.1: one coarse field per view, equal to the one computed from its points; a shard written
+// without (or a v1.0 shard) has none and still opens; a count that disagrees is refused.
+TEST(ShardReader, CoarseFieldsSection) {
+  auto bytes = SampleShard("coarse");
+  auto r = ShardReader::FromMemory(bytes, "sample.hdb");
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(r->header().version_minor, 1);
+  ASSERT_TRUE(r->has_coarse_fields());
+  EXPECT_EQ(r->coarse_fields().size(), 5u * shard::kCoarseFieldSize);
+  for (size_t i = 0; i < r->num_views(); ++i) {
+    std::vector<uint8_t> want(shard::kCoarseFieldSize);
+    ComputeCoarseField(r->points(i), want.data());
+    EXPECT_EQ(std::vector<uint8_t>(r->coarse_field(i), r->coarse_field(i) + want.size()), want)
+        << "view " << i;
+  }
+
+  ShardWriterOptions without;
+  without.coarse_fields = false;
+  auto plain = SampleShard("nocoarse", without);
+  auto p = ShardReader::FromMemory(plain, "plain.hdb");
+  ASSERT_TRUE(p.ok()) << p.status().ToString();
+  EXPECT_FALSE(p->has_coarse_fields());
+  EXPECT_EQ(p->coarse_field(0), nullptr);
+  EXPECT_EQ(p->sections().size(), 3u);
+
+  // The section's count says 4 fields for 5 views (size and table checksum made consistent).
+  for (const auto& s : r->sections()) {
+    if (s.name != "coarse_fields") continue;
+    const size_t table = shard::kHeaderSize;
+    for (size_t e = 0; e < r->sections().size(); ++e) {
+      const size_t at = table + e * shard::kSectionEntrySize;
+      if (shard::Load<uint32_t>(bytes.data() + at) != shard::kSectionCoarseFields) continue;
+      shard::Store<uint64_t>(bytes.data() + at + shard::kSecOffCount, 4);
+      shard::Store<uint64_t>(bytes.data() + at + shard::kSecOffSize, 4 * shard::kCoarseFieldSize);
+    }
+  }
+  ASSERT_TRUE(shard::RewriteChecksums(bytes));
+  auto bad = ShardReader::FromMemory(bytes, "bad.hdb");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("coarse_fields"), std::string::npos)
+      << bad.status().message();
 }
 
 TEST(ShardReader, RefusesUnknownRequiredSection) {
@@ -383,7 +431,7 @@ void ExpectFlipDetected(std::vector<uint8_t>* bytes, size_t bit, std::set<Status
 }
 
 TEST(ShardReader, EverySingleBitFlipIsDetected) {
-  auto bytes = SampleShard("everybit", {"{}", {}});
+  auto bytes = SampleShard("everybit", {"{}", {}, true});
   std::set<StatusCode> codes;
   for (size_t bit = 0; bit < bytes.size() * 8; ++bit) {
     ExpectFlipDetected(&bytes, bit, &codes);

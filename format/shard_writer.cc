@@ -4,6 +4,7 @@
 #include <vector>
 
 #include "base/atomic_file.h"
+#include "format/coarse_field.h"
 #include "format/shard_layout.h"
 
 namespace handdb {
@@ -36,7 +37,8 @@ bool AllFinite(const ViewLabel& l) {
 bool ShardWriterOptions::Check() const {
   CHECK_OPTION(!metadata_json.empty());
   for (const auto& s : extra_sections) {
-    CHECK_OPTION(s.type != kSectionMetadata && s.type != kSectionViews && s.type != kSectionPoints);
+    CHECK_OPTION(s.type != kSectionMetadata && s.type != kSectionViews &&
+                 s.type != kSectionPoints && s.type != kSectionCoarseFields);
     CHECK_OPTION(s.type != 0);
     CHECK_OPTION((s.flags & ~kKnownSectionFlags) == 0);
   }
@@ -48,6 +50,7 @@ struct ShardWriter::Impl {
   ShardWriterOptions options;
   std::vector<uint8_t> buffer;      // pending bytes not yet handed to the file
   std::vector<uint8_t> view_table;  // kViewRecordSize per view, written at Finish()
+  std::vector<uint8_t> coarse;      // kCoarseFieldSize per view, written at Finish()
   StreamingChecksum points_hash;
   uint64_t num_points = 0;
   uint64_t points_offset = 0;
@@ -90,7 +93,7 @@ Status ShardWriter::Open(const std::filesystem::path& path, const ShardWriterOpt
   HANDDB_RETURN_IF_ERROR(w.file.Open(path));
   w.open = true;
   // Header and section table are placeholders, patched by Finish() once sizes are known.
-  w.num_sections = 3 + options.extra_sections.size();
+  w.num_sections = 3 + (options.coarse_fields ? 1 : 0) + options.extra_sections.size();
   std::vector<uint8_t> head(kHeaderSize + w.num_sections * kSectionEntrySize, 0);
   HANDDB_RETURN_IF_ERROR(w.Append(head.data(), head.size()));
   HANDDB_RETURN_IF_ERROR(w.PadTo64());
@@ -131,6 +134,11 @@ Status ShardWriter::AddView(const ViewLabel& label, std::span<const PointQ> poin
   w.view_table.resize(at + kViewRecordSize);
   EncodeViewRecord(label, w.num_points, static_cast<uint32_t>(points.size()), &w.view_table[at]);
   w.num_points += points.size();
+  if (w.options.coarse_fields) {
+    const size_t c = w.coarse.size();
+    w.coarse.resize(c + kCoarseFieldSize);
+    ComputeCoarseField(points, &w.coarse[c]);
+  }
   return Status::Ok();
 }
 
@@ -168,6 +176,19 @@ Result<ShardSummary> ShardWriter::Finish() {
                       Checksum(w.view_table.data(), w.view_table.size())});
   HANDDB_RETURN_IF_ERROR(w.Append(w.view_table.data(), w.view_table.size()));
   std::vector<uint8_t>().swap(w.view_table);
+  if (w.options.coarse_fields) {
+    HANDDB_RETURN_IF_ERROR(w.PadTo64());
+    sections.push_back({kSectionCoarseFields,
+                        0,
+                        w.Position(),
+                        w.coarse.size(),
+                        num_views,
+                        kCoarseFieldSize,
+                        0,
+                        Checksum(w.coarse.data(), w.coarse.size())});
+    HANDDB_RETURN_IF_ERROR(w.Append(w.coarse.data(), w.coarse.size()));
+    std::vector<uint8_t>().swap(w.coarse);
+  }
   for (const auto& extra : w.options.extra_sections) {
     HANDDB_RETURN_IF_ERROR(w.PadTo64());
     sections.push_back({extra.type,

@@ -15,8 +15,8 @@
 
 namespace handdb {
 
-// A section beyond the three v1 ones (element_size 1), written after the view table. Used by
-// later minor versions and by the forward-compatibility tests; the type must not be 1, 2 or 3.
+// A section this writer does not know (element_size 1), written after the view table and the
+// coarse fields. Used by the forward-compatibility tests; the type must not be 1, 2, 3 or 4.
 struct ShardExtraSection {
   uint32_t type = 0;
   uint32_t flags = 0;  // shard::kSectionFlagRequired or 0
@@ -26,6 +26,10 @@ struct ShardExtraSection {
 struct ShardWriterOptions {
   std::string metadata_json = "{}";  // generation config, hand-model hash, versions, label names
   std::vector<ShardExtraSection> extra_sections;
+  // Write the v1.1 coarse-fields section (format/coarse_field.h, 1,849 bytes per view), which the
+  // search's query -> view bound reads instead of computing it on open. Off: a v1.1 shard with
+  // the three v1.0 sections only (tests of the fallback).
+  bool coarse_fields = true;
   bool Check() const;
 };
 

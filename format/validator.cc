@@ -11,10 +11,12 @@
 #include <set>
 #include <sstream>
 #include <unordered_map>
+#include <vector>
 
 #include "base/json_schema.h"
 #include "base/mapped_file.h"
 #include "base/progress.h"
+#include "format/coarse_field.h"
 #include "format/manifest.h"
 #include "format/shard_layout.h"
 
@@ -266,6 +268,34 @@ void CheckPoints(const uint8_t* b,
   }
 }
 
+// The stored coarse field of view i equals the one computed from its points (the search prunes
+// with it, so a wrong byte could drop a true match: a checksum recomputed over corrupt bytes must
+// not hide that).
+void CheckCoarseField(const uint8_t* b,
+                      uint64_t points_at,
+                      uint32_t count,
+                      const Layout& layout,
+                      uint64_t i,
+                      ProblemList* problems) {
+  std::vector<PointQ> points(count);
+  if (count > 0) std::memcpy(points.data(), b + points_at, count * sizeof(PointQ));
+  uint8_t want[kCoarseFieldSize];
+  ComputeCoarseField(points, want);
+  const uint64_t at =
+      layout.sections[static_cast<size_t>(layout.coarse_fields)].offset + i * kCoarseFieldSize;
+  for (uint32_t c = 0; c < kCoarseFieldSize; ++c) {
+    if (b[at + c] != want[c]) {
+      problems->Add("coarse-field",
+                    StatusCode::kOutOfRange,
+                    at + c,
+                    "view " + std::to_string(i) + ": coarse field cell " + std::to_string(c) +
+                        " is " + std::to_string(b[at + c]) + ", its points give " +
+                        std::to_string(want[c]) + " (1/2 px)");
+      return;
+    }
+  }
+}
+
 ValidationReport ToReport(const ProblemList& problems) {
   ValidationReport report;
   for (const auto& p : problems.problems()) {
@@ -320,6 +350,9 @@ ValidationReport ValidateBytes(std::span<const uint8_t> bytes,
         const uint64_t off = Load<uint64_t>(b + at + kViewOffPointOffset);
         const uint32_t cnt = Load<uint32_t>(b + at + kViewOffPointCount);
         CheckPoints(b, ps.offset, off, cnt, "view " + std::to_string(i) + ": ", &problems);
+        if (layout.coarse_fields >= 0) {
+          CheckCoarseField(b, ps.offset + off * kPointSize, cnt, layout, i, &problems);
+        }
       }
     }
     if (!layout.views_ok) CheckPoints(b, ps.offset, 0, ps.count, "", &problems);

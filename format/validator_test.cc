@@ -20,9 +20,11 @@ using testing::WriteBytes;
 
 namespace fs = std::filesystem;
 
-std::vector<uint8_t> Sample(const std::string& name, uint32_t views = 6) {
+std::vector<uint8_t> Sample(const std::string& name, uint32_t views = 6, bool coarse = true) {
   auto dir = TempDir(name);
-  THROW_CHECK(testing::WriteSyntheticShard(dir / "s.hdb", views).ok());
+  ShardWriterOptions options;
+  options.coarse_fields = coarse;
+  THROW_CHECK(testing::WriteSyntheticShard(dir / "s.hdb", views, 0, options).ok());
   auto bytes = ReadBytes(dir / "s.hdb");
   fs::remove_all(dir);
   return bytes;
@@ -80,11 +82,16 @@ TEST(Validator, ReportsEveryProblemWithOffsetAndRawValues) {
   ASSERT_TRUE(shard::RewriteChecksums(bytes));
   // The reader opens it (the structure is fine) ...
   ASSERT_TRUE(ShardReader::FromMemory(bytes, "s").ok());
-  // ... the validator finds all five problems.
+  // ... the validator finds all five problems, and that the moved points no longer match the
+  // coarse fields stored for views 0 and 1.
   auto report = ValidateShardBytes(bytes, "bad.hdb");
   EXPECT_FALSE(report.ok());
-  EXPECT_EQ(report.problems.size(), 5u) << Dump(report);
-  EXPECT_EQ(Count(report, StatusCode::kOutOfRange), 5u) << Dump(report);
+  EXPECT_EQ(report.problems.size(), 7u) << Dump(report);
+  EXPECT_EQ(Count(report, StatusCode::kOutOfRange), 7u) << Dump(report);
+  EXPECT_EQ(Count(report, StatusCode::kOutOfRange, "view 0: coarse field cell"), 1u)
+      << Dump(report);
+  EXPECT_EQ(Count(report, StatusCode::kOutOfRange, "view 1: coarse field cell"), 1u)
+      << Dump(report);
   EXPECT_EQ(Count(report,
                   StatusCode::kOutOfRange,
                   "bad.hdb: offset " + std::to_string(joint_at) +
@@ -96,6 +103,23 @@ TEST(Validator, ReportsEveryProblemWithOffsetAndRawValues) {
   EXPECT_EQ(Count(report, StatusCode::kOutOfRange, "view 3: view_direction"), 1u) << Dump(report);
   EXPECT_EQ(Count(report, StatusCode::kOutOfRange, "view 0: point 0 (7000, "), 1u) << Dump(report);
   EXPECT_EQ(Count(report, StatusCode::kOutOfRange, "view 1: point 7 ("), 1u) << Dump(report);
+}
+
+// The coarse fields prune the search, so a wrong byte could hide a true match: the validator
+// recomputes each view's field from its points, also when the checksums were recomputed.
+TEST(Validator, CoarseFieldThatDisagreesWithItsPointsIsReported) {
+  auto bytes = Sample("coarse");
+  const uint64_t fields = SectionOffset(bytes, "coarse_fields");
+  const uint64_t at = fields + 2 * shard::kCoarseFieldSize + 100;
+  bytes[at] = static_cast<uint8_t>(bytes[at] + 1);
+  ASSERT_TRUE(shard::RewriteChecksums(bytes));
+  auto report = ValidateShardBytes(bytes, "c.hdb");
+  EXPECT_EQ(report.problems.size(), 1u) << Dump(report);
+  EXPECT_EQ(Count(report,
+                  StatusCode::kOutOfRange,
+                  "c.hdb: offset " + std::to_string(at) + ": view 2: coarse field cell 100 is"),
+            1u)
+      << Dump(report);
 }
 
 TEST(Validator, ReportsChecksumAndStructureProblemsTogether) {
@@ -110,7 +134,7 @@ TEST(Validator, ReportsChecksumAndStructureProblemsTogether) {
 }
 
 TEST(Validator, CapsListedProblemsButCountsAll) {
-  auto bytes = Sample("cap", 30);
+  auto bytes = Sample("cap", 30, /*coarse=*/false);  // one problem per point, none per field
   const uint64_t points = SectionOffset(bytes, "points");
   auto reader = ShardReader::FromMemory(bytes, "s");
   ASSERT_TRUE(reader.ok());
@@ -189,7 +213,7 @@ fs::path MakeDatabase(const std::string& name) {
     char file[32];
     std::snprintf(file, sizeof(file), "shard-%05u.hdb", u);
     ShardWriter w;
-    THROW_CHECK(w.Open(dir / file, {testing::SyntheticMetadata(), {}}).ok());
+    THROW_CHECK(w.Open(dir / file, {testing::SyntheticMetadata(), {}, true}).ok());
     for (uint32_t i = 0; i < 4; ++i) {
       const uint32_t id = u * 4 + i;
       THROW_CHECK(w.AddView(testing::SyntheticLabel(id), testing::SyntheticPoints(id, 9)).ok());
@@ -225,8 +249,10 @@ TEST(Validator, ManifestAndShardsMustAgree) {
   EXPECT_EQ(Count(report, StatusCode::kNotFound, "shard-00001.hdb: listed in"), 1u) << Dump(report);
   EXPECT_EQ(Count(report, StatusCode::kChecksumMismatch, "whole-file xxh3"), 1u) << Dump(report);
   EXPECT_EQ(Count(report, StatusCode::kChecksumMismatch, "'points'"), 1u) << Dump(report);
+  // The flipped bit moved view 0's first point away from what its coarse field was made from.
+  EXPECT_EQ(Count(report, StatusCode::kOutOfRange, "view 0: coarse field"), 1u) << Dump(report);
   // shard-00009 is a copy of shard-00000 but unlisted, so it is not read: no duplicate ids.
-  EXPECT_EQ(report.problems.size(), 4u) << Dump(report);
+  EXPECT_EQ(report.problems.size(), 5u) << Dump(report);
   fs::remove_all(dir);
 }
 

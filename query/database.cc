@@ -95,9 +95,11 @@ Result<Database> Database::Open(const std::filesystem::path& dir, bool verify_ch
     auto owned = std::make_unique<ShardReader>(std::move(reader).value());
     if (db.shape_names_.empty()) db.shape_names_ = ShapeNamesFromMetadata(owned->metadata_json());
     for (size_t i = 0; i < owned->num_views(); ++i) {
-      db.views_.push_back({shard_index, static_cast<uint32_t>(i), owned->points(i)});
+      db.views_.push_back(
+          {shard_index, static_cast<uint32_t>(i), owned->points(i), owned->coarse_field(i)});
       db.num_points_ += db.views_.back().points.size();
     }
+    if (!owned->has_coarse_fields()) ++db.shards_without_coarse_fields_;
     // The point spans are copied out; labels are read again only for the top-k of a search.
     owned->ReleaseViewTablePages();
     db.size_bytes_ += header.file_size;
@@ -112,6 +114,11 @@ Result<Database> Database::Open(const std::filesystem::path& dir, bool verify_ch
 std::span<const PointQ> Database::points(view_id_t v) const {
   THROW_CHECK_LT(v, views_.size());
   return views_[v].points;
+}
+
+const uint8_t* Database::coarse_field(view_id_t v) const {
+  THROW_CHECK_LT(v, views_.size());
+  return views_[v].coarse_field;
 }
 
 ViewLabel Database::label(view_id_t v) const {

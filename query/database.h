@@ -47,6 +47,12 @@ class Database {
   // Canonical (roll 0) points of view v, zero-copy.
   std::span<const PointQ> points(view_id_t v) const;
   ViewLabel label(view_id_t v) const;
+  // View v's coarse field (format/coarse_field.h) from its shard's v1.1 section, zero-copy, or
+  // nullptr when that shard has none (v1.0 shards, FromMemory databases).
+  const uint8_t* coarse_field(view_id_t v) const;
+  // True when every view has one (then the search reads them instead of computing them).
+  bool has_coarse_fields() const { return !shards_.empty() && shards_without_coarse_fields_ == 0; }
+  size_t shards_without_coarse_fields() const { return shards_without_coarse_fields_; }
   // Name of a shape id from the metadata's shape table, "" if unknown.
   std::string_view shape_name(shape_id_t id) const;
   // Bytes of the database on disk (sum of shard sizes) or in memory (points + labels).
@@ -58,7 +64,9 @@ class Database {
     uint32_t shard = 0;
     uint32_t index = 0;  // inside the shard
     std::span<const PointQ> points;
+    const uint8_t* coarse_field = nullptr;  // in the shard's mapping, if it has the section
   };
+  size_t shards_without_coarse_fields_ = 0;
   std::vector<ViewRef> views_;
   uint32_t num_rolls_ = 1;
   uint64_t num_points_ = 0;

@@ -10,6 +10,7 @@
 
 #include "base/thread_pool.h"
 #include "query/chamfer.h"
+#include "query/coarse_bound.h"
 #include "query/distance_transform.h"
 
 namespace handdb {
@@ -98,13 +99,18 @@ class QueryContext {
  public:
   QueryContext(const Database& db,
                std::span<const int32_t> max_abs,
+               const CoarseFields* coarse,
                std::span<const Point2f> query,
                const SearchOptions& options)
       : db_(db),
         options_(options),
         query_(query),
         max_abs_(max_abs),
+        coarse_(coarse),
         rolled_(db.num_rolls()),
+        histograms_(coarse != nullptr ? db.num_rolls() : 0),
+        point_cells_(coarse != nullptr ? db.num_rolls() : 0),
+        scan_d2_(ResolveNumThreads(options.num_threads)),
         rolled_max_abs_(db.num_rolls()),
         query_trees_(db.num_rolls()),
         query_tree_once_(db.num_rolls()),
@@ -118,6 +124,25 @@ class QueryContext {
       m = std::max({m, std::abs(static_cast<int32_t>(p.x)), std::abs(static_cast<int32_t>(p.y))});
     }
     rolled_max_abs_[r] = m;
+    if (coarse_ != nullptr) {
+      histograms_[r].Build(rolled_[r]);
+      point_cells_[r].resize(rolled_[r].size());
+      for (size_t i = 0; i < rolled_[r].size(); ++i) {
+        point_cells_[r][i] = static_cast<int16_t>(CoarseGrid::CellOf(rolled_[r][i]));
+      }
+    }
+  }
+
+  // L_A(v, r) of query/coarse_field.h (px), 0 without coarse fields.
+  double CoarseBound(view_id_t v, roll_id_t r) const {
+    if (coarse_ == nullptr) return 0.0;
+    return histograms_[r].LowerBound(coarse_->field(v), rolled_[r].size());
+  }
+  // A lower bound of B(v, r) from a stored bound L <= L_A + L_B: L - L_A <= L_B (the same L_A
+  // computation, so the subtraction is exact up to the last rounding, which goes down).
+  double BLowerBound(view_id_t v, roll_id_t r, double stored_px) const {
+    if (coarse_ == nullptr) return stored_px;
+    return std::max(0.0, (stored_px - CoarseBound(v, r)) * (1 - 1e-12));
   }
   // The kd-tree over the rolled query, built on first use: rolls whose pairs are all pruned
   // never get one (and the trees do not exist during the bounds step).
@@ -161,12 +186,18 @@ class QueryContext {
     bool stopped = false;
     const double limit_a = Limit(threshold, lower_bound, nq);
     if (limit_a < 0) return false;
-    if (limit_a != kInf && ProbeExceeds(v, r, limit_a)) {
-      probe_abandoned_.fetch_add(1, std::memory_order_relaxed);
-      return false;
+    double sum_a = 0;
+    // Brute force keeps the kd-trees: it is the reference the scans are tested against.
+    if (!options_.brute_force && max_abs_[v] <= kSmallCoordLimit &&
+        rolled_max_abs_[r] <= kSmallCoordLimit) {
+      if (!ScanA(v, r, limit_a, worker, &sum_a)) {
+        probe_abandoned_.fetch_add(1, std::memory_order_relaxed);
+        return false;
+      }
+    } else {
+      sum_a = ViewTree(v, worker).SumNearestDistances(q, limit_a, &stopped);
+      if (stopped) return false;
     }
-    const double sum_a = ViewTree(v, worker).SumNearestDistances(q, limit_a, &stopped);
-    if (stopped) return false;
     const double a = sum_a / nq;
     const double limit_b = Limit(threshold, a, nv);
     if (limit_b < 0) return false;
@@ -180,24 +211,42 @@ class QueryContext {
     return true;
   }
 
-  // Before a view's kd-tree is built: the sum of the exact nearest distances of a spread-out
-  // sample of the query's points (linear scans, no tree) is a lower bound of the whole sum of A.
-  // True if it already exceeds `limit` (with a relative margin for float rounding), so the pair
-  // is abandoned without building a tree: on the real paper database most refined pairs are
-  // decided by the first few dozen points. The exact A is computed as before otherwise, so
-  // results do not depend on the probe.
-  bool ProbeExceeds(view_id_t v, roll_id_t r, double limit) const {
+  // The sum of A for (v, r) by linear scans of the view's points (no kd-tree: for a few hundred
+  // points a vectorised scan per query point is cheaper than building a tree that one pair
+  // uses), abandoned as soon as a lower bound of the whole sum exceeds `limit`: the exact
+  // distances of the points scanned so far plus the coarse bound F_v(cell) of the others
+  // (query/coarse_field.h; 0 without coarse fields). Points are scanned spread out first (every
+  // step-th point, then the gaps), so the bound rises quickly. A pair that is not abandoned gets
+  // the same sum as the kd-tree path, bit for bit: the nearest squared distances are exact
+  // integers either way, and they are summed in the query's order.
+  bool ScanA(view_id_t v, roll_id_t r, double limit, int worker, double* sum_out) {
     const std::span<const PointQ> view = db_.points(v);
     const std::span<const PointQ> q = rolled_[r];
-    if (max_abs_[v] > kSmallCoordLimit || rolled_max_abs_[r] > kSmallCoordLimit) return false;
-    const size_t step = std::max<size_t>(1, q.size() / kProbePoints);
-    double sum = 0;
-    for (size_t i = 0; i < q.size(); i += step) {
-      sum += std::sqrt(static_cast<double>(NearestSquaredSmall(q[i], view))) /
-             static_cast<double>(kPointScale);
-      if (sum > limit * (1 + 1e-9) + 1e-9) return true;
+    std::vector<int32_t>& d2 = scan_d2_[worker];
+    d2.resize(q.size());
+    const double stop = limit == kInf ? kInf : limit * (1 + 1e-9) + 1e-9;
+    const uint8_t* field = coarse_ != nullptr ? coarse_->field(v) : nullptr;
+    const int16_t* cells = coarse_ != nullptr ? point_cells_[r].data() : nullptr;
+    double bound = coarse_ != nullptr ? CoarseBound(v, r) * static_cast<double>(q.size()) : 0.0;
+    const size_t step = std::max<size_t>(1, q.size() / kScanSpread);
+    for (size_t offset = 0; offset < step; ++offset) {
+      for (size_t i = offset; i < q.size(); i += step) {
+        d2[i] = NearestSquaredSmall(q[i], view);
+        double gain = std::sqrt(static_cast<double>(d2[i])) / static_cast<double>(kPointScale);
+        if (field != nullptr && cells[i] >= 0) {
+          gain -= static_cast<double>(field[cells[i]]) / CoarseGrid::kValueUnitsPerPx;
+        }
+        bound += gain;
+        if (bound > stop) return false;
+      }
     }
-    return false;
+    double sum = 0;
+    for (size_t i = 0; i < q.size(); ++i) {
+      sum += std::sqrt(static_cast<double>(d2[i])) / static_cast<double>(kPointScale);
+    }
+    if (sum > limit) return false;
+    *sum_out = sum;
+    return true;
   }
 
   uint64_t num_view_trees() const { return num_view_trees_.load(); }
@@ -208,9 +257,13 @@ class QueryContext {
   const SearchOptions& options_;
   std::span<const Point2f> query_;
   std::span<const int32_t> max_abs_;  // per view: max |x|, |y| (PointQ units)
+  const CoarseFields* coarse_;        // nullptr: no A bound
   std::vector<std::vector<PointQ>> rolled_;
+  std::vector<CellHistogram> histograms_;          // per roll, with coarse fields
+  std::vector<std::vector<int16_t>> point_cells_;  // per roll: each point's coarse cell or -1
+  static constexpr size_t kScanSpread = 64;        // points in ScanA's first spread-out pass
+  std::vector<std::vector<int32_t>> scan_d2_;      // per worker: ScanA's squared distances
   std::vector<int32_t> rolled_max_abs_;
-  static constexpr size_t kProbePoints = 384;
   std::atomic<uint64_t> probe_abandoned_{0};
   std::vector<std::unique_ptr<KdTree>> query_trees_;
   std::vector<std::once_flag> query_tree_once_;
@@ -238,6 +291,7 @@ Searcher::Searcher(std::shared_ptr<const Database> db) : db_(std::move(db)) {
     }
     max_abs_[v] = m;
   }
+  coarse_ = CoarseFields(*db_, -1);
 }
 
 Searcher::~Searcher() = default;
@@ -275,6 +329,7 @@ class QueryRun {
  public:
   QueryRun(const Database& db,
            std::span<const int32_t> max_abs,
+           const CoarseFields* coarse,
            std::span<const Point2f> query_px,
            const SearchOptions& options,
            double threshold,
@@ -288,7 +343,7 @@ class QueryRun {
         num_views_(db.num_views()),
         num_rolls_(db.num_rolls()),
         k_(static_cast<size_t>(options.top_k)),
-        ctx_(db, max_abs, query_px, options),
+        ctx_(db, max_abs, coarse, query_px, options),
         top_(k_, threshold) {}
 
   // The reference: exact D_c for every (view, roll).
@@ -338,7 +393,7 @@ class QueryRun {
           DistanceGrid& grid = grids[worker];
           grid.Build(ctx_.rolled(r));
           Bound* out = bound.data() + ri * num_views_;
-          BoundRoll(grid, out);
+          BoundRoll(grid, r, out);
           ScoreRollBest(r, out, worker);
           return true;
         },
@@ -412,7 +467,7 @@ class QueryRun {
 
  private:
   // The bound of every view against one roll's distance grid, into out[v].
-  void BoundRoll(const DistanceGrid& grid, Bound* out) const {
+  void BoundRoll(const DistanceGrid& grid, roll_id_t r, Bound* out) const {
     constexpr size_t kChunk = 64;
     for (view_id_t v = 0; v < num_views_; ++v) {
       const std::span<const PointQ> pts = db_.points(v);
@@ -420,7 +475,15 @@ class QueryRun {
         out[v] = kNoBound;
         continue;
       }
-      const double limit = Limit(top_.threshold(), 0.0, static_cast<double>(pts.size()));
+      // The coarse A bound first: a short dot product that on real photos prunes most pairs
+      // alone; then the B bound, stopped as soon as the sum is above the k-th best.
+      const double threshold = top_.threshold();
+      const double bound_a = ctx_.CoarseBound(v, r);
+      if (bound_a > threshold) {
+        out[v] = BoundBelow(bound_a);
+        continue;
+      }
+      const double limit = Limit(threshold, bound_a, static_cast<double>(pts.size()));
       const bool fast = grid.Covers(max_abs_[v]);
       double sum = 0;
       for (size_t i = 0; i < pts.size() && sum <= limit; i += kChunk) {
@@ -428,7 +491,7 @@ class QueryRun {
         sum += fast ? grid.SumLowerBoundsFast(chunk) : grid.SumLowerBounds(chunk);
       }
       const double mean = sum / static_cast<double>(pts.size());
-      out[v] = BoundBelow(mean - DistanceGrid::MeanLowerBoundMargin(pts.size(), mean));
+      out[v] = BoundBelow(bound_a + mean - DistanceGrid::MeanLowerBoundMargin(pts.size(), mean));
     }
   }
 
@@ -454,7 +517,7 @@ class QueryRun {
       if (BoundPx(out[v]) > threshold) continue;
       refined_.fetch_add(1, std::memory_order_relaxed);
       Scored sc;
-      if (ctx_.Score(v, r, threshold, BoundPx(out[v]), worker, &sc)) {
+      if (ctx_.Score(v, r, threshold, ctx_.BLowerBound(v, r, BoundPx(out[v])), worker, &sc)) {
         sc.lower_bound = BoundPx(out[v]);
         top_.Insert(sc);
       } else {
@@ -476,7 +539,8 @@ class QueryRun {
           const roll_id_t r = static_cast<roll_id_t>(idx / num_views_);
           refined_.fetch_add(1, std::memory_order_relaxed);
           Scored s;
-          if (ctx_.Score(v, r, threshold, BoundPx(bound[idx]), worker, &s)) {
+          if (ctx_.Score(
+                  v, r, threshold, ctx_.BLowerBound(v, r, BoundPx(bound[idx])), worker, &s)) {
             s.lower_bound = BoundPx(bound[idx]);
             top_.Insert(s);
           } else {
@@ -540,7 +604,14 @@ std::vector<Match> Searcher::SearchOnce(std::span<const Point2f> query_px,
                                         ThreadPool* pool,
                                         SearchStats* stats) const {
   const auto start = std::chrono::steady_clock::now();
-  QueryRun run(*db_, max_abs_, query_px, options, threshold, threads, pool);
+  QueryRun run(*db_,
+               max_abs_,
+               options.coarse_bound && !coarse_.empty() ? &coarse_ : nullptr,
+               query_px,
+               options,
+               threshold,
+               threads,
+               pool);
   SearchStats local;
   if (options.brute_force) {
     run.BruteForce(&local, start);

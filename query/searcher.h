@@ -21,6 +21,7 @@
 #include "base/status.h"
 #include "format/roll.h"
 #include "format/view.h"
+#include "query/coarse_bound.h"
 #include "query/database.h"
 #include "query/kdtree.h"
 
@@ -45,6 +46,9 @@ struct SearchOptions {
   bool brute_force = false;  // D_c for every (view, roll), no pruning (the reference)
   KdTreeBackend kdtree = KdTreeBackend::kNanoflann;
   float dt_cell_px = 1.0f;  // distance-transform grid step: 1, 1/2, 1/4, 1/8 or 1/16 px
+  // Also bound the query -> view term A from the views' coarse fields (query/coarse_field.h)
+  // before any kd-tree. Off: the B bound alone (for comparison; results are identical).
+  bool coarse_bound = true;
   bool Check() const;
 };
 
@@ -55,8 +59,8 @@ struct Match {
   double distance = 0;     // D_c = a + b, px
   double a = 0;            // query -> view term, px
   double b = 0;            // view -> query term, px
-  double lower_bound = 0;  // the distance-transform bound L(v, r) used for pruning, rounded
-                           // down to 1/64 px (0 in brute force)
+  double lower_bound = 0;  // the bound L(v, r) <= D_c used for pruning (the B bound, plus the
+                           // coarse A bound), rounded down to 1/64 px (0 in brute force)
   ViewLabel label;         // rolled: camera_roll += angle, keypoints rotated (RollLabel)
   std::string shape_name;  // from the database's shape table, "" if unknown
   // kRight, or kLeft when the mirrored query matched: then `label` is mirrored back into the
@@ -120,6 +124,7 @@ class Searcher {
 
   std::shared_ptr<const Database> db_;
   std::vector<int32_t> max_abs_;  // per view: max |x|, |y| of its points (PointQ units)
+  CoarseFields coarse_;           // per view: the A bound's coarse field
 };
 
 }  // namespace handdb

@@ -152,6 +152,7 @@ TEST(Searcher, PrunedEqualsBruteForce) {
     SearchOptions pruned = Options(1 + i % 8, 1 + i % 3);
     pruned.kdtree = i % 2 ? KdTreeBackend::kPcl : KdTreeBackend::kNanoflann;
     pruned.dt_cell_px = i % 5 == 0 ? 0.5f : 1.0f;
+    pruned.coarse_bound = i % 3 != 1;
     SearchOptions brute = pruned;
     brute.brute_force = true;
     brute.num_threads = 2;
@@ -161,7 +162,10 @@ TEST(Searcher, PrunedEqualsBruteForce) {
     ASSERT_TRUE(a.ok() && b.ok());
     ExpectSameResults(*a, *b);
     for (const Match& m : *a) {
-      EXPECT_LE(m.lower_bound, m.b + 1e-9);
+      EXPECT_LE(m.lower_bound, m.distance + 1e-9);
+      if (!pruned.coarse_bound) {
+        EXPECT_LE(m.lower_bound, m.b + 1e-9);
+      }
       EXPECT_DOUBLE_EQ(m.distance, m.a + m.b);
     }
   }

@@ -1,0 +1,136 @@
+#include "format/coarse_field.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <utility>
+#include <vector>
+
+#include "format/shard_layout.h"
+
+namespace handdb {
+namespace {
+
+static_assert(CoarseGrid::kCells == shard::kCoarseFieldSize);
+
+constexpr int64_t kInf64 = std::numeric_limits<int64_t>::max();
+
+// Distance from coordinate c to the closed interval [lo, lo + kCellUnits].
+int64_t Gap(int32_t c, int32_t lo) {
+  const int32_t hi = lo + CoarseGrid::kCellUnits;
+  return c < lo ? lo - c : (c > hi ? c - hi : 0);
+}
+
+// floor(sqrt(d2) in 1/2 px), saturating at 255. Exact: sqrt is correctly rounded and the scale
+// (2 / kPointScale = 1/8) is a power of two; no integer d2 < 2^53 has a root within rounding
+// distance below a multiple of 8.
+uint8_t ToUnits(int64_t d2) {
+  const double units =
+      std::floor(std::sqrt(static_cast<double>(d2)) * CoarseGrid::kValueUnitsPerPx / kPointScale);
+  return static_cast<uint8_t>(std::min(units, 255.0));
+}
+
+}  // namespace
+
+int64_t CoarseCellDistanceSquaredBruteForce(std::span<const PointQ> view, int ix, int iy) {
+  const int32_t x0 = -CoarseGrid::kHalfUnits + ix * CoarseGrid::kCellUnits;
+  const int32_t y0 = -CoarseGrid::kHalfUnits + iy * CoarseGrid::kCellUnits;
+  int64_t best = kInf64;
+  for (const PointQ& p : view) {
+    const int64_t gx = Gap(p.x, x0);
+    const int64_t gy = Gap(p.y, y0);
+    best = std::min(best, gx * gx + gy * gy);
+  }
+  return best;
+}
+
+void ComputeCoarseField(std::span<const PointQ> view, uint8_t* out) {
+  constexpr int kSide = CoarseGrid::kSide;
+  constexpr int kCell = CoarseGrid::kCellUnits;
+  constexpr int kHalf = CoarseGrid::kHalfUnits;
+  if (view.empty()) {
+    std::fill(out, out + CoarseGrid::kCells, uint8_t{0});
+    return;
+  }
+  // The envelope runs along one axis ("a") over bands of cells across the other ("b"), and needs
+  // the points sorted by a. A database view's points come in raster order (sorted by y), so a = y
+  // and bands are columns; any other set is sorted by x and bands are rows.
+  thread_local std::vector<std::pair<int32_t, int32_t>> pts;  // (a, b)
+  pts.clear();
+  const bool by_y =
+      std::is_sorted(view.begin(), view.end(), [](PointQ p, PointQ q) { return p.y < q.y; });
+  for (const PointQ& p : view) pts.emplace_back(by_y ? p.y : p.x, by_y ? p.x : p.y);
+  if (!by_y) std::sort(pts.begin(), pts.end());
+  const size_t n = pts.size();
+  // Envelope scratch: vertex a, its value gap_b^2, and the left boundary of each parabola as a
+  // fraction zn / zd (zd > 0; index 0 is -infinity and never read).
+  thread_local std::vector<int64_t> va, vf, zn, zd;
+  va.resize(n);
+  vf.resize(n);
+  zn.resize(n);
+  zd.resize(n);
+  int64_t edge_d2[kSide + 1];
+  int64_t inside_d2[kSide];
+
+  for (int band = 0; band < kSide; ++band) {
+    const int32_t b0 = -kHalf + band * kCell;
+    // The parabolas (a - p.a)^2 + gap_b(p)^2, one per distinct a (the smallest gap_b^2).
+    size_t m = 0;
+    std::fill(inside_d2, inside_d2 + kSide, kInf64);
+    for (size_t i = 0; i < n; ++i) {
+      const int64_t gb = Gap(pts[i].second, b0);
+      const int64_t f = gb * gb;
+      const int64_t a = pts[i].first;
+      // Points inside a cell's a range: the distance to that cell is gap_b alone.
+      const int64_t cell = (a + kHalf) / kCell;
+      if (a >= -kHalf && cell < kSide) inside_d2[cell] = std::min(inside_d2[cell], f);
+      if (m > 0 && va[m - 1] == a) {
+        vf[m - 1] = std::min(vf[m - 1], f);
+      } else {
+        va[m] = a;
+        vf[m] = f;
+        ++m;
+      }
+    }
+    // Lower envelope (Felzenszwalb & Huttenlocher) in exact integer fractions, built in place:
+    // the envelope's vertices are a subsequence of the parabolas.
+    size_t k = 0;
+    for (size_t q = 1; q < m; ++q) {
+      const int64_t aq = va[q];
+      const int64_t fq = vf[q];
+      int64_t num = 0;
+      int64_t den = 0;
+      for (;;) {
+        num = (fq + aq * aq) - (vf[k] + va[k] * va[k]);
+        den = 2 * (aq - va[k]);
+        // Pop while the new boundary is at or left of the top's left boundary.
+        if (k > 0 && num * zd[k] <= zn[k] * den) {
+          --k;
+          continue;
+        }
+        break;
+      }
+      ++k;
+      va[k] = aq;
+      vf[k] = fq;
+      zn[k] = num;
+      zd[k] = den;
+    }
+    // Evaluate at the cell edges along a, in increasing order.
+    size_t j = 0;
+    for (int e = 0; e <= kSide; ++e) {
+      const int64_t a = -kHalf + static_cast<int64_t>(e) * kCell;
+      while (j < k && zn[j + 1] < a * zd[j + 1]) ++j;
+      const int64_t da = a - va[j];
+      edge_d2[e] = da * da + vf[j];
+    }
+    for (int c = 0; c < kSide; ++c) {
+      const uint8_t value = ToUnits(std::min({edge_d2[c], edge_d2[c + 1], inside_d2[c]}));
+      // a = y: band is the column ix, c the row iy; a = x: band is the row, c the column.
+      out[by_y ? static_cast<size_t>(c) * kSide + band : static_cast<size_t>(band) * kSide + c] =
+          value;
+    }
+  }
+}
+
+}  // namespace handdb

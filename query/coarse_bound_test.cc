@@ -1,0 +1,101 @@
+#include "query/coarse_bound.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include "query/chamfer.h"
+#include "query/database.h"
+#include "query/search_testing.h"
+#include "query/searcher.h"
+
+namespace handdb {
+namespace {
+
+std::vector<PointQ> RandomPoints(std::mt19937* rng, size_t n, int spread_units) {
+  std::uniform_int_distribution<int> u(-spread_units, spread_units);
+  std::vector<PointQ> pts;
+  for (size_t i = 0; i < n; ++i) {
+    pts.push_back({static_cast<int16_t>(u(*rng)), static_cast<int16_t>(u(*rng))});
+  }
+  return pts;
+}
+
+// L_A <= A for random pairs, and it is not vacuous: a query far from the view gets most of A.
+TEST(CoarseBound, HistogramBoundIsBelowTheExactQueryToViewTerm) {
+  std::mt19937 rng(11);
+  std::vector<uint8_t> field(CoarseGrid::kCells);
+  CellHistogram hist;
+  double worst_gap = 0;
+  for (int i = 0; i < 200; ++i) {
+    const auto view = RandomPoints(&rng, 100 + i % 300, 400 + 10 * i);
+    const auto query = RandomPoints(&rng, 50 + i % 200, 300 + 15 * i);
+    ComputeCoarseField(view, field.data());
+    hist.Build(query);
+    const double bound = hist.LowerBound(field.data(), query.size());
+    const double a = ChamferBruteForce(query, view).a;
+    ASSERT_LE(bound, a) << "pair " << i;
+    // The loss per point is at most the cell's diagonal, for points on the grid whose distance
+    // is below the 127.5 px saturation.
+    bool tight = true;
+    for (const PointQ& q : query) {
+      const double d = std::sqrt(static_cast<double>(NearestSquaredSmall(q, view))) / kPointScale;
+      if (CoarseGrid::CellOf(q) < 0 || d >= 127) tight = false;
+    }
+    if (tight) worst_gap = std::max(worst_gap, a - bound);
+  }
+  EXPECT_GT(worst_gap, 0);
+  EXPECT_LE(worst_gap, 8 * std::sqrt(2.0) + 0.5);
+
+  const std::vector<PointQ> view = {{0, 0}};
+  const std::vector<PointQ> far = {{1600, 0}, {0, -1600}};  // 100 px away
+  ComputeCoarseField(view, field.data());
+  hist.Build(far);
+  EXPECT_GE(hist.LowerBound(field.data(), far.size()), 100 - 8 * std::sqrt(2.0));
+}
+
+// Queries with edges the views lack (clutter) are where the A bound matters: pruned search with
+// it equals brute force, and refines fewer pairs than the B bound alone.
+TEST(CoarseBound, SearchWithClutterEqualsBruteForceAndRefinesLess) {
+  const auto db = std::make_shared<const Database>(
+      testing::SyntheticDatabase(40, 150, 12, /*views_per_shape=*/8));
+  const Searcher searcher(db);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(-120, 120);
+  uint64_t refined_with = 0;
+  uint64_t refined_without = 0;
+  for (int i = 0; i < 12; ++i) {
+    std::vector<Point2f> q = testing::RolledView(*db, static_cast<view_id_t>(i * 3), i % 12);
+    const size_t clutter = q.size() / 2;
+    for (size_t c = 0; c < clutter; ++c) q.push_back({u(rng), u(rng)});
+    SearchOptions with;
+    with.top_k = 1 + i % 5;
+    with.num_threads = 1 + i % 2;
+    SearchOptions without = with;
+    without.coarse_bound = false;
+    SearchOptions brute = with;
+    brute.brute_force = true;
+    SearchStats s_with;
+    SearchStats s_without;
+    auto a = searcher.Search(q, with, &s_with);
+    auto b = searcher.Search(q, without, &s_without);
+    auto c = searcher.Search(q, brute);
+    ASSERT_TRUE(a.ok() && b.ok() && c.ok());
+    ASSERT_EQ(a->size(), c->size());
+    for (size_t k = 0; k < a->size(); ++k) {
+      EXPECT_EQ((*a)[k].view_id, (*c)[k].view_id) << "query " << i << " rank " << k;
+      EXPECT_EQ((*a)[k].roll, (*c)[k].roll);
+      EXPECT_EQ((*a)[k].distance, (*c)[k].distance);
+      EXPECT_EQ((*b)[k].distance, (*c)[k].distance);
+      EXPECT_LE((*a)[k].lower_bound, (*a)[k].distance);
+    }
+    refined_with += s_with.refined;
+    refined_without += s_without.refined;
+  }
+  EXPECT_LT(refined_with, refined_without);
+}
+
+}  // namespace
+}  // namespace handdb
