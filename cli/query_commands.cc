@@ -195,6 +195,15 @@ void QueryFlags::Add(CLI::App& app) {
                  "photo: skin box Ymin,Ymax,Crmin,Crmax,Cbmin,Cbmax (YCrCb, 0..255; default "
                  "40,255,133,173,77,127)");
   app.add_option("--canny", canny, "photo: Canny thresholds low,high (default 40,120)");
+  app.add_option("--contour-clearance",
+                 edges.contour_clearance_px,
+                 "photo: drop Canny edges within this many px of the silhouette contour (0: keep)")
+      ->check(CLI::Range(0, 20))
+      ->capture_default_str();
+  app.add_flag_callback(
+      "--edges-outside",
+      [this] { edges.interior_edges_only = false; },
+      "photo: also keep Canny edges up to 4 px outside the hand region (before issue 16)");
   app.add_flag("--verify", verify, "hash every shard section before searching");
 }
 
@@ -316,6 +325,7 @@ json ResultJson(const QueryFlags& flags,
             {"refined", stats.refined},
             {"abandoned", stats.abandoned},
             {"view_kdtrees", stats.view_trees},
+            {"scan_abandoned", stats.probe_abandoned},
             {"searches", stats.searches},
             {"seconds", stats.seconds_total},
             {"seconds_bounds", stats.seconds_bounds},

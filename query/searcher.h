@@ -81,7 +81,7 @@ struct SearchStats {
   uint64_t bounded = 0;          // pairs whose lower bound was computed
   uint64_t refined = 0;          // pairs whose exact D_c was started
   uint64_t abandoned = 0;        // of those, stopped early above the k-th best
-  uint64_t probe_abandoned = 0;  // of those, decided by the probe before a view kd-tree
+  uint64_t probe_abandoned = 0;  // of those, dropped by the linear scans' running bound
   uint64_t view_trees = 0;       // kd-trees built over view points
   uint64_t query_points = 0;
   uint32_t searches = 0;      // 1, or 2 for Hand::kEither (the counters and seconds add up both)
