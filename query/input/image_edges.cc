@@ -254,7 +254,15 @@ Result<QueryEdges> FromPhoto(const std::filesystem::path& path,
   cv::Mat near_hand;
   const int d = options.dilate_px;
   cv::dilate(hand, near_hand, cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * d + 1, 2 * d + 1}));
-  edges &= near_hand;
+  edges &= options.interior_edges_only ? hand : near_hand;
+  if (const int c = options.contour_clearance_px; c > 0) {
+    cv::Mat near_contour = cv::Mat::zeros(h, w, CV_8U);
+    for (const EdgePixel& p : silhouette.silhouette) near_contour.at<uint8_t>(p.row, p.col) = 255;
+    cv::dilate(near_contour,
+               near_contour,
+               cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * c + 1, 2 * c + 1}));
+    edges.setTo(0, near_contour);
+  }
   for (const EdgePixel& p : silhouette.silhouette) edges.at<uint8_t>(p.row, p.col) = 255;
 
   QueryEdges out;
@@ -307,6 +315,8 @@ bool ImageEdgeOptions::Check() const {
   CHECK_OPTION(canny_low >= 0 && canny_low <= canny_high);
   CHECK_OPTION_GE(dilate_px, 0);
   CHECK_OPTION_LE(dilate_px, 100);
+  CHECK_OPTION_GE(contour_clearance_px, 0);
+  CHECK_OPTION_LE(contour_clearance_px, 20);
   CHECK_OPTION_GE(min_hand_pixels, 1);
   CHECK_OPTION(roi.empty() || (roi.width > 0 && roi.height > 0));
   CHECK_OPTION(label_edges.Check());

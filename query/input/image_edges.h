@@ -3,8 +3,9 @@
 // Three kinds of input (docs/query.md):
 //  - a photo (PNG/JPEG): the hand is found by skin colour (a documented, tunable YCrCb box), or
 //    given by --mask (non-zero = hand), optionally restricted to --roi; the largest connected
-//    region is the hand. Edges = Canny edges (OpenCV) within `dilate_px` of the hand region plus
-//    the silhouette contour;
+//    region is the hand. Edges = the silhouette contour plus the Canny edges (OpenCV) inside the
+//    hand region, except those within `contour_clearance_px` of the contour (one outline, as in
+//    the database's views, not Canny's outline beside the contour's);
 //  - an edge image (non-zero pixels are edges);
 //  - a Blender label EXR (clean synthetic edges through the converter's own code:
 //    edges/exr_io.h + edges/view_conversion.h, BorderContact::kAllow).
@@ -57,7 +58,14 @@ struct ImageEdgeOptions {
   PixelRect roi;               // photo: only this rectangle can hold the hand (empty: all)
   double canny_low = 40;       // Canny hysteresis thresholds (on the 5x5-blurred grey image)
   double canny_high = 120;
-  int dilate_px = 4;          // Canny edges are kept within this distance of the hand region
+  // Canny edges inside the hand region only (the database's views have no background edges).
+  // false: also those within `dilate_px` outside it (the behaviour before issue 16 item 3).
+  bool interior_edges_only = true;
+  int dilate_px = 4;
+  // Canny edges this close to the silhouette (px, in the input picture) are dropped: Canny
+  // finds the hand's outline too, a pixel or two from the contour, and the outline twice
+  // weighs the silhouette double in D_c. 0: keep them.
+  int contour_clearance_px = 2;
   int min_hand_pixels = 400;  // smaller largest regions mean "no hand found"
   // Label EXR: the converter's edge rule (edges/edges.h). Set these to the options the
   // database was converted with (its manifest records them; `handdb query` reads them) so a
