@@ -1,5 +1,8 @@
 #include "format/manifest.h"
 
+#include <algorithm>
+#include <optional>
+#include <regex>
 #include <set>
 
 #include "base/json_schema.h"
@@ -135,6 +138,168 @@ Result<Manifest> ManifestFromJson(const json& doc, const std::string& what) {
   }
   HANDDB_RETURN_IF_ERROR(CheckConsistency(m, what, StatusCode::kSizeMismatch));
   return m;
+}
+
+namespace {
+
+// Shard metadata key -> manifest field (JSON pointers into ManifestToJson), docs/format.md §8.
+struct CrossCheckedField {
+  const char* shard;
+  const char* manifest;
+};
+constexpr CrossCheckedField kCrossCheckedFields[] = {
+    {"/rolls", "/rolls"},
+    {"/tool/version", "/tool_version"},
+    {"/generation", "/metadata/generation"},
+    {"/hand_model", "/metadata/hand_model"},
+    {"/labels", "/metadata/labels"},
+    {"/shapes", "/metadata/shapes"},
+    {"/conversion/edges", "/metadata/conversion/edges"},
+    {"/conversion/normalisation", "/metadata/conversion/normalisation"},
+};
+
+// "/metadata/shapes/3/name" -> "metadata.shapes[3].name".
+std::string DottedPath(const std::string& pointer) {
+  std::string out;
+  size_t i = 0;
+  while (i < pointer.size()) {
+    const size_t next = pointer.find('/', i + 1);
+    const std::string seg = pointer.substr(i + 1, next == std::string::npos ? next : next - i - 1);
+    const bool index = !seg.empty() && seg.find_first_not_of("0123456789") == std::string::npos;
+    out += index ? "[" + seg + "]" : (out.empty() ? "" : ".") + seg;
+    i = next == std::string::npos ? pointer.size() : next;
+  }
+  return out;
+}
+
+// A value for a one-line message: compact JSON, at most 60 characters.
+std::string Short(const json& doc, const std::string& pointer) {
+  const json::json_pointer ptr(pointer);
+  if (!doc.contains(ptr)) return "absent";
+  std::string text = doc.at(ptr).dump();
+  if (text.size() > 60) text = text.substr(0, 57) + "...";
+  return text;
+}
+
+// The first place where `a` and `b` differ, as a JSON pointer relative to both ("" = the whole).
+std::string FirstDifference(const json& a, const json& b) {
+  const json patch = json::diff(a, b);
+  if (patch.empty()) return "";
+  std::string path = patch[0].at("path").get<std::string>();
+  // An element appended to an array is at ".../-": name the array instead.
+  if (path.size() >= 2 && path.compare(path.size() - 2, 2, "/-") == 0) path.resize(path.size() - 2);
+  return path;
+}
+
+std::optional<ManifestSkipped> SkippedFromJson(const json& s) {
+  if (!s.is_object() || !s.contains("render_id") || !s["render_id"].is_number_unsigned() ||
+      !s.contains("file") || !s["file"].is_string() || !s.contains("reason") ||
+      !s["reason"].is_string() || s["render_id"].get<uint64_t>() > kInvalidRenderId) {
+    return std::nullopt;
+  }
+  return ManifestSkipped{s["render_id"].get<render_id_t>(),
+                         s["file"].get<std::string>(),
+                         s["reason"].get<std::string>()};
+}
+
+std::string SkippedText(const ManifestSkipped& s) {
+  return "render " + std::to_string(s.render_id) + " (" + s.file + ": " + s.reason + ")";
+}
+
+}  // namespace
+
+ManifestShardCheck::ManifestShardCheck(const Manifest& manifest)
+    : manifest_json_(ManifestToJson(manifest)) {
+  for (const ManifestSkipped& s : manifest.skipped) {
+    skipped_listed_.insert({s.render_id, s.file, s.reason});
+  }
+}
+
+std::vector<std::string> ManifestShardCheck::Check(const ManifestShard& entry,
+                                                   const json& metadata) {
+  std::vector<std::string> out;
+  if (!metadata.is_object()) return out;
+  for (const CrossCheckedField& field : kCrossCheckedFields) {
+    const json::json_pointer shard_ptr(field.shard);
+    if (!metadata.contains(shard_ptr)) continue;
+    const json& value = metadata.at(shard_ptr);
+    const json::json_pointer manifest_ptr(field.manifest);
+    if (manifest_json_.contains(manifest_ptr) && !manifest_json_.at(manifest_ptr).is_null()) {
+      const json& expected = manifest_json_.at(manifest_ptr);
+      if (expected == value) continue;
+      const std::string at = FirstDifference(expected, value);
+      out.push_back(DottedPath(field.manifest + at) + " is " +
+                    Short(manifest_json_, field.manifest + at) + " in the manifest but " +
+                    Short(metadata, field.shard + at) + " in the shard's metadata (" +
+                    DottedPath(field.shard + at) + ")");
+      continue;
+    }
+    auto [it, first] = first_.try_emplace(field.shard, value, entry.file);
+    if (first || it->second.first == value) continue;
+    const std::string at = FirstDifference(it->second.first, value);
+    out.push_back(DottedPath(field.shard + at) + " is " + Short(metadata, field.shard + at) +
+                  " in the shard's metadata but " + Short(it->second.first, at) + " in " +
+                  it->second.second + " (the manifest does not record " +
+                  DottedPath(field.manifest) + ")");
+  }
+  // The unit a shard was converted from is the number in its file name (shard-00007.hdb: 7).
+  static const std::regex kShardFile(R"(shard-([0-9]{1,9})\.hdb)");
+  std::smatch m;
+  if (metadata.contains("unit") && metadata["unit"].is_number_unsigned() &&
+      std::regex_match(entry.file, m, kShardFile) &&
+      std::stoull(m[1].str()) != metadata["unit"].get<uint64_t>()) {
+    out.push_back("the manifest lists it as " + entry.file + " but its metadata records unit " +
+                  metadata["unit"].dump());
+  }
+  if (metadata.contains("skipped") && metadata["skipped"].is_array()) {
+    shards_record_skipped_ = true;
+    for (const json& s : metadata["skipped"]) {
+      const std::optional<ManifestSkipped> skipped = SkippedFromJson(s);
+      if (!skipped) {
+        out.push_back("metadata skipped[] holds a malformed entry " + s.dump().substr(0, 60));
+        continue;
+      }
+      const SkippedKey key{skipped->render_id, skipped->file, skipped->reason};
+      skipped_recorded_.insert(key);
+      if (!skipped_listed_.count(key)) {
+        out.push_back("its metadata records skipped " + SkippedText(*skipped) +
+                      ", which the manifest's skipped[] does not list");
+      }
+    }
+  }
+  return out;
+}
+
+std::vector<std::string> ManifestShardCheck::Finish() const {
+  std::vector<std::string> out;
+  if (!shards_record_skipped_) return out;
+  for (const SkippedKey& key : skipped_listed_) {
+    if (skipped_recorded_.count(key)) continue;
+    out.push_back("skipped[] lists " +
+                  SkippedText({std::get<0>(key), std::get<1>(key), std::get<2>(key)}) +
+                  ", which no shard's metadata records");
+  }
+  return out;
+}
+
+std::string ManifestLabelsMismatch(const Manifest& manifest) {
+  const std::vector<ManifestLabelField> record = Manifest::ShardLabelFields();
+  for (size_t i = 0; i < std::max(record.size(), manifest.labels.size()); ++i) {
+    auto text = [](const std::vector<ManifestLabelField>& fields, size_t k) {
+      if (k >= fields.size()) return std::string("absent");
+      return "{" + fields[k].name + ", unit '" + fields[k].unit + "', count " +
+             std::to_string(fields[k].count) + "}";
+    };
+    const bool same = i < record.size() && i < manifest.labels.size() &&
+                      record[i].name == manifest.labels[i].name &&
+                      record[i].unit == manifest.labels[i].unit &&
+                      record[i].count == manifest.labels[i].count;
+    if (!same) {
+      return "labels[" + std::to_string(i) + "] is " + text(manifest.labels, i) +
+             ", the v1.0 view record has " + text(record, i);
+    }
+  }
+  return "";
 }
 
 Result<Manifest> ReadManifest(const std::filesystem::path& db_dir) {

@@ -5,8 +5,12 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <map>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <string>
+#include <tuple>
+#include <utility>
 #include <vector>
 
 #include "base/status.h"
@@ -65,6 +69,37 @@ Result<Manifest> ManifestFromJson(const nlohmann::json& doc, const std::string& 
 
 // Reads DB_DIR/manifest.json (schema-checked). kNotFound when absent.
 Result<Manifest> ReadManifest(const std::filesystem::path& db_dir);
+// What the manifest says against what each listed shard's metadata section records (issue 14
+// item 4: a manifest saying 24 rolls over shards made with 48 made `query` search 24). Compared,
+// shard metadata key -> manifest field: `rolls` -> `rolls`, `tool.version` -> `tool_version`,
+// `unit` -> the shard's file name, `generation`, `hand_model`, `labels`, `shapes` ->
+// `metadata.<same>`, `conversion.edges` / `conversion.normalisation` -> `metadata.conversion.*`,
+// `skipped` -> `skipped[]` (each shard's entries listed, and no entry no shard records). A field
+// is compared only where the shard records it; when the manifest does not record it, the first
+// shard that does is the reference, so the shards still have to agree with each other.
+class ManifestShardCheck {
+ public:
+  explicit ManifestShardCheck(const Manifest& manifest);
+  // One line per disagreement, e.g. "rolls is 24 in the manifest but 48 in the shard's metadata"
+  // (the caller prefixes the shard's path). Empty when the shard agrees.
+  std::vector<std::string> Check(const ManifestShard& entry, const nlohmann::json& metadata);
+  // After the last shard: manifest entries that no shard records (skipped renders).
+  std::vector<std::string> Finish() const;
+
+ private:
+  using SkippedKey = std::tuple<render_id_t, std::string, std::string>;
+  nlohmann::json manifest_json_;  // ManifestToJson(manifest), addressed by JSON pointers
+  // For a field the manifest does not record: the first shard's value and that shard's file.
+  std::map<std::string, std::pair<nlohmann::json, std::string>> first_;
+  std::set<SkippedKey> skipped_listed_;
+  std::set<SkippedKey> skipped_recorded_;
+  bool shards_record_skipped_ = false;
+};
+
+// The manifest's labels[] against the v1.0 view record (Manifest::ShardLabelFields(): names,
+// units, counts in order); "" when they agree, else the first difference.
+std::string ManifestLabelsMismatch(const Manifest& manifest);
+
 // Writes DB_DIR/manifest.json atomically; refuses (kInvalidArgument) a manifest whose totals do
 // not add up or that does not match the schema, so an invalid manifest is never written.
 Status WriteManifest(const std::filesystem::path& db_dir, const Manifest& manifest);

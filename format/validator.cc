@@ -77,9 +77,11 @@ struct RecordedLimits {
 };
 
 // hand_model.joint_limits from the shard's metadata, when present.
+// The parsed object goes to *parsed (left null when it is not a JSON object).
 std::optional<RecordedLimits> ParseMetadata(std::string_view text,
                                             uint64_t offset,
-                                            ProblemList* problems) {
+                                            ProblemList* problems,
+                                            nlohmann::json* parsed) {
   if (Status s = CheckJsonDepth(text, "metadata section"); !s.ok()) {
     problems->Add("metadata", StatusCode::kBadJson, offset, s.message());
     return std::nullopt;
@@ -107,6 +109,7 @@ std::optional<RecordedLimits> ParseMetadata(std::string_view text,
                   "metadata JSON is a " + std::string(doc.type_name()) + ", expected an object");
     return std::nullopt;
   }
+  *parsed = doc;
   auto hm = doc.find("hand_model");
   if (hm == doc.end()) return std::nullopt;
   if (!hm->is_object()) {
@@ -310,7 +313,8 @@ using RenderIdMap = std::unordered_map<render_id_t, std::string>;
 ValidationReport ValidateBytes(std::span<const uint8_t> bytes,
                                const std::string& name,
                                const ValidateOptions& options,
-                               RenderIdMap* seen) {
+                               RenderIdMap* seen,
+                               nlohmann::json* metadata = nullptr) {
   THROW_CHECK(options.Check());
   ProblemList problems(name, /*stop_at_first=*/false, options.max_problems_per_check);
   const Layout layout = CheckLayout(bytes, &problems);
@@ -328,7 +332,9 @@ ValidationReport ValidateBytes(std::span<const uint8_t> bytes,
   if (layout.structure_ok) {
     const RawSection& ms = layout.sections[layout.metadata];
     const std::string_view meta(reinterpret_cast<const char*>(b + ms.offset), ms.size);
-    const std::optional<RecordedLimits> limits = ParseMetadata(meta, ms.offset, &problems);
+    nlohmann::json parsed;
+    const std::optional<RecordedLimits> limits = ParseMetadata(meta, ms.offset, &problems, &parsed);
+    if (metadata != nullptr) *metadata = std::move(parsed);
     const RawSection& vs = layout.sections[layout.views];
     const RawSection& ps = layout.sections[layout.points];
     for (uint64_t i = 0; i < vs.count; ++i) {
@@ -439,6 +445,15 @@ ValidationReport ValidateDatabase(const fs::path& db_dir, const ValidateOptions&
                     options.show_progress,
                     manifest.ok() ? "views" : "shards");
   RenderIdMap seen;
+  // Issue 14 item 4: every manifest field against what the shards record.
+  std::optional<ManifestShardCheck> cross_check;
+  if (manifest.ok()) {
+    cross_check.emplace(*manifest);
+    if (const std::string labels = ManifestLabelsMismatch(*manifest); !labels.empty()) {
+      report.problems.push_back(
+          {StatusCode::kSizeMismatch, manifest_path, 0, manifest_path + ": " + labels});
+    }
+  }
   for (const ManifestShard* entry : listed) {
     const fs::path path = db_dir / entry->file;
     const std::string file = path.string();
@@ -487,11 +502,23 @@ ValidationReport ValidateDatabase(const fs::path& db_dir, const ValidateOptions&
         }
       }
     }
-    ValidationReport shard_report = ValidateBytes(bytes, file, options, &seen);
+    nlohmann::json metadata;
+    ValidationReport shard_report = ValidateBytes(bytes, file, options, &seen, &metadata);
+    if (cross_check) {
+      for (const std::string& what : cross_check->Check(*entry, metadata)) {
+        report.problems.push_back({StatusCode::kSizeMismatch, file, 0, file + ": " + what});
+      }
+    }
     progress.Add(manifest.ok() ? entry->views : 1);
     report.Append(std::move(shard_report));
   }
   progress.Finish();
+  if (cross_check) {
+    for (const std::string& what : cross_check->Finish()) {
+      report.problems.push_back(
+          {StatusCode::kSizeMismatch, manifest_path, 0, manifest_path + ": " + what});
+    }
+  }
   return report;
 }
 

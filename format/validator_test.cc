@@ -2,7 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <cstdio>
 #include <filesystem>
+#include <nlohmann/json.hpp>
 
 #include "base/atomic_file.h"
 #include "base/testing.h"
@@ -270,6 +272,210 @@ TEST(Validator, DuplicateRenderIdsAcrossShards) {
   ASSERT_TRUE(WriteManifest(dir, *m).ok());
   auto report = ValidatePath(dir);
   EXPECT_EQ(Count(report, StatusCode::kBadLayout, "already appears in"), 4u) << Dump(report);
+  fs::remove_all(dir);
+}
+
+// A database whose shards record what the converter records (rolls, tool version, unit,
+// generation, hand model, conversion, labels, shapes, skipped renders) and whose manifest agrees.
+fs::path MakeRecordedDatabase(const std::string& name) {
+  auto dir = TempDir(name);
+  const nlohmann::json hand = nlohmann::json::parse(testing::SyntheticMetadata())["hand_model"];
+  const nlohmann::json generation = {{"seed", 7}, {"rolls", 48}, {"config", {{"k", 2}}}};
+  const nlohmann::json conversion = {
+      {"edges", {{"min_depth_jump", 3.5}, {"joint_pairs", {{1, 2}}}}},
+      {"normalisation", {{"diameter_px", 192}}}};
+  const nlohmann::json labels = {{"joint_angles", {{"unit", "rad"}}}};
+  const nlohmann::json shapes = {{{"id", 0}, {"name", "fist"}}, {{"id", 1}, {"name", "flat"}}};
+  const ManifestSkipped skipped{99, "units/u00001/r000099.exr", "no hand pixels"};
+  Manifest m;
+  m.tool_version = "test";
+  m.rolls = 48;
+  m.metadata = {{"generation", generation},
+                {"hand_model", hand},
+                {"conversion", conversion},
+                {"labels", labels},
+                {"shapes", shapes}};
+  m.skipped = {skipped};
+  for (uint32_t u = 0; u < 3; ++u) {
+    char file[32];
+    std::snprintf(file, sizeof(file), "shard-%05u.hdb", u);
+    nlohmann::json skipped_here = nlohmann::json::array();
+    if (u == 1) {
+      skipped_here.push_back(
+          {{"render_id", skipped.render_id}, {"file", skipped.file}, {"reason", skipped.reason}});
+    }
+    const nlohmann::json meta = {{"unit", u},
+                                 {"rolls", 48},
+                                 {"tool", {{"name", "handdb"}, {"version", "test"}}},
+                                 {"generation", generation},
+                                 {"hand_model", hand},
+                                 {"conversion", conversion},
+                                 {"labels", labels},
+                                 {"shapes", shapes},
+                                 {"skipped", skipped_here}};
+    ShardWriter w;
+    THROW_CHECK(w.Open(dir / file, {meta.dump(), {}}).ok());
+    for (uint32_t i = 0; i < 4; ++i) {
+      const uint32_t id = u * 4 + i;
+      THROW_CHECK(w.AddView(testing::SyntheticLabel(id), testing::SyntheticPoints(id, 9)).ok());
+    }
+    auto summary = w.Finish();
+    THROW_CHECK(summary.ok());
+    m.AddShard(*summary);
+  }
+  THROW_CHECK(WriteManifest(dir, m).ok());
+  return dir;
+}
+
+// Validates the recorded database after `edit` changed its manifest.
+template <typename F>
+ValidationReport ValidateWithManifest(const std::string& name, F edit) {
+  auto dir = MakeRecordedDatabase(name);
+  auto m = ReadManifest(dir);
+  THROW_CHECK(m.ok());
+  edit(dir, &*m);
+  m->UpdateTotals();
+  THROW_CHECK(WriteManifest(dir, *m).ok());
+  ValidationReport report = ValidatePath(dir);
+  fs::remove_all(dir);
+  return report;
+}
+
+// Issue 14 item 4: manifest rolls 24 over shards made with 48 passed validate, and query then
+// searched 24 rolls. Every manifest field is compared with what the shards record.
+TEST(Validator, ManifestFieldsAreCrossCheckedAgainstTheShards) {
+  EXPECT_TRUE(ValidateWithManifest("xc_good", [](const fs::path&, Manifest*) {}).ok());
+
+  auto report =
+      ValidateWithManifest("xc_rolls", [](const fs::path&, Manifest* m) { m->rolls = 24; });
+  EXPECT_EQ(report.problems.size(), 3u) << Dump(report);  // one per shard
+  EXPECT_EQ(Count(report,
+                  StatusCode::kSizeMismatch,
+                  "shard-00000.hdb: rolls is 24 in the manifest but 48 in the shard's metadata "
+                  "(rolls)"),
+            1u)
+      << Dump(report);
+
+  report = ValidateWithManifest(
+      "xc_generation", [](const fs::path&, Manifest* m) { m->metadata["generation"]["seed"] = 8; });
+  EXPECT_EQ(report.problems.size(), 3u) << Dump(report);
+  EXPECT_EQ(Count(report,
+                  StatusCode::kSizeMismatch,
+                  "metadata.generation.seed is 8 in the manifest but 7 in the shard's metadata "
+                  "(generation.seed)"),
+            3u)
+      << Dump(report);
+
+  report = ValidateWithManifest("xc_edges", [](const fs::path&, Manifest* m) {
+    m->metadata["conversion"]["edges"]["joint_pairs"][0][1] = 3;
+  });
+  EXPECT_EQ(Count(report,
+                  StatusCode::kSizeMismatch,
+                  "metadata.conversion.edges.joint_pairs[0][1] is 3 in the manifest but 2"),
+            3u)
+      << Dump(report);
+
+  for (const char* field : {"hand_model", "labels", "shapes"}) {
+    SCOPED_TRACE(field);
+    report = ValidateWithManifest(std::string("xc_") + field, [&](const fs::path&, Manifest* m) {
+      m->metadata[field] = nlohmann::json::array();
+    });
+    EXPECT_EQ(
+        Count(report, StatusCode::kSizeMismatch, "metadata." + std::string(field) + " is [] in"),
+        3u)
+        << Dump(report);
+  }
+
+  report = ValidateWithManifest("xc_tool",
+                                [](const fs::path&, Manifest* m) { m->tool_version = "9.9"; });
+  EXPECT_EQ(Count(report,
+                  StatusCode::kSizeMismatch,
+                  "tool_version is \"9.9\" in the manifest but \"test\" in the shard's metadata "
+                  "(tool.version)"),
+            3u)
+      << Dump(report);
+
+  // A shard listed under another unit's name.
+  report = ValidateWithManifest("xc_unit", [](const fs::path& dir, Manifest* m) {
+    fs::rename(dir / "shard-00002.hdb", dir / "shard-00007.hdb");
+    m->shards[2].file = "shard-00007.hdb";
+  });
+  EXPECT_EQ(report.problems.size(), 1u) << Dump(report);
+  EXPECT_EQ(Count(report,
+                  StatusCode::kSizeMismatch,
+                  "shard-00007.hdb: the manifest lists it as shard-00007.hdb but its metadata "
+                  "records unit 2"),
+            1u)
+      << Dump(report);
+
+  // Skipped renders: one the manifest invents, and one a shard records that the manifest drops.
+  report = ValidateWithManifest("xc_skipped_extra", [](const fs::path&, Manifest* m) {
+    m->skipped.push_back({5, "units/u00000/r000005.exr", "no hand pixels"});
+  });
+  EXPECT_EQ(report.problems.size(), 1u) << Dump(report);
+  EXPECT_EQ(Count(report,
+                  StatusCode::kSizeMismatch,
+                  "manifest.json: skipped[] lists render 5 (units/u00000/r000005.exr: no hand "
+                  "pixels), which no shard's metadata records"),
+            1u)
+      << Dump(report);
+  report = ValidateWithManifest("xc_skipped_lost",
+                                [](const fs::path&, Manifest* m) { m->skipped.clear(); });
+  EXPECT_EQ(report.problems.size(), 1u) << Dump(report);
+  EXPECT_EQ(Count(report,
+                  StatusCode::kSizeMismatch,
+                  "shard-00001.hdb: its metadata records skipped render 99 "
+                  "(units/u00001/r000099.exr: no hand pixels), which the manifest's skipped[] "
+                  "does not list"),
+            1u)
+      << Dump(report);
+
+  // The label fields must describe the v1.0 view record.
+  report = ValidateWithManifest("xc_labels",
+                                [](const fs::path&, Manifest* m) { m->labels[3].count = 24; });
+  EXPECT_EQ(report.problems.size(), 1u) << Dump(report);
+  EXPECT_EQ(Count(report,
+                  StatusCode::kSizeMismatch,
+                  "manifest.json: labels[3] is {joint_angles, unit 'rad', count 24}, the v1.0 "
+                  "view record has {joint_angles, unit 'rad', count 20}"),
+            1u)
+      << Dump(report);
+}
+
+// A field the manifest does not record: the shards must still agree with each other.
+TEST(Validator, ShardsAgreeWithEachOtherWhereTheManifestIsSilent) {
+  auto dir = MakeRecordedDatabase("xc_silent");
+  auto m = ReadManifest(dir);
+  ASSERT_TRUE(m.ok());
+  m->metadata.erase("generation");
+  ASSERT_TRUE(WriteManifest(dir, *m).ok());
+  EXPECT_TRUE(ValidatePath(dir).ok()) << Dump(ValidatePath(dir));
+  // Shard 2 rewritten with another seed (its manifest entry updated so only the seed differs).
+  auto reader = ShardReader::Open(dir / "shard-00002.hdb");
+  ASSERT_TRUE(reader.ok());
+  nlohmann::json meta = nlohmann::json::parse(reader->metadata_json());
+  meta["generation"]["seed"] = 8;
+  ShardWriter w;
+  ASSERT_TRUE(w.Open(dir / "shard-00002.tmp", {meta.dump(), {}}).ok());
+  for (size_t i = 0; i < reader->num_views(); ++i) {
+    const auto pts = reader->points(i);
+    ASSERT_TRUE(w.AddView(reader->label(i), {pts.begin(), pts.end()}).ok());
+  }
+  auto summary = w.Finish();
+  ASSERT_TRUE(summary.ok());
+  fs::rename(dir / "shard-00002.tmp", dir / "shard-00002.hdb");
+  m->shards.pop_back();
+  m->AddShard(*summary);
+  m->shards.back().file = "shard-00002.hdb";
+  ASSERT_TRUE(WriteManifest(dir, *m).ok());
+  auto report = ValidatePath(dir);
+  EXPECT_EQ(report.problems.size(), 1u) << Dump(report);
+  EXPECT_EQ(Count(report,
+                  StatusCode::kSizeMismatch,
+                  "shard-00002.hdb: generation.seed is 8 in the shard's metadata but 7 in "
+                  "shard-00000.hdb (the manifest does not record metadata.generation)"),
+            1u)
+      << Dump(report);
   fs::remove_all(dir);
 }
 

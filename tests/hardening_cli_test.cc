@@ -3,8 +3,8 @@
 // brackets in a config or manifest are refused with one line instead of a SIGSEGV (item 2); a FIFO
 // or /dev/zero as a manifest or shard is refused at once instead of blocking or growing memory
 // forever (item 7); a truncated PNG / JPEG, a directory or a symlink loop as the query image is one
-// line (items 6 and 8). Every command runs under `timeout`, so a regression fails instead of
-// hanging.
+// line (items 6 and 8); validate cross-checks the manifest against the shards (item 4). Every
+// command runs under `timeout`, so a regression fails instead of hanging.
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
@@ -15,13 +15,16 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <opencv2/imgcodecs.hpp>
 #include <sstream>
 #include <string>
 #include <utility>
 #include <vector>
 
+#include "base/json_schema.h"
 #include "format/manifest.h"
+#include "format/shard_layout.h"
 #include "format/shard_writer.h"
 #include "query/search_testing.h"
 
@@ -218,6 +221,56 @@ TEST_F(HardeningCli, TruncatedOrMissingImagesAreRefusedWithOneLine) {
   EXPECT_EQ(
       r.err,
       "handdb query: " + loop.string() + ": too many levels of symbolic links (a symlink loop?)\n");
+}
+
+// A database of one shard whose metadata is `metadata_json`, after `patch` edited the shard's
+// bytes (checksums recomputed, the manifest made to match), with `rolls` in the manifest.
+template <typename F>
+std::string WriteDb(const fs::path& db, const std::string& metadata_json, uint32_t rolls, F patch) {
+  fs::create_directories(db);
+  const fs::path shard_path = db / "shard-00000.hdb";
+  ShardWriter w;
+  THROW_CHECK(w.Open(shard_path, ShardWriterOptions{metadata_json, {}}).ok());
+  for (uint32_t v = 0; v < 4; ++v) {
+    THROW_CHECK(
+        w.AddView(testing::SyntheticViewLabel(v, 4), testing::SyntheticEdgeSet(v, 300)).ok());
+  }
+  auto summary = w.Finish();
+  THROW_CHECK(summary.ok());
+  std::ifstream in(shard_path, std::ios::binary);
+  std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)),
+                             std::istreambuf_iterator<char>());
+  in.close();
+  patch(&bytes);
+  THROW_CHECK(shard::RewriteChecksums(bytes));
+  std::ofstream(shard_path, std::ios::binary)
+      .write(reinterpret_cast<const char*>(bytes.data()),
+             static_cast<std::streamsize>(bytes.size()));
+  summary->checksum = shard::ChecksumHex(shard::Checksum(bytes.data(), bytes.size()));
+  Manifest manifest;
+  manifest.tool_version = "hardening_cli_test";
+  manifest.rolls = rolls;
+  manifest.AddShard(*summary);
+  // Bypasses WriteManifest's own checks, so a manifest it would refuse can be tested too.
+  THROW_CHECK(WriteJsonFileAtomic(db / "manifest.json", ManifestToJson(manifest)).ok());
+  return db.string();
+}
+
+// Item 4: manifest rolls 24 over shards made with 48 passed validate; query searched 24 rolls.
+TEST_F(HardeningCli, ValidateCrossChecksTheManifestAgainstTheShards) {
+  const std::string db =
+      WriteDb(*dir_ / "rolls-db", R"({"unit": 0, "rolls": 48})", 24, [](std::vector<uint8_t>*) {});
+  const fs::path out = *dir_ / "validate.txt";
+  const CliRun r = Handdb("validate " + db, out.string());
+  EXPECT_EQ(r.code, 1) << r.err;
+  const std::string report = r.err;  // problems go to stderr, the summary to stdout
+  EXPECT_NE(report.find(db + "/shard-00000.hdb: rolls is 24 in the manifest but 48 in the "
+                             "shard's metadata (rolls)"),
+            std::string::npos)
+      << report << r.err;
+  const std::string good =
+      WriteDb(*dir_ / "rolls-ok", R"({"unit": 0, "rolls": 24})", 24, [](std::vector<uint8_t>*) {});
+  EXPECT_EQ(Handdb("validate " + good + " -q").code, 0);
 }
 
 }  // namespace

@@ -16,6 +16,7 @@
 #include "format/manifest.h"
 #include "format/roll.h"
 #include "format/shard_reader.h"
+#include "format/validator.h"
 #include "generator/plan/plan.h"
 
 namespace handdb {
@@ -235,6 +236,9 @@ TEST_F(ConvertDir, WritesOneShardPerUnitAndTheManifest) {
   EXPECT_EQ(manifest->num_virtual_views, 80u);
   ASSERT_EQ(manifest->shards.size(), 3u);
   EXPECT_EQ(manifest->metadata["shapes"].size(), 2u);
+  // What the converter writes passes validate, including the manifest-vs-shard cross-checks.
+  const ValidationReport report = ValidatePath(db);
+  EXPECT_TRUE(report.ok()) << (report.problems.empty() ? "" : report.problems[0].message);
   uint32_t expected_render = 0;
   for (uint32_t u = 0; u < 3; ++u) {
     EXPECT_EQ(manifest->shards[u].file, ShardFileName(u));
@@ -426,6 +430,9 @@ TEST_F(ConvertDir, BadInputWritesNothingAndNamesEveryFile) {
   ASSERT_TRUE(rerun.ok());
   EXPECT_EQ(rerun->shards_kept, 3u);
   EXPECT_EQ(rerun->skipped.size(), 3u);
+  // The skipped views the shards record are the manifest's (validate cross-checks them).
+  const ValidationReport report = ValidatePath(db);
+  EXPECT_TRUE(report.ok()) << (report.problems.empty() ? "" : report.problems[0].message);
   // Without --skip-bad the bad views are still bad: fails, and keeps the database untouched.
   const auto before = ReadDir(db);
   EXPECT_FALSE(ConvertRenderDir(run_, db, Options(2)).ok());
@@ -493,6 +500,8 @@ TEST_F(ConvertDir, OneUnitAtATimeEqualsTheWholeRun) {
   auto final_run = ConvertRenderDir(run_, db, Options(2));
   ASSERT_TRUE(final_run.ok()) << final_run.status().ToString();
   EXPECT_EQ(final_run->shards_kept, 3u);
+  const ValidationReport report = ValidatePath(db);
+  EXPECT_TRUE(report.ok()) << (report.problems.empty() ? "" : report.problems[0].message);
   ASSERT_TRUE(ConvertRenderDir(run_, root_ / "whole", Options(2)).ok());
   EXPECT_EQ(ReadDir(db), ReadDir(root_ / "whole"));
 }
