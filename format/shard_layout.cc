@@ -6,7 +6,9 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cmath>
 #include <sstream>
+#include <utility>
 
 #include "base/atomic_file.h"
 #include "base/hex.h"
@@ -188,12 +190,13 @@ void ProblemList::Add(const char* check,
                       uint64_t offset,
                       const std::string& what) {
   if (!Admit(check)) return;
-  problems_.push_back({code, offset, file_ + ": offset " + std::to_string(offset) + ": " + what});
+  problems_.push_back(
+      {code, offset, file_ + ": offset " + std::to_string(offset) + ": " + what, what});
 }
 
 void ProblemList::AddFileLevel(const char* check, StatusCode code, const std::string& what) {
   if (!Admit(check)) return;
-  problems_.push_back({code, 0, file_ + ": " + what});
+  problems_.push_back({code, 0, file_ + ": " + what, what});
 }
 
 Status ProblemList::FirstStatus() const {
@@ -750,6 +753,123 @@ void CheckSectionChecksums(std::span<const uint8_t> bytes,
                         ChecksumHex(computed));
       if (problems->done()) return;
     }
+  }
+}
+
+std::string FormatValue(double v) {
+  std::ostringstream os;
+  os.precision(9);
+  os << v;
+  return os.str();
+}
+
+namespace {
+
+// Name of the label float at `offset` inside a view record.
+std::string FieldName(size_t offset) {
+  auto idx = [&](size_t base) { return std::to_string((offset - base) / 4); };
+  if (offset < kViewOffViewDirection) return "joint_angles[" + idx(kViewOffJointAngles) + "]";
+  if (offset < kViewOffViewTheta) return "view_direction[" + idx(kViewOffViewDirection) + "]";
+  if (offset == kViewOffViewTheta) return "view_theta";
+  if (offset == kViewOffViewPhi) return "view_phi";
+  if (offset == kViewOffCameraRoll) return "camera_roll";
+  if (offset < kViewOffSourceDiameter) {
+    const size_t k = (offset - kViewOffKeypoints) / 4;
+    return "keypoints[" + std::to_string(k / 3) + "][" + std::to_string(k % 3) + "]";
+  }
+  if (offset == kViewOffSourceDiameter) return "source_diameter_px";
+  if (offset == kViewOffScale) return "scale";
+  return "source_centre_px[" + idx(kViewOffSourceCentre) + "]";
+}
+
+}  // namespace
+
+bool CheckLabelRanges(const uint8_t* rec,
+                      uint64_t at,
+                      uint64_t index,
+                      const JointLimits* limits,
+                      double tolerance,
+                      const std::string& limits_source,
+                      ProblemList* problems) {
+  // Built only for a message: the reader runs this over every view at open.
+  auto view = [index] { return "view " + std::to_string(index) + ": "; };
+  // Fast path for the common good record: an f32 is NaN or infinite iff its exponent bits are all
+  // set; OR-ing that over the record vectorises, and the message loop runs only on a bad one.
+  uint32_t any_non_finite = 0;
+  for (size_t o = kViewFloatsBegin; o < kViewFloatsEnd; o += 4) {
+    any_non_finite |= static_cast<uint32_t>((Load<uint32_t>(rec + o) & 0x7f800000u) == 0x7f800000u);
+  }
+  bool finite = true;
+  for (size_t o = kViewFloatsBegin; any_non_finite != 0 && o < kViewFloatsEnd; o += 4) {
+    const float v = Load<float>(rec + o);
+    if (!std::isfinite(v)) {
+      problems->Add("label-finite",
+                    StatusCode::kOutOfRange,
+                    at + o,
+                    view() + FieldName(o) + " is " + FormatValue(v) + " (not finite)");
+      if (problems->done()) return false;
+      finite = false;
+    }
+  }
+  for (auto [offset, field] : {std::pair{kViewOffRenderId, "render_id"},
+                               std::pair{kViewOffShapeId, "shape_id"},
+                               std::pair{kViewOffDirId, "dir_id"}}) {
+    if (Load<uint32_t>(rec + offset) == kInvalidRenderId) {
+      problems->Add("label-id",
+                    StatusCode::kOutOfRange,
+                    at,
+                    view() + field + " is 0xffffffff (the invalid id: never filled in)");
+      if (problems->done()) return finite;
+    }
+  }
+  if (!finite) return false;
+  for (int j = 0; j < kNumJointAngles; ++j) {
+    const double a = Load<float>(rec + kViewOffJointAngles + 4 * j);
+    const double lo = limits ? limits->min[j] : -kMaxAbsAngle;
+    const double hi = limits ? limits->max[j] : kMaxAbsAngle;
+    if (a < lo - tolerance || a > hi + tolerance) {
+      problems->Add("label-joints",
+                    StatusCode::kOutOfRange,
+                    at + kViewOffJointAngles + 4 * j,
+                    view() + "joint_angles[" + std::to_string(j) + "] = " + FormatValue(a) +
+                        " rad is outside [" + FormatValue(lo) + ", " + FormatValue(hi) + "] (" +
+                        (limits ? limits_source : "no hand model: +-2 pi") + ")");
+      if (problems->done()) return true;
+    }
+  }
+  const float roll = Load<float>(rec + kViewOffCameraRoll);
+  constexpr double kAngleTolerance = 1e-3;  // rad: a roll of exactly 2 pi in float rounds up
+  if (std::abs(roll) > kMaxAbsAngle + kAngleTolerance) {
+    problems->Add("label-roll",
+                  StatusCode::kOutOfRange,
+                  at + kViewOffCameraRoll,
+                  view() + "camera_roll is " + FormatValue(roll) + " rad, outside [-2 pi, 2 pi]");
+    if (problems->done()) return true;
+  }
+  for (int k = 0; k < kNumKeypoints; ++k) {
+    const uint8_t* kp = rec + kViewOffKeypoints + 12 * k;
+    const float x = Load<float>(kp), y = Load<float>(kp + 4), z = Load<float>(kp + 8);
+    if (std::abs(x) > kMaxAbsKeypointXY || std::abs(y) > kMaxAbsKeypointXY ||
+        std::abs(z) > kMaxAbsKeypointZ) {
+      problems->Add("label-keypoints",
+                    StatusCode::kOutOfRange,
+                    at + kViewOffKeypoints + 12 * k,
+                    view() + "keypoint " + std::to_string(k) + " (" + FormatValue(x) + ", " +
+                        FormatValue(y) + ", " + FormatValue(z) +
+                        ") px is outside |x|,|y| <= " + FormatValue(kMaxAbsKeypointXY) +
+                        ", |z| <= " + FormatValue(kMaxAbsKeypointZ));
+      if (problems->done()) return true;
+    }
+  }
+  return true;
+}
+
+void CheckViewLabels(std::span<const uint8_t> bytes, const Layout& layout, ProblemList* problems) {
+  THROW_CHECK(layout.structure_ok);
+  const RawSection& vs = layout.sections[layout.views];
+  for (uint64_t i = 0; i < vs.count && !problems->done(); ++i) {
+    const uint64_t at = vs.offset + i * layout.view_stride;
+    CheckLabelRanges(bytes.data() + at, at, i, nullptr, 0.0, "", problems);
   }
 }
 

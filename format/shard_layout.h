@@ -175,6 +175,9 @@ void SerializeSection(const RawSection& section, uint8_t* entry);
 // Checksum of the header bytes [0, header_size - 8).
 uint64_t HeaderChecksum(std::span<const uint8_t> header_bytes);
 
+// A float for messages: up to 9 significant digits ("2.5", "nan", "inf").
+std::string FormatValue(double v);
+
 // "metadata", "views", "points" or "unknown(0x...)".
 std::string SectionName(uint32_t type);
 
@@ -185,6 +188,7 @@ struct Problem {
   StatusCode code = StatusCode::kOk;
   uint64_t offset = 0;
   std::string message;
+  std::string what;  // the message without "<file>: offset <o>: "
 };
 
 class ProblemList {
@@ -236,6 +240,31 @@ Layout CheckLayout(std::span<const uint8_t> bytes, ProblemList* problems);
 void CheckSectionChecksums(std::span<const uint8_t> bytes,
                            const Layout& layout,
                            ProblemList* problems);
+
+// Label ranges (docs/format.md §3.2): keypoints |x|, |y| <= 384 px (as for points), |z| <= 2048 px;
+// angles (camera_roll, and joint angles without a hand model's limits) within +-2 pi.
+constexpr float kMaxAbsKeypointXY = 384.0f;
+constexpr float kMaxAbsKeypointZ = 2048.0f;
+constexpr double kMaxAbsAngle = 2 * 3.14159265358979323846;
+
+// The range checks of one view label that need only its record, shared by the reader's open
+// checks and the validator (issue 14 item 5: a NaN joint angle was served as `nan`): every f32
+// finite ("label-finite"), ids not 0xffffffff ("label-id"), each joint angle inside
+// [limits->min, limits->max] +- tolerance, or +-2 pi without limits ("label-joints"),
+// |camera_roll| <= 2 pi ("label-roll"), keypoints in range ("label-keypoints"). `at` is the
+// record's offset in the file, `index` the view's; `limits_source` names the limits in messages.
+// Returns false when a float is not finite (its value checks are then skipped).
+bool CheckLabelRanges(const uint8_t* record,
+                      uint64_t at,
+                      uint64_t index,
+                      const JointLimits* limits,
+                      double tolerance,
+                      const std::string& limits_source,
+                      ProblemList* problems);
+
+// CheckLabelRanges of every view (no hand model), for the reader's open. Needs a layout with
+// structure_ok.
+void CheckViewLabels(std::span<const uint8_t> bytes, const Layout& layout, ProblemList* problems);
 
 // Decodes the label fields of a view record (no range checks).
 ViewLabel DecodeViewLabel(const uint8_t* record);

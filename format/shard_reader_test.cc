@@ -4,6 +4,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <random>
 #include <set>
 
@@ -399,6 +400,71 @@ TEST(ShardReader, RejectsViewPointsOutsidePointsSection) {
   ASSERT_FALSE(bad.ok());
   EXPECT_EQ(bad.status().code(), StatusCode::kOutOfRange);
   EXPECT_NE(bad.status().message().find("view 4"), std::string::npos);
+}
+
+// Issue 14 item 5: a shard whose checksums were recomputed over a NaN joint angle or an infinite
+// keypoint opened and was queried, printing `nan` / JSON null. The open checks range-check every
+// label, with one line naming the shard, the offset, the view and the field.
+TEST(ShardReader, RefusesLabelsOutOfRange) {
+  const auto good = SampleShard("labels");
+  auto r = ShardReader::FromMemory(good, "s");
+  ASSERT_TRUE(r.ok());
+  uint64_t views = 0;
+  for (const auto& s : r->sections()) {
+    if (s.name == "views") views = s.offset;
+  }
+  struct Case {
+    size_t field;  // offset inside view 3's record
+    float value;
+    std::string message;
+  };
+  const uint64_t rec = views + 3 * shard::kViewRecordSize;
+  const std::vector<Case> cases = {
+      {shard::kViewOffJointAngles + 4 * 2,
+       std::nanf(""),
+       "view 3: joint_angles[2] is nan (not finite)"},
+      {shard::kViewOffKeypoints + 12 * 5 + 4,
+       std::numeric_limits<float>::infinity(),
+       "view 3: keypoints[5][1] is inf (not finite)"},
+      {shard::kViewOffJointAngles + 4 * 7,
+       7.0f,
+       "view 3: joint_angles[7] = 7 rad is outside [-6.28318531, 6.28318531] (no hand model: "
+       "+-2 pi)"},
+      {shard::kViewOffKeypoints + 12 * 20, -500.0f, "view 3: keypoint 20 (-500, "},
+      {shard::kViewOffCameraRoll, 9.0f, "view 3: camera_roll is 9 rad, outside [-2 pi, 2 pi]"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.message);
+    auto bytes = good;
+    shard::Store<float>(bytes.data() + rec + c.field, c.value);
+    ASSERT_TRUE(shard::RewriteChecksums(bytes));
+    auto bad = ShardReader::FromMemory(bytes, "bad.hdb");
+    ASSERT_FALSE(bad.ok());
+    EXPECT_EQ(bad.status().code(), StatusCode::kOutOfRange);
+    const std::string& m = bad.status().message();
+    const std::string prefix = "bad.hdb: offset " + std::to_string(rec + c.field) + ": ";
+    EXPECT_EQ(m.rfind(prefix + c.message, 0), 0u) << m;
+    EXPECT_EQ(m.find('\n'), std::string::npos) << m;
+  }
+  auto bytes = good;
+  shard::Store<uint32_t>(bytes.data() + rec + shard::kViewOffShapeId, kInvalidShapeId);
+  ASSERT_TRUE(shard::RewriteChecksums(bytes));
+  EXPECT_EQ(ShardReader::FromMemory(bytes, "bad.hdb").status().message(),
+            "bad.hdb: offset " + std::to_string(rec) +
+                ": view 3: shape_id is 0xffffffff (the invalid id: never filled in)");
+}
+
+TEST(ShardWriter, RefusesLabelsTheReaderWouldRefuse) {
+  auto dir = TempDir("writer-ranges");
+  ShardWriter w;
+  ASSERT_TRUE(w.Open(dir / "x.hdb", {}).ok());
+  ViewLabel far = testing::SyntheticLabel(0);
+  far.keypoints[2][0] = 400.0f;
+  const Status s = w.AddView(far, testing::SyntheticPoints(0, 4));
+  EXPECT_EQ(s.code(), StatusCode::kOutOfRange);
+  EXPECT_EQ(s.message().rfind((dir / "x.hdb").string() + ": view 0: keypoint 2 (400, ", 0), 0u)
+      << s.message();
+  fs::remove_all(dir);
 }
 
 TEST(ShardReader, RejectsTrailingBytes) {

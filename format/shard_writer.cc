@@ -1,5 +1,6 @@
 #include "format/shard_writer.h"
 
+#include <array>
 #include <cmath>
 #include <vector>
 
@@ -118,6 +119,16 @@ Status ShardWriter::AddView(const ViewLabel& label, std::span<const PointQ> poin
   }
   if (!AllFinite(label)) {
     return Status(StatusCode::kOutOfRange, where + ": label has a non-finite value");
+  }
+  // Nothing the reader's open checks would refuse is written.
+  std::array<uint8_t, kViewRecordSize> record{};
+  EncodeViewRecord(label, 0, 0, record.data());
+  ProblemList problems(w.file.target().string(), /*stop_at_first=*/true);
+  CheckLabelRanges(
+      record.data(), 0, w.view_table.size() / kViewRecordSize, nullptr, 0.0, "", &problems);
+  if (!problems.empty()) {
+    const Problem& p = problems.problems().front();
+    return Status(p.code, w.file.target().string() + ": " + p.what);
   }
   for (size_t i = 0; i < points.size(); ++i) {
     if (std::abs(points[i].x) > kMaxAbsPointCoord || std::abs(points[i].y) > kMaxAbsPointCoord) {

@@ -42,33 +42,7 @@ void ValidationReport::Append(ValidationReport other) {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
-constexpr float kMaxAbsKeypointXY = 384.0f;  // px, as for points
-constexpr float kMaxAbsKeypointZ = 2048.0f;  // px
-constexpr double kAngleTolerance = 1e-3;     // rad, for derived angles (theta, phi)
-
-// Name of the label float at `offset` inside a view record.
-std::string FieldName(size_t offset) {
-  auto idx = [&](size_t base) { return std::to_string((offset - base) / 4); };
-  if (offset < kViewOffViewDirection) return "joint_angles[" + idx(kViewOffJointAngles) + "]";
-  if (offset < kViewOffViewTheta) return "view_direction[" + idx(kViewOffViewDirection) + "]";
-  if (offset == kViewOffViewTheta) return "view_theta";
-  if (offset == kViewOffViewPhi) return "view_phi";
-  if (offset == kViewOffCameraRoll) return "camera_roll";
-  if (offset < kViewOffSourceDiameter) {
-    const size_t k = (offset - kViewOffKeypoints) / 4;
-    return "keypoints[" + std::to_string(k / 3) + "][" + std::to_string(k % 3) + "]";
-  }
-  if (offset == kViewOffSourceDiameter) return "source_diameter_px";
-  if (offset == kViewOffScale) return "scale";
-  return "source_centre_px[" + idx(kViewOffSourceCentre) + "]";
-}
-
-std::string Num(double v) {
-  std::ostringstream os;
-  os.precision(9);
-  os << v;
-  return os.str();
-}
+constexpr double kAngleTolerance = 1e-3;  // rad, for derived angles (theta, phi)
 
 // A shard's recorded joint limits and the hand model they came from (for messages).
 struct RecordedLimits {
@@ -153,59 +127,31 @@ void CheckLabel(const uint8_t* rec,
                 const ValidateOptions& options,
                 ProblemList* problems) {
   const std::string view = "view " + std::to_string(i) + ": ";
-  bool finite = true;
-  for (size_t o = kViewFloatsBegin; o < kViewFloatsEnd; o += 4) {
-    const float v = Load<float>(rec + o);
-    if (!std::isfinite(v)) {
-      problems->Add("label-finite",
-                    StatusCode::kOutOfRange,
-                    at + o,
-                    view + FieldName(o) + " is " + Num(v) + " (not finite)");
-      finite = false;
-    }
-  }
-  const ViewLabel l = DecodeViewLabel(rec);
-  for (auto [value, field] : {std::pair{l.render_id, "render_id"},
-                              std::pair{l.shape_id, "shape_id"},
-                              std::pair{l.dir_id, "dir_id"}}) {
-    if (value == kInvalidRenderId) {
-      problems->Add("label-id",
-                    StatusCode::kOutOfRange,
-                    at,
-                    view + field + " is 0xffffffff (the invalid id: never filled in)");
-    }
-  }
+  const bool finite = CheckLabelRanges(rec,
+                                       at,
+                                       i,
+                                       lim ? &lim->limits : nullptr,
+                                       lim ? options.joint_limit_tolerance : 0.0,
+                                       lim ? lim->source + " joint limits" : "",
+                                       problems);
   if (!finite) return;
-  for (int j = 0; j < kNumJointAngles; ++j) {
-    const double a = l.joint_angles[j];
-    const double lo = lim ? lim->limits.min[j] : -2 * kPi;
-    const double hi = lim ? lim->limits.max[j] : 2 * kPi;
-    const double tol = lim ? options.joint_limit_tolerance : 0.0;
-    if (a < lo - tol || a > hi + tol) {
-      problems->Add("label-joints",
-                    StatusCode::kOutOfRange,
-                    at + kViewOffJointAngles + 4 * j,
-                    view + "joint_angles[" + std::to_string(j) + "] = " + Num(a) +
-                        " rad is outside [" + Num(lo) + ", " + Num(hi) + "] (" +
-                        (lim ? lim->source + " joint limits" : "no hand model: +-2 pi") + ")");
-    }
-  }
+  const ViewLabel l = DecodeViewLabel(rec);
   const auto& d = l.view_direction;
   const double norm = std::sqrt(double{d[0]} * d[0] + double{d[1]} * d[1] + double{d[2]} * d[2]);
   if (std::abs(norm - 1.0) > 1e-3) {
     problems->Add("label-direction",
                   StatusCode::kOutOfRange,
                   at + kViewOffViewDirection,
-                  view + "view_direction (" + Num(d[0]) + ", " + Num(d[1]) + ", " + Num(d[2]) +
-                      ") has length " + Num(norm) + ", expected 1");
+                  view + "view_direction (" + FormatValue(d[0]) + ", " + FormatValue(d[1]) + ", " +
+                      FormatValue(d[2]) + ") has length " + FormatValue(norm) + ", expected 1");
   } else {
     const double theta = std::acos(std::clamp(d[2] / norm, -1.0, 1.0));
     if (std::abs(theta - l.view_theta) > kAngleTolerance) {
       problems->Add("label-direction",
                     StatusCode::kOutOfRange,
                     at + kViewOffViewTheta,
-                    view + "view_theta is " + Num(l.view_theta) + ", acos(view_direction.z) is " +
-                        Num(theta));
+                    view + "view_theta is " + FormatValue(l.view_theta) +
+                        ", acos(view_direction.z) is " + FormatValue(theta));
     }
     if (std::sin(theta) > 1e-2) {
       const double phi = std::atan2(double{d[1]}, double{d[0]});
@@ -214,27 +160,9 @@ void CheckLabel(const uint8_t* rec,
         problems->Add("label-direction",
                       StatusCode::kOutOfRange,
                       at + kViewOffViewPhi,
-                      view + "view_phi is " + Num(l.view_phi) +
-                          ", atan2(view_direction.y, view_direction.x) is " + Num(phi));
+                      view + "view_phi is " + FormatValue(l.view_phi) +
+                          ", atan2(view_direction.y, view_direction.x) is " + FormatValue(phi));
       }
-    }
-  }
-  if (std::abs(l.camera_roll) > 2 * kPi + kAngleTolerance) {
-    problems->Add("label-roll",
-                  StatusCode::kOutOfRange,
-                  at + kViewOffCameraRoll,
-                  view + "camera_roll is " + Num(l.camera_roll) + " rad, outside [-2 pi, 2 pi]");
-  }
-  for (int k = 0; k < kNumKeypoints; ++k) {
-    const auto& kp = l.keypoints[k];
-    if (std::abs(kp[0]) > kMaxAbsKeypointXY || std::abs(kp[1]) > kMaxAbsKeypointXY ||
-        std::abs(kp[2]) > kMaxAbsKeypointZ) {
-      problems->Add("label-keypoints",
-                    StatusCode::kOutOfRange,
-                    at + kViewOffKeypoints + 12 * k,
-                    view + "keypoint " + std::to_string(k) + " (" + Num(kp[0]) + ", " + Num(kp[1]) +
-                        ", " + Num(kp[2]) + ") px is outside |x|,|y| <= " + Num(kMaxAbsKeypointXY) +
-                        ", |z| <= " + Num(kMaxAbsKeypointZ));
     }
   }
   if (!(l.source_diameter_px > 0) || !(l.scale > 0) ||
@@ -243,10 +171,10 @@ void CheckLabel(const uint8_t* rec,
     problems->Add("label-scale",
                   StatusCode::kOutOfRange,
                   at + kViewOffSourceDiameter,
-                  view + "scale " + Num(l.scale) + " x source_diameter_px " +
-                      Num(l.source_diameter_px) + " = " +
-                      Num(double{l.scale} * l.source_diameter_px) + ", expected " +
-                      Num(kNormalisedDiameter) + " (both > 0)");
+                  view + "scale " + FormatValue(l.scale) + " x source_diameter_px " +
+                      FormatValue(l.source_diameter_px) + " = " +
+                      FormatValue(double{l.scale} * l.source_diameter_px) + ", expected " +
+                      FormatValue(kNormalisedDiameter) + " (both > 0)");
   }
 }
 

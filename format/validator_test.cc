@@ -82,8 +82,13 @@ TEST(Validator, ReportsEveryProblemWithOffsetAndRawValues) {
   shard::Store<int16_t>(bytes.data() + points, 7000);
   shard::Store<int16_t>(bytes.data() + points + 7 * 4 + 2, -6145);
   ASSERT_TRUE(shard::RewriteChecksums(bytes));
-  // The reader opens it (the structure is fine) ...
-  ASSERT_TRUE(ShardReader::FromMemory(bytes, "s").ok());
+  // The reader refuses it at the first problem (view 2's NaN: view 1's joint is inside +-2 pi,
+  // the reader knows no hand model) ...
+  EXPECT_NE(ShardReader::FromMemory(bytes, "s")
+                .status()
+                .message()
+                .find("view 2: keypoints[4][1] is nan (not finite)"),
+            std::string::npos);
   // ... the validator finds all five problems, and that the moved points no longer match the
   // coarse fields stored for views 0 and 1.
   auto report = ValidateShardBytes(bytes, "bad.hdb");

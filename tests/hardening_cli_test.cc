@@ -3,19 +3,22 @@
 // brackets in a config or manifest are refused with one line instead of a SIGSEGV (item 2); a FIFO
 // or /dev/zero as a manifest or shard is refused at once instead of blocking or growing memory
 // forever (item 7); a truncated PNG / JPEG, a directory or a symlink loop as the query image is one
-// line (items 6 and 8); validate cross-checks the manifest against the shards (item 4). Every
-// command runs under `timeout`, so a regression fails instead of hanging.
+// line (items 6 and 8); validate cross-checks the manifest against the shards (item 4); labels
+// out of range are refused at open (item 5). Every command runs under `timeout`, so a regression
+// fails instead of hanging.
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <limits>
 #include <opencv2/imgcodecs.hpp>
 #include <sstream>
 #include <string>
@@ -25,6 +28,7 @@
 #include "base/json_schema.h"
 #include "format/manifest.h"
 #include "format/shard_layout.h"
+#include "format/shard_reader.h"
 #include "format/shard_writer.h"
 #include "query/search_testing.h"
 
@@ -271,6 +275,43 @@ TEST_F(HardeningCli, ValidateCrossChecksTheManifestAgainstTheShards) {
   const std::string good =
       WriteDb(*dir_ / "rolls-ok", R"({"unit": 0, "rolls": 24})", 24, [](std::vector<uint8_t>*) {});
   EXPECT_EQ(Handdb("validate " + good + " -q").code, 0);
+}
+
+// Item 5: a NaN joint angle / an infinite keypoint under recomputed checksums was served by
+// query (exit 0, `nan` / JSON null). The reader's open checks refuse it: one line naming the shard.
+TEST_F(HardeningCli, LabelsOutOfRangeAreRefusedAtOpen) {
+  const std::string q = (*dir_ / "q.pgm").string();
+  for (const auto& [name, value] :
+       {std::pair{std::string("nan"), std::nanf("")},
+        std::pair{std::string("inf"), std::numeric_limits<float>::infinity()}}) {
+    SCOPED_TRACE(name);
+    const float v = value;
+    uint64_t field_at = 0;
+    const std::string db =
+        WriteDb(*dir_ / ("label-" + name), "{}", 12, [&](std::vector<uint8_t>* b) {
+          auto reader = ShardReader::FromMemory(*b, "s");
+          THROW_CHECK(reader.ok());
+          for (const auto& sec : reader->sections()) {
+            if (sec.name == "views") field_at = sec.offset + 1 * shard::kViewRecordSize;
+          }
+          field_at +=
+              name == "nan" ? shard::kViewOffJointAngles : shard::kViewOffKeypoints + 12 * 3;
+          shard::Store<float>(b->data() + field_at, v);
+        });
+    const std::string expected =
+        db + "/shard-00000.hdb: offset " + std::to_string(field_at) +
+        ": view 1: " + (name == "nan" ? "joint_angles[0] is nan" : "keypoints[3][0] is inf") +
+        " (not finite)";
+    // query opens the database; info the shard (on a database it reads only the manifest).
+    for (const std::string cmd : {"query", "info"}) {
+      SCOPED_TRACE(cmd);
+      const CliRun r = Handdb(cmd == "query" ? "query " + db + " " + q + " --input edges --json"
+                                             : "info " + db + "/shard-00000.hdb");
+      EXPECT_EQ(r.code, 1) << r.err;
+      EXPECT_NE(r.err.find(expected), std::string::npos) << r.err;
+      EXPECT_EQ(Lines(r.err), 1) << r.err;
+    }
+  }
 }
 
 }  // namespace
