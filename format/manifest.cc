@@ -79,6 +79,11 @@ namespace {
 
 // Meaning beyond the schema: totals add up, no shard listed twice.
 Status CheckConsistency(const Manifest& m, const std::string& what, StatusCode code) {
+  if (m.rolls > kMaxRolls) {
+    return Status(StatusCode::kOutOfRange,
+                  what + ": rolls is " + std::to_string(m.rolls) + ", more than the " +
+                      std::to_string(kMaxRolls) + " a database may have");
+  }
   uint64_t views = 0;
   std::set<std::string> files;
   for (const auto& s : m.shards) {

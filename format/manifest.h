@@ -22,6 +22,10 @@ namespace handdb {
 constexpr char kManifestFileName[] = "manifest.json";
 constexpr char kManifestFormat[] = "handdb-manifest";
 constexpr int kManifestVersion = 1;
+// Largest roll count R a manifest may give (config.schema.json's "rolls" maximum: 0.1 degree
+// steps). Readers size per-roll work by R: a manifest with rolls = 10^8 made `query` grow to 4 GB
+// and die with std::bad_alloc (issue 14 item 3); above this ReadManifest refuses it.
+constexpr uint32_t kMaxRolls = 3600;
 
 struct ManifestShard {
   std::string file;  // "shard-00007.hdb", relative to the database directory

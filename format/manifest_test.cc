@@ -70,6 +70,28 @@ TEST(Manifest, RefusesToWriteInconsistentTotals) {
   fs::remove_all(dir);
 }
 
+// Issue 14 item 3: rolls = 10^8 with a matching virtual-view count passed validate and `query`
+// then grew to 4 GB. The roll count is bounded (kMaxRolls) when a manifest is read or written.
+TEST(Manifest, RefusesMoreRollsThanTheLimit) {
+  auto dir = TempDir("rolls");
+  Manifest m = Sample();
+  m.rolls = kMaxRolls;
+  m.UpdateTotals();
+  ASSERT_TRUE(WriteManifest(dir, m).ok());
+  ASSERT_TRUE(ReadManifest(dir).ok());
+  m.rolls = 100000000;
+  m.UpdateTotals();
+  EXPECT_EQ(WriteManifest(dir, m).code(), StatusCode::kOutOfRange);
+  ASSERT_TRUE(WriteJsonFileAtomic(dir / "manifest.json", ManifestToJson(m)).ok());
+  auto read = ReadManifest(dir);
+  ASSERT_FALSE(read.ok());
+  EXPECT_EQ(read.status().code(), StatusCode::kOutOfRange);
+  EXPECT_EQ(read.status().message(),
+            (dir / "manifest.json").string() +
+                ": rolls is 100000000, more than the 3600 a database may have");
+  fs::remove_all(dir);
+}
+
 TEST(Manifest, ReadErrors) {
   auto dir = TempDir("errors");
   auto missing = ReadManifest(dir);

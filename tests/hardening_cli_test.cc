@@ -4,14 +4,16 @@
 // or /dev/zero as a manifest or shard is refused at once instead of blocking or growing memory
 // forever (item 7); a truncated PNG / JPEG, a directory or a symlink loop as the query image is one
 // line (items 6 and 8); validate cross-checks the manifest against the shards (item 4); labels
-// out of range are refused at open (item 5). Every command runs under `timeout`, so a regression
-// fails instead of hanging.
+// out of range are refused at open (item 5); rolls, image pixels and plan sizes are bounded
+// before allocating (item 3). Every command runs under `timeout`, so a regression fails instead of
+// hanging.
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -312,6 +314,53 @@ TEST_F(HardeningCli, LabelsOutOfRangeAreRefusedAtOpen) {
       EXPECT_EQ(Lines(r.err), 1) << r.err;
     }
   }
+}
+
+// Item 3: counts that size an allocation are bounded before allocating, one line each.
+TEST_F(HardeningCli, CountsThatSizeAllocationsAreBounded) {
+  const std::string q = (*dir_ / "q.pgm").string();
+  // A manifest with rolls = 10^8 and a matching virtual-view count.
+  const std::string db =
+      WriteDb(*dir_ / "many-rolls", "{}", 100000000, [](std::vector<uint8_t>*) {});
+  for (const std::string cmd : {"info", "validate", "query"}) {
+    SCOPED_TRACE(cmd);
+    const CliRun r = Handdb(cmd + " " + db + (cmd == "query" ? " " + q + " --input edges" : "") +
+                            (cmd == "validate" ? " -q" : ""));
+    EXPECT_EQ(r.code, 1) << r.err;
+    EXPECT_NE(r.err.find(db + "/manifest.json: rolls is 100000000, more than the 3600 a database "
+                              "may have"),
+              std::string::npos)
+        << r.err;
+    EXPECT_EQ(Lines(r.err), 1) << r.err;
+  }
+  // A 5 MB-class PNG claiming 20000 x 20000 pixels: refused from its header, nothing decoded.
+  const fs::path big = *dir_ / "big.png";
+  {
+    const cv::Mat tiny(8, 8, CV_8UC1, cv::Scalar(0));
+    ASSERT_TRUE(cv::imwrite(big.string(), tiny));
+    std::fstream f(big, std::ios::in | std::ios::out | std::ios::binary);
+    const char size[8] = {0, 0, 0x4e, 0x20, 0, 0, 0x4e, 0x20};  // IHDR width, height = 20000
+    f.seekp(16);
+    f.write(size, 8);
+  }
+  CliRun r = Handdb("query " + Db() + " " + big.string());
+  EXPECT_EQ(r.code, 1) << r.err;
+  EXPECT_EQ(r.err,
+            "handdb query: " + big.string() +
+                ": 20000 x 20000 pixels (PNG header), more than the 67108864 (64 Mpx) allowed\n");
+  // A schema-valid config {"method": "pairs", "k": 1000}: 4 GB in 22 s before; now refused at once.
+  const fs::path config = *dir_ / "pairs.json";
+  std::ofstream(config) << R"({"seed": 0, "shapes": {"method": "pairs", "k": 1000},
+                              "views": {"method": "fibonacci", "count": 86}})";
+  const auto start = std::chrono::steady_clock::now();
+  r = Handdb("plan " + config.string() + " -o " + (*dir_ / "pairs-plan.json").string());
+  EXPECT_EQ(r.code, 1) << r.err;
+  EXPECT_NE(r.err.find("pairs of 26 basic shapes with k = 1000 give 325000 shapes x 86 "
+                       "directions, more than the 250000 renders a plan may hold"),
+            std::string::npos)
+      << r.err;
+  EXPECT_EQ(Lines(r.err), 1) << r.err;
+  EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(10));
 }
 
 }  // namespace

@@ -40,14 +40,23 @@ struct SampledShapes {
   uint64_t clamped = 0;
 };
 
+// `num_dirs` directions: the shapes a method would give are counted and refused above
+// kMaxPlanRenders / num_dirs before any is sampled.
 Result<SampledShapes> SampleShapes(const json& spec,
                                    const fs::path& config_path,
                                    const HandModel& model,
-                                   uint64_t seed) {
+                                   uint64_t seed,
+                                   uint64_t num_dirs) {
   const std::string cfg = config_path.string();
   const std::string method = spec.at("method").get<std::string>();
   auto bad = [&](const std::string& msg) {
     return Status(StatusCode::kInvalidArgument, cfg + ": shapes: " + msg);
+  };
+  auto check_count = [&](uint64_t shapes, const std::string& how) -> Status {
+    if (shapes <= kMaxPlanRenders / num_dirs) return Status::Ok();
+    return bad(how + " give " + std::to_string(shapes) + " shapes x " + std::to_string(num_dirs) +
+               " directions, more than the " + std::to_string(kMaxPlanRenders) +
+               " renders a plan may hold");
   };
   auto allow_only = [&](std::initializer_list<const char*> keys) -> Status {
     for (const auto& [key, value] : spec.items()) {
@@ -84,6 +93,10 @@ Result<SampledShapes> SampleShapes(const json& spec,
       if (basic->size() < 2) return bad("pairs needs at least 2 basic shapes");
       const int k = spec.value("k", 1);
       const bool endpoints = spec.value("include_endpoints", false);
+      const uint64_t n = basic->size();
+      HANDDB_RETURN_IF_ERROR(check_count(
+          n * (n - 1) / 2 * static_cast<uint64_t>(k) + (endpoints ? n : 0),
+          "pairs of " + std::to_string(n) + " basic shapes with k = " + std::to_string(k)));
       out.samples = SamplePairs(*basic, k, endpoints);
       out.report["k"] = k;
       out.report["include_endpoints"] = endpoints;
@@ -99,6 +112,7 @@ Result<SampledShapes> SampleShapes(const json& spec,
     HANDDB_RETURN_IF_ERROR(
         allow_only({"library", "source", "components", "count", "sampling", "scale", "max_sigma"}));
     if (count == 0) return bad("pca needs 'count' (number of samples)");
+    HANDDB_RETURN_IF_ERROR(check_count(count, "pca count " + std::to_string(count) + " would"));
   } else {
     HANDDB_RETURN_IF_ERROR(allow_only({"library", "source", "components", "levels", "span"}));
     if (!spec.contains("levels")) return bad("grid needs 'levels'");
@@ -145,6 +159,12 @@ Result<SampledShapes> SampleShapes(const json& spec,
     } else {
       levels.assign(static_cast<size_t>(k), spec["levels"].get<int>());
     }
+    uint64_t total = 1;
+    for (int l : levels) {
+      total *= static_cast<uint64_t>(std::max(l, 1));
+      if (total > kMaxPlanRenders) break;  // no overflow: every level is <= 1000
+    }
+    HANDDB_RETURN_IF_ERROR(check_count(total, "grid levels would"));
     const double span = spec.value("span", 2.0);
     Result<std::vector<ShapeSample>> grid = SampleGrid(*basis, levels, span, limits, &out.clamped);
     if (!grid.ok()) return bad(grid.status().message());
@@ -261,12 +281,14 @@ Result<json> MakePlan(const json& config, const fs::path& config_path, PlanSumma
   Result<HandModel> model = LoadHandModel(*hand_path);
   if (!model.ok()) return model.status();
 
-  Result<SampledShapes> shapes = SampleShapes(config.at("shapes"), config_path, *model, seed);
-  if (!shapes.ok()) return shapes.status();
+  // Directions first: their count bounds the shapes (kMaxPlanRenders).
   json views_report = json::object();
   Result<std::vector<Eigen::Vector3d>> dirs =
       SampleViews(config.at("views"), config_path, &views_report);
   if (!dirs.ok()) return dirs.status();
+  Result<SampledShapes> shapes = SampleShapes(
+      config.at("shapes"), config_path, *model, seed, std::max<size_t>(dirs->size(), 1));
+  if (!shapes.ok()) return shapes.status();
 
   const json render_cfg = config.value("render", json::object());
   const int resolution = render_cfg.value("resolution", 256);
@@ -281,9 +303,10 @@ Result<json> MakePlan(const json& config, const fs::path& config_path, PlanSumma
   const uint64_t num_shapes = shapes->samples.size();
   const uint64_t num_dirs = dirs->size();
   const uint64_t num_renders = num_shapes * num_dirs;
-  if (num_renders > 100'000'000ull) {
+  if (num_renders > kMaxPlanRenders) {  // checked per method above; this guards a new method
     return Status(StatusCode::kInvalidArgument,
-                  cfg + ": " + std::to_string(num_renders) + " renders: more than 100,000,000");
+                  cfg + ": " + std::to_string(num_renders) + " renders, more than the " +
+                      std::to_string(kMaxPlanRenders) + " a plan may hold");
   }
 
   json plan = json::object();

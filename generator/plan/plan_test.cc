@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <chrono>
+
 #include "base/atomic_file.h"
 #include "base/json_schema.h"
 #include "base/testing.h"
@@ -139,6 +141,37 @@ TEST(Plan, RejectsBadConfigs) {
   r = MakePlan(c, kConfigPath);
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.status().code(), StatusCode::kInvalidArgument);
+}
+
+// Issue 14 item 3: {"method": "pairs", "k": 1000} made `plan` pass 4 GB in 22 s and a pca count of
+// 10^9 was std::bad_alloc. Both are refused from the counts, before sampling, in well under 1 s.
+TEST(Plan, RefusesMoreRendersThanAPlanMayHoldBeforeSampling) {
+  const auto start = std::chrono::steady_clock::now();
+  json c = SmallConfig();
+  c["shapes"] = {{"method", "pairs"}, {"k", 1000}};
+  auto r = MakePlan(c, kConfigPath);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(r.status().message().find(": shapes: pairs of 26 basic shapes with k = 1000 give "
+                                      "325000 shapes x 20 directions, more than the 250000 "
+                                      "renders a plan may hold"),
+            std::string::npos)
+      << r.status().message();
+  c["shapes"] = {{"method", "pca"}, {"components", 4}, {"count", 1000000000}};
+  r = MakePlan(c, kConfigPath);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find("pca count 1000000000 would give 1000000000 shapes x 20"),
+            std::string::npos)
+      << r.status().message();
+  c["shapes"] = {{"method", "grid"}, {"components", 4}, {"levels", 1000}};
+  r = MakePlan(c, kConfigPath);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find("grid levels would give "), std::string::npos)
+      << r.status().message();
+  // One shape over: 12,501 x 20 directions = 250,020 renders.
+  c["shapes"] = {{"method", "pca"}, {"components", 4}, {"count", 12501}};
+  EXPECT_FALSE(MakePlan(c, kConfigPath).ok());
+  EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(5));
 }
 
 TEST(Plan, ParseRejectsInconsistentPlans) {
