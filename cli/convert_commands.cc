@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <nlohmann/json.hpp>
@@ -10,6 +11,8 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <string>
+#include <string_view>
+#include <utility>
 #include <vector>
 
 #include "base/atomic_file.h"
@@ -275,6 +278,32 @@ void DrawSkeleton(cv::Mat& img, const ViewLabel& label, const cv::Point2d& origi
   }
 }
 
+// CRC-32 (ISO 3309, as PNG chunks use it) of `data`.
+uint32_t Crc32(std::string_view data) {
+  uint32_t crc = 0xFFFFFFFFu;
+  for (const char c : data) {
+    crc ^= static_cast<uint8_t>(c);
+    for (int k = 0; k < 8; ++k) crc = (crc >> 1) ^ (0xEDB88320u & (0u - (crc & 1u)));
+  }
+  return crc ^ 0xFFFFFFFFu;
+}
+
+// Inserts a tEXt chunk (keyword, Latin-1 text) right after the IHDR chunk of an encoded PNG, so
+// the caption travels with the file without touching a pixel.
+void AddPngText(std::vector<uint8_t>* png, const std::string& keyword, const std::string& text) {
+  constexpr size_t kAfterIhdr = 8 + 4 + 4 + 13 + 4;  // signature, length, type, data, CRC
+  if (png->size() < kAfterIhdr) return;
+  const std::string body = "tEXt" + keyword + '\0' + text;
+  std::string chunk;
+  const auto be32 = [&chunk](uint32_t v) {
+    for (int shift = 24; shift >= 0; shift -= 8) chunk.push_back(static_cast<char>(v >> shift));
+  };
+  be32(static_cast<uint32_t>(body.size() - 4));
+  chunk += body;
+  be32(Crc32(body));
+  png->insert(png->begin() + kAfterIhdr, chunk.begin(), chunk.end());
+}
+
 }  // namespace
 
 int RunShow(int argc, char** argv) {
@@ -288,7 +317,13 @@ int RunShow(int argc, char** argv) {
   app.add_option("DB", db_dir, "database directory")->required();
   app.add_option("--view", view, "canonical view index (manifest order)")->required();
   app.add_option("--roll", roll, "roll index 0..R-1")->capture_default_str();
+  bool draw_caption = false;
   app.add_flag("--keypoints", keypoints, "draw the 21 keypoints and the finger chains");
+  app.add_flag("--caption",
+               draw_caption,
+               "draw the caption (view, roll, shape, points) into the image; without it the "
+               "caption is only the PNG's Description text, so the image is a clean edge image "
+               "`handdb query` reads back");
   app.add_option("--size", size, "image size in px (the normalised frame is 192 px across)")
       ->check(CLI::Range(64, 4096))
       ->capture_default_str();
@@ -331,18 +366,25 @@ int RunShow(int argc, char** argv) {
                               "/" + std::to_string(db->num_rolls()) +
                               (shape.empty() ? "" : "  " + shape) + "  " +
                               std::to_string(db->points(v).size()) + " pts";
-  cv::putText(img,
-              caption,
-              cv::Point(6, 16),
-              cv::FONT_HERSHEY_SIMPLEX,
-              0.4,
-              cv::Scalar(160, 160, 160),
-              1,
-              cv::LINE_AA);
+  // Issue 14 item 11: the anti-aliased caption in the pixels made `query` take the image for a
+  // photo (and with --input edges the caption became edges), so the tool's own output did not
+  // find its own view. By default the pixels are the edges only (one grey level on black, what
+  // query's auto-detection calls an edge image) and the caption is PNG text.
+  if (draw_caption) {
+    cv::putText(img,
+                caption,
+                cv::Point(6, 16),
+                cv::FONT_HERSHEY_SIMPLEX,
+                0.4,
+                cv::Scalar(160, 160, 160),
+                1,
+                cv::LINE_AA);
+  }
   std::vector<uint8_t> png;
   if (!cv::imencode(".png", img, png)) {
     return Fail("show", Status(StatusCode::kIoError, out_path.string() + ": PNG encoding failed"));
   }
+  AddPngText(&png, "Description", "handdb show " + db_dir.string() + ": " + caption);
   Status s = WriteFileAtomic(
       out_path, std::string_view(reinterpret_cast<const char*>(png.data()), png.size()));
   if (!s.ok()) return Fail("show", s);

@@ -5,8 +5,8 @@
 // forever (item 7); a truncated PNG / JPEG, a directory or a symlink loop as the query image is one
 // line (items 6 and 8); validate cross-checks the manifest against the shards (item 4); labels
 // out of range are refused at open (item 5); rolls, image pixels and plan sizes are bounded
-// before allocating (item 3). Every command runs under `timeout`, so a regression fails instead of
-// hanging.
+// before allocating (item 3); `show`'s image finds its own view (item 11). Every command runs
+// under `timeout`, so a regression fails instead of hanging.
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
@@ -21,13 +21,16 @@
 #include <fstream>
 #include <iterator>
 #include <limits>
+#include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <set>
 #include <sstream>
 #include <string>
 #include <utility>
 #include <vector>
 
 #include "base/json_schema.h"
+#include "edges/normalise.h"
 #include "format/manifest.h"
 #include "format/shard_layout.h"
 #include "format/shard_reader.h"
@@ -361,6 +364,62 @@ TEST_F(HardeningCli, CountsThatSizeAllocationsAreBounded) {
       << r.err;
   EXPECT_EQ(Lines(r.err), 1) << r.err;
   EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(10));
+}
+
+// A synthetic hand's points as the converter stores a rendered view: rasterised into a 256 px
+// render (diameter ~134 px), then normalised from those pixels (hull-centroid centre, diameter
+// 192).
+std::vector<PointQ> AsConverted(const std::vector<PointQ>& points) {
+  std::set<std::pair<int32_t, int32_t>> pixels;  // (row, col): raster order
+  for (const PointQ& p : points) {
+    pixels.insert({static_cast<int32_t>(std::floor(128 + 0.7 * p.y / kPointScale)),
+                   static_cast<int32_t>(std::floor(128 + 0.7 * p.x / kPointScale))});
+  }
+  std::vector<EdgePixel> contour;
+  for (const auto& [row, col] : pixels) contour.push_back({col, row});
+  auto norm = ComputeNormalisation(contour);
+  THROW_CHECK(norm.ok());
+  return NormalisePixels(contour, *norm);
+}
+
+// Item 11: `show -o v.png` then `query DB v.png` said "no hand found" (the anti-aliased caption
+// made auto-detection pick "photo"). The tool's own image finds its own view at rank 1, D_c ~ 0.
+TEST_F(HardeningCli, ShowOutputQueriedFindsItsOwnView) {
+  const fs::path db = *dir_ / "show-db";
+  fs::create_directories(db);
+  Manifest manifest;
+  manifest.tool_version = "hardening_cli_test";
+  manifest.rolls = 12;
+  ShardWriter w;
+  ASSERT_TRUE(w.Open(db / "shard-00000.hdb", ShardWriterOptions{}).ok());
+  for (uint32_t v = 0; v < 8; ++v) {
+    ASSERT_TRUE(w.AddView(testing::SyntheticViewLabel(v, 4),
+                          AsConverted(testing::SyntheticHandEdges(v / 4, v % 4, 4, 600)))
+                    .ok());
+  }
+  auto summary = w.Finish();
+  ASSERT_TRUE(summary.ok());
+  manifest.AddShard(*summary);
+  ASSERT_TRUE(WriteManifest(db, manifest).ok());
+  const fs::path png = *dir_ / "v.png";
+  CliRun r = Handdb("show " + db.string() + " --view 5 --roll 3 -o " + png.string());
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(Slurp(png).find("tEXtDescription"), std::string::npos);  // the caption, as text
+  const fs::path out = *dir_ / "v.json";
+  r = Handdb("query " + db.string() + " " + png.string() + " --json --top 3", out.string());
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_EQ(r.err, "");  // no decoder warning about the text chunk either
+  const auto result = nlohmann::json::parse(Slurp(out));
+  EXPECT_EQ(result["input_kind"], "edges");
+  const auto& best = result["matches"][0];
+  EXPECT_EQ(best["view_id"], 5) << best.dump();
+  EXPECT_EQ(best["roll"], 3) << best.dump();
+  EXPECT_LT(best["distance"].get<double>(), 1.0) << best.dump();
+  EXPECT_GT(result["matches"][1]["distance"].get<double>(), 2 * best["distance"].get<double>());
+  // --caption still draws it for people (and is then not meant as a query input).
+  EXPECT_EQ(
+      Handdb("show " + db.string() + " --view 5 --caption -o " + (*dir_ / "c.png").string()).code,
+      0);
 }
 
 }  // namespace
