@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "base/atomic_file.h"
+#include "base/directory_lock.h"
 #include "base/json_schema.h"
 #include "base/thread_pool.h"
 #include "cli/cli_util.h"
@@ -113,6 +114,15 @@ int RunConvert(int argc, char** argv) {
   if (int rc = ParseArgs(app, argc, argv); rc >= 0) return rc;
   options.edges = edges.Get();
   options.progress = !quiet;
+  // One writer per database directory (issue 14 item 10).
+  std::error_code ec;
+  fs::create_directories(db_dir, ec);
+  if (ec) {
+    return Fail("convert",
+                Status(StatusCode::kIoError, db_dir.string() + ": cannot create: " + ec.message()));
+  }
+  auto lock = DirectoryLock::Acquire(db_dir);
+  if (!lock.ok()) return Fail("convert", lock.status());
   std::vector<SkippedView> bad;
   auto summary = ConvertRenderDir(render_dir, db_dir, options, &bad);
   if (!summary.ok()) {
@@ -165,15 +175,27 @@ int RunGenerate(int argc, char** argv) {
   // another database).
   stage("[1/4] plan");
   std::error_code ec;
-  fs::create_directories(work_dir, ec);
-  if (ec)
-    return Fail("generate", Status(StatusCode::kIoError, work_dir.string() + ": " + ec.message()));
   const fs::path plan_path = work_dir / "plan.json";
+  // Held until the run ends: a second generate or convert into this --out (or --work) is refused
+  // with one line instead of rendering everything again beside this one (issue 14 item 10).
+  std::vector<DirectoryLock> locks;
   {
+    // The plan first, so a bad config leaves no directory behind (issue 14 item 12).
     auto config = ReadJsonFile(config_path, "config.schema.json");
     if (!config.ok()) return Fail("generate", config.status());
     auto plan = MakePlan(*config, config_path);
     if (!plan.ok()) return Fail("generate", plan.status());
+    for (const fs::path& dir : {db_dir, work_dir}) {
+      fs::create_directories(dir, ec);
+      if (ec) {
+        return Fail(
+            "generate",
+            Status(StatusCode::kIoError, dir.string() + ": cannot create: " + ec.message()));
+      }
+      auto lock = DirectoryLock::Acquire(dir);
+      if (!lock.ok()) return Fail("generate", lock.status());
+      locks.push_back(std::move(lock).value());
+    }
     if (fs::exists(plan_path, ec)) {
       auto existing = ReadJsonFile(plan_path, "");
       if (!existing.ok()) return Fail("generate", existing.status());

@@ -5,8 +5,9 @@
 // forever (item 7); a truncated PNG / JPEG, a directory or a symlink loop as the query image is one
 // line (items 6 and 8); validate cross-checks the manifest against the shards (item 4); labels
 // out of range are refused at open (item 5); rolls, image pixels and plan sizes are bounded
-// before allocating (item 3); `show`'s image finds its own view (item 11). Every command runs
-// under `timeout`, so a regression fails instead of hanging.
+// before allocating (item 3); `show`'s image finds its own view (item 11); a second writer is
+// refused and a bad config leaves no directory (items 10, 12). Every command runs under
+// `timeout`, so a regression fails instead of hanging.
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
@@ -29,6 +30,7 @@
 #include <utility>
 #include <vector>
 
+#include "base/directory_lock.h"
 #include "base/json_schema.h"
 #include "edges/normalise.h"
 #include "format/manifest.h"
@@ -420,6 +422,36 @@ TEST_F(HardeningCli, ShowOutputQueriedFindsItsOwnView) {
   EXPECT_EQ(
       Handdb("show " + db.string() + " --view 5 --caption -o " + (*dir_ / "c.png").string()).code,
       0);
+}
+
+// Item 10: two `generate` runs into one --out both rendered everything, unlocked. The output
+// directory is flock'ed: a second writer (generate or convert) is refused at once with one line.
+// Item 12: a bad config left an empty OUT/render/ behind.
+TEST_F(HardeningCli, SecondWriterIsRefusedAndABadConfigLeavesNoDirectory) {
+  const fs::path out = *dir_ / "locked-out";
+  fs::create_directories(out);
+  {
+    auto held = DirectoryLock::Acquire(out);  // as a running generate holds it
+    ASSERT_TRUE(held.ok());
+    const std::string busy = out.string() +
+                             ": another handdb process is writing here (its lock is held); wait "
+                             "for it to finish or use another directory\n";
+    CliRun r = Handdb("generate configs/demo.json -q --out " + out.string());
+    EXPECT_EQ(r.code, 1) << r.err;
+    EXPECT_EQ(r.err, "handdb generate: " + busy);
+    EXPECT_FALSE(fs::exists(out / "render" / "plan.json"));  // nothing written beside the owner
+    r = Handdb("convert " + (*dir_ / "no-render").string() + " -q --out " + out.string());
+    EXPECT_EQ(r.code, 1) << r.err;
+    EXPECT_EQ(r.err, "handdb convert: " + busy);
+  }
+  const fs::path config = *dir_ / "bad-pairs.json";
+  std::ofstream(config) << R"({"seed": 0, "shapes": {"method": "pairs", "k": 1000},
+                              "views": {"method": "fibonacci", "count": 86}})";
+  const fs::path fresh = *dir_ / "never-made";
+  const CliRun r = Handdb("generate " + config.string() + " -q --out " + fresh.string());
+  EXPECT_EQ(r.code, 1) << r.err;
+  EXPECT_EQ(Lines(r.err), 1) << r.err;
+  EXPECT_FALSE(fs::exists(fresh));
 }
 
 }  // namespace
