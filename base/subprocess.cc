@@ -4,6 +4,7 @@
 #include <poll.h>
 #include <signal.h>
 #include <spawn.h>
+#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -24,6 +25,83 @@ void CloseFd(int* fd) {
   *fd = -1;
 }
 
+// Spawn with die_with_parent: fork, then in the child (async-signal-safe calls only) its own
+// group, PR_SET_PDEATHSIG, default signals, the standard streams and exec. An exec failure comes
+// back through a close-on-exec pipe as the child's errno.
+Result<pid_t> ForkExec(const std::vector<std::string>& argv,
+                       const SpawnOptions& options,
+                       int out_fd,
+                       int err_fd) {
+  std::vector<char*> args;
+  for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
+  args.push_back(nullptr);
+  const int devnull = ::open("/dev/null", O_RDONLY | O_CLOEXEC);
+  int log_fd = -1;
+  if (out_fd < 0) {
+    log_fd = ::open(options.log.c_str(), O_WRONLY | O_APPEND | O_CREAT | O_CLOEXEC, 0644);
+    if (log_fd < 0) {
+      const int e = errno;
+      if (devnull >= 0) ::close(devnull);
+      return Status(StatusCode::kIoError, options.log.string() + ": " + std::strerror(e));
+    }
+    out_fd = err_fd = log_fd;
+  }
+  int report[2] = {-1, -1};
+  if (devnull < 0 || ::pipe2(report, O_CLOEXEC) != 0) {
+    const int e = errno;
+    for (int fd : {devnull, log_fd}) {
+      if (fd >= 0) ::close(fd);
+    }
+    return Status(StatusCode::kIoError, argv[0] + ": cannot start: " + std::strerror(e));
+  }
+  const pid_t parent = ::getpid();
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    if (options.own_process_group) ::setpgid(0, 0);
+    ::prctl(PR_SET_PDEATHSIG, SIGKILL);
+    if (::getppid() != parent) _exit(127);  // the parent died before the line above
+    struct sigaction dfl {};
+    dfl.sa_handler = SIG_DFL;
+    ::sigaction(SIGINT, &dfl, nullptr);
+    ::sigaction(SIGTERM, &dfl, nullptr);
+    sigset_t none;
+    sigemptyset(&none);
+    ::sigprocmask(SIG_SETMASK, &none, nullptr);
+    ::dup2(devnull, STDIN_FILENO);
+    ::dup2(out_fd, STDOUT_FILENO);
+    ::dup2(err_fd, STDERR_FILENO);
+    ::execvp(args[0], args.data());
+    const int e = errno;
+    (void)!::write(report[1], &e, sizeof(e));
+    _exit(127);
+  }
+  const int fork_errno = errno;
+  ::close(report[1]);
+  for (int fd : {devnull, log_fd}) {
+    if (fd >= 0) ::close(fd);
+  }
+  if (pid < 0) {
+    ::close(report[0]);
+    return Status(StatusCode::kExternalToolFailed,
+                  argv[0] + ": cannot start: " + std::strerror(fork_errno));
+  }
+  // Also here, so a Kill() right after Spawn reaches the group whichever side runs first.
+  if (options.own_process_group) ::setpgid(pid, pid);
+  int exec_errno = 0;
+  ssize_t n = 0;
+  do {
+    n = ::read(report[0], &exec_errno, sizeof(exec_errno));
+  } while (n < 0 && errno == EINTR);
+  ::close(report[0]);
+  if (n == static_cast<ssize_t>(sizeof(exec_errno))) {
+    int status = 0;
+    ::waitpid(pid, &status, 0);
+    return Status(exec_errno == ENOENT ? StatusCode::kNotFound : StatusCode::kExternalToolFailed,
+                  argv[0] + ": cannot start: " + std::strerror(exec_errno));
+  }
+  return pid;
+}
+
 }  // namespace
 
 Result<Subprocess> Subprocess::Spawn(const std::vector<std::string>& argv,
@@ -38,6 +116,22 @@ Result<Subprocess> Subprocess::Spawn(const std::vector<std::string>& argv,
       if (fd >= 0) ::close(fd);
     }
     return Status(StatusCode::kIoError, argv[0] + ": pipe: " + std::strerror(e));
+  }
+  if (options.die_with_parent) {
+    Result<pid_t> pid = ForkExec(argv, options, pipes ? out_pipe[1] : -1, pipes ? err_pipe[1] : -1);
+    CloseFd(&out_pipe[1]);
+    CloseFd(&err_pipe[1]);
+    if (!pid.ok()) {
+      CloseFd(&out_pipe[0]);
+      CloseFd(&err_pipe[0]);
+      return pid.status();
+    }
+    Subprocess p;
+    p.pid_ = *pid;
+    p.group_ = options.own_process_group;
+    p.out_fd_ = out_pipe[0];
+    p.err_fd_ = err_pipe[0];
+    return p;
   }
   posix_spawn_file_actions_t actions;
   posix_spawn_file_actions_init(&actions);
@@ -191,6 +285,7 @@ Result<RunResult> RunOnce(const std::vector<std::string>& argv, const RunOptions
   SpawnOptions spawn;
   spawn.log = options.log;
   spawn.own_process_group = options.own_process_group;
+  spawn.die_with_parent = options.die_with_parent;
   auto child = Subprocess::Spawn(argv, spawn);
   if (!child.ok()) return child.status();
   RunResult result;

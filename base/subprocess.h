@@ -20,6 +20,11 @@ struct SpawnOptions {
   // both are appended to this file.
   std::filesystem::path log;
   bool own_process_group = true;
+  // The child is SIGKILLed when this process dies, however it dies (PR_SET_PDEATHSIG; it survives
+  // the child's own exec). Without it, a `kill -9` of generate left Blender workers, each in its
+  // own process group, rendering on (issue 14 item 9). Started with fork + exec instead of
+  // posix_spawn, which cannot set it; only async-signal-safe calls run between the two.
+  bool die_with_parent = false;
 };
 
 // A started child. Movable; the destructor does not wait or kill (call Kill + Wait).
@@ -60,7 +65,8 @@ int ExitCodeOf(int wait_status);
 struct RunOptions {
   std::filesystem::path log;  // empty: capture stdout and stderr into RunResult::out / err
   bool own_process_group = true;
-  double timeout_seconds = 0;  // > 0: the attempt is killed after this long (timed_out)
+  bool die_with_parent = false;  // as SpawnOptions::die_with_parent
+  double timeout_seconds = 0;    // > 0: the attempt is killed after this long (timed_out)
   // Polled while the child runs: when any is true the child is killed (SIGTERM, then SIGKILL
   // after 5 s) and the run returns with cancelled set; no retry follows.
   std::vector<const std::atomic<bool>*> stop_flags;

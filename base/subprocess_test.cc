@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -9,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <string>
 #include <thread>
 
 namespace handdb {
@@ -112,6 +114,90 @@ TEST(Subprocess, SpawnAndPoll) {
   while (!p->TryWait(&status)) std::this_thread::sleep_for(std::chrono::milliseconds(10));
   EXPECT_EQ(ExitCodeOf(status), 0);
   EXPECT_EQ(ReadAll(log), "hi\n");
+  fs::remove(log);
+}
+
+// Whether `pid` is still running (absent or a zombie both count as gone).
+bool Running(pid_t pid) {
+  std::ifstream stat("/proc/" + std::to_string(pid) + "/stat");
+  std::string line;
+  if (!std::getline(stat, line)) return false;
+  const size_t paren = line.rfind(')');
+  return paren != std::string::npos && paren + 2 < line.size() && line[paren + 2] != 'Z';
+}
+
+// A helper process spawns `sleep 60` (with or without die_with_parent), reports its pid, then is
+// SIGKILLed as `kill -9` of generate would be; returns the sleeper's pid.
+pid_t SpawnFromAKilledParent(bool die_with_parent) {
+  int fds[2];
+  THROW_CHECK(::pipe(fds) == 0);
+  const pid_t helper = ::fork();
+  if (helper == 0) {
+    SpawnOptions options;
+    options.die_with_parent = die_with_parent;
+    options.log = "/dev/null";
+    auto child = Subprocess::Spawn({"sleep", "60"}, options);
+    const pid_t pid = child.ok() ? child->pid() : -1;
+    (void)!::write(fds[1], &pid, sizeof(pid));
+    ::pause();
+    _exit(0);
+  }
+  ::close(fds[1]);
+  pid_t sleeper = -1;
+  THROW_CHECK(::read(fds[0], &sleeper, sizeof(sleeper)) == sizeof(sleeper));
+  ::close(fds[0]);
+  ::kill(helper, SIGKILL);
+  ::waitpid(helper, nullptr, 0);
+  return sleeper;
+}
+
+// Issue 14 item 9: after kill -9 of generate, its Blender workers (each in its own process group)
+// kept rendering. With die_with_parent they die with it.
+TEST(Subprocess, DieWithParentKillsTheChildWhenTheParentIsKilled) {
+  const pid_t tied = SpawnFromAKilledParent(true);
+  ASSERT_GT(tied, 0);
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+  while (Running(tied) && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  EXPECT_FALSE(Running(tied));
+  // Without it the orphan lives on (what the option fixes); clean it up.
+  const pid_t orphan = SpawnFromAKilledParent(false);
+  ASSERT_GT(orphan, 0);
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  EXPECT_TRUE(Running(orphan));
+  ::kill(orphan, SIGKILL);
+}
+
+TEST(Subprocess, DieWithParentSpawnsLikeTheOthers) {
+  // Output, exit code, own process group, and the same errors as posix_spawn.
+  RunOptions options;
+  options.die_with_parent = true;
+  auto r = RunSubprocess({"sh", "-c", "echo out; echo err >&2; exit 3"}, options);
+  ASSERT_TRUE(r.ok()) << r.status().message();
+  EXPECT_EQ(r->exit_code, 3);
+  EXPECT_EQ(r->out, "out\n");
+  EXPECT_EQ(r->err, "err\n");
+  options.timeout_seconds = 0.5;
+  const auto start = std::chrono::steady_clock::now();
+  r = RunSubprocess({"sh", "-c", "sleep 30 & sleep 30"}, options);
+  ASSERT_TRUE(r.ok());
+  EXPECT_TRUE(r->timed_out);
+  EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(10));
+  SpawnOptions spawn;
+  spawn.die_with_parent = true;
+  auto missing = Subprocess::Spawn({"/no/such/program"}, spawn);
+  ASSERT_FALSE(missing.ok());
+  EXPECT_EQ(missing.status().code(), StatusCode::kNotFound);
+  EXPECT_EQ(missing.status().message(),
+            "/no/such/program: cannot start: No such file or directory");
+  const fs::path log = TempLog("tied");
+  spawn.log = log;
+  auto p = Subprocess::Spawn({"sh", "-c", "echo hi; echo there >&2"}, spawn);
+  ASSERT_TRUE(p.ok());
+  EXPECT_EQ(::getpgid(p->pid()), p->pid());
+  EXPECT_EQ(ExitCodeOf(p->Wait()), 0);
+  EXPECT_EQ(ReadAll(log), "hi\nthere\n");
   fs::remove(log);
 }
 

@@ -158,6 +158,13 @@ int RunGenerate(int argc, char** argv) {
                  "all cores)")
       ->check(CLI::PositiveNumber);
   app.add_option("--blender", blender, "Blender executable (default: $HANDDB_BLENDER or PATH)");
+  RenderOptions render;
+  app.add_option("--stall-timeout",
+                 render.stall_timeout_seconds,
+                 "kill a Blender worker (and retry its unit) when no render of its unit finished "
+                 "for this many seconds (0: never)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   app.add_flag("--skip-bad", convert.skip_bad, "leave bad views out instead of failing");
   edges.Add(app, kDepthJumpHelp);
   app.add_flag("--quiet,-q", quiet, "no progress display");
@@ -223,7 +230,6 @@ int RunGenerate(int argc, char** argv) {
 
   // 2. Render.
   stage("[2/4] render");
-  RenderOptions render;
   render.jobs = jobs;
   render.blender = blender;
   render.progress = !quiet;

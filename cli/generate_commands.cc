@@ -97,6 +97,12 @@ int RunRender(int argc, char** argv) {
                  options.frames_per_process,
                  "restart Blender every N renders within a unit (0: script default)")
       ->check(CLI::Range(0, 1000000));
+  app.add_option("--stall-timeout",
+                 options.stall_timeout_seconds,
+                 "kill a Blender worker (and retry its unit) when no render of its unit finished "
+                 "for this many seconds (0: never)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   app.add_flag("-q,--quiet", quiet, "no progress bar");
   app.add_flag("--json", as_json, "print the summary as JSON on stdout");
   if (int rc = ParseArgs(app, argc, argv); rc >= 0) return rc;

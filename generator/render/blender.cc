@@ -86,12 +86,16 @@ Result<Subprocess> BlenderLauncher::Spawn(const std::vector<std::string>& script
   SpawnOptions options;
   options.log = log;
   options.own_process_group = true;
+  // A killed handdb leaves no Blender rendering on (issue 14 item 9).
+  options.die_with_parent = true;
   return Subprocess::Spawn(Argv(script_args), options);
 }
 
 Result<RunResult> BlenderLauncher::Run(const std::vector<std::string>& script_args,
                                        const RunOptions& options) const {
-  return RunSubprocess(Argv(script_args), options);
+  RunOptions tied = options;
+  tied.die_with_parent = true;
+  return RunSubprocess(Argv(script_args), tied);
 }
 
 }  // namespace handdb

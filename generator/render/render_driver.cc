@@ -8,6 +8,7 @@
 #include <deque>
 #include <fstream>
 #include <map>
+#include <sstream>
 #include <thread>
 
 #include "base/atomic_file.h"
@@ -90,6 +91,10 @@ struct Worker {
 struct RunningWorker {
   Worker worker;
   Subprocess process;
+  // For RenderOptions::stall_timeout_seconds: when the unit's finished count last grew.
+  std::chrono::steady_clock::time_point last_progress;
+  uint64_t finished = 0;
+  bool stalled = false;  // killed as hung
 };
 
 // Everything RenderPlan checks before the first render.
@@ -225,11 +230,13 @@ class RenderRun {
       int status = 0;
       if (auto it = ReapOne(&status); it != running_.end()) {
         const Worker w = it->second.worker;
+        const bool stalled = it->second.stalled;
         running_.erase(it);
-        HANDDB_RETURN_IF_ERROR(Finished(w, status));
+        HANDDB_RETURN_IF_ERROR(Finished(w, status, stalled));
         continue;
       }
       PollProgress();
+      KillStalledWorkers();
       std::this_thread::sleep_for(std::chrono::milliseconds(100));
     }
     PollProgress();
@@ -271,7 +278,11 @@ class RenderRun {
       Result<Subprocess> process = inputs_.blender.Spawn(args, log);
       if (!process.ok()) return Stop(process.status());
       const pid_t pid = process->pid();
-      running_.emplace(pid, RunningWorker{w, std::move(process).value()});
+      running_.emplace(pid,
+                       RunningWorker{w,
+                                     std::move(process).value(),
+                                     std::chrono::steady_clock::now(),
+                                     work_->counted[w.unit]});
     }
     return Status::Ok();
   }
@@ -285,8 +296,26 @@ class RenderRun {
     return running_.end();
   }
 
+  // Issue 14 item 9: a hung Blender (no render finished for stall_timeout_seconds) is killed,
+  // group and all, and its unit retried, instead of holding the run forever.
+  void KillStalledWorkers() {
+    if (options_.stall_timeout_seconds <= 0) return;
+    const auto now = std::chrono::steady_clock::now();
+    for (auto& [pid, r] : running_) {
+      const uint64_t finished = work_->counted[r.worker.unit];
+      if (finished > r.finished) {
+        r.finished = finished;
+        r.last_progress = now;
+      } else if (!r.stalled && std::chrono::duration<double>(now - r.last_progress).count() >
+                                   options_.stall_timeout_seconds) {
+        r.process.Kill(SIGKILL);
+        r.stalled = true;
+      }
+    }
+  }
+
   // A worker exited: the unit is done, retried, or the run fails.
-  Status Finished(const Worker& w, int status) {
+  Status Finished(const Worker& w, int status, bool stalled) {
     std::error_code ec;
     const bool done = fs::exists(out_dir_ / "units" / UnitDirName(w.unit) / "DONE", ec);
     if (WIFEXITED(status) && WEXITSTATUS(status) == 0 && done) {
@@ -298,6 +327,11 @@ class RenderRun {
     const fs::path log = LogPath(w.unit);
     std::string why = DescribeExitStatus(status);
     if (WIFEXITED(status) && WEXITSTATUS(status) == 0) why = "exit code 0 but no DONE marker";
+    if (stalled) {
+      std::ostringstream seconds;
+      seconds << options_.stall_timeout_seconds;
+      why = "no render finished in " + seconds.str() + " s: killed as hung";
+    }
     if (w.attempt <= options_.max_retries) {
       std::ofstream(log, std::ios::app)
           << "== handdb render: attempt " << w.attempt << " failed (" << why << "); retrying\n";
@@ -366,6 +400,7 @@ bool RenderOptions::Check() const {
   CHECK_OPTION_LE(jobs, 256);
   CHECK_OPTION_GE(max_retries, 0);
   CHECK_OPTION_GE(frames_per_process, 0);
+  CHECK_OPTION_GE(stall_timeout_seconds, 0.0);
   return true;
 }
 

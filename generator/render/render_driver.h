@@ -29,9 +29,13 @@ struct RenderOptions {
   std::filesystem::path scripts_dir;  // empty: $HANDDB_SCRIPTS_DIR, else RepoRoot()/blender_scripts
   int max_retries = 2;                // extra attempts for a unit whose worker failed
   int frames_per_process = 0;         // passed as --frames-per-process when > 0
-  std::vector<uint32_t> units;        // render only these units (empty: all)
-  bool progress = true;               // progress bar on stderr
-  bool handle_signals = true;         // install SIGINT/SIGTERM handlers for the run
+  // A worker whose unit gains no finished render for this long is taken for hung: its process
+  // group is SIGKILLed and the attempt fails (retried like a crash). 0: wait forever. A render of
+  // the paper's views takes seconds; Blender's start well under a minute.
+  double stall_timeout_seconds = 600;
+  std::vector<uint32_t> units;                // render only these units (empty: all)
+  bool progress = true;                       // progress bar on stderr
+  bool handle_signals = true;                 // install SIGINT/SIGTERM handlers for the run
   const std::atomic<bool>* cancel = nullptr;  // optional external cancel flag
   // Called on the driver's thread as each unit completes in this run (e.g. to convert it while
   // the others render). Not called for units skipped as already DONE.

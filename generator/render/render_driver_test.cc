@@ -208,6 +208,25 @@ TEST_F(RenderDriverTest, CancelKillsWorkersQuickly) {
   EXPECT_LT(seconds, 10.0);
 }
 
+// Issue 14 item 9: a hung Blender held the run forever. A worker whose unit finishes no render
+// for stall_timeout_seconds is killed and its unit retried; the last failure names the cause.
+TEST_F(RenderDriverTest, HungWorkerIsKilledAfterTheStallTimeout) {
+  ::setenv("FAKE_BLENDER_MODE", "hang", 1);
+  options_.stall_timeout_seconds = 0.5;
+  options_.max_retries = 1;
+  const auto start = std::chrono::steady_clock::now();
+  auto r = RenderPlan(dir_ / "plan.json", dir_ / "run", options_);
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), StatusCode::kExternalToolFailed);
+  EXPECT_NE(r.status().message().find("failed after 2 attempts (no render finished in 0.5 s: "
+                                      "killed as hung)"),
+            std::string::npos)
+      << r.status().message();
+  EXPECT_LT(seconds, 20.0);  // the fake hangs for 600 s
+}
+
 TEST_F(RenderDriverTest, ChecksEverythingBeforeRendering) {
   // Missing Blender.
   RenderOptions o = options_;
@@ -258,6 +277,9 @@ TEST(RenderOptions, Check) {
   EXPECT_FALSE(o.Check());
   o.jobs = 2;
   o.max_retries = -1;
+  EXPECT_FALSE(o.Check());
+  o.max_retries = 0;
+  o.stall_timeout_seconds = -1;
   EXPECT_FALSE(o.Check());
 }
 
