@@ -11,6 +11,8 @@
 #include <regex>
 #include <set>
 #include <sstream>
+#include <string>
+#include <vector>
 
 #include "base/atomic_file.h"
 
@@ -627,9 +629,26 @@ Status CheckJsonDepth(std::string_view text, const std::string& what, int max_de
 
 Result<nlohmann::json> ParseJsonText(std::string_view text, const std::string& what) {
   if (Status s = CheckJsonDepth(text, what); !s.ok()) return s;
+  // nlohmann keeps the last of two equal keys without a word, so a config with two "seed"s ran
+  // with one of them (issue 14 item 12): the parser's callback watches each object's keys.
+  std::vector<std::set<std::string>> keys;  // one set per object being parsed
+  std::string duplicate;
+  const nlohmann::json::parser_callback_t check_keys =
+      [&](int /*depth*/, nlohmann::json::parse_event_t event, nlohmann::json& parsed) {
+        using Event = nlohmann::json::parse_event_t;
+        if (event == Event::object_start) {
+          keys.emplace_back();
+        } else if (event == Event::object_end) {
+          if (!keys.empty()) keys.pop_back();
+        } else if (event == Event::key && !keys.empty() && duplicate.empty() &&
+                   !keys.back().insert(parsed.get<std::string>()).second) {
+          duplicate = parsed.get<std::string>();
+        }
+        return true;
+      };
   nlohmann::json doc;
   try {
-    doc = nlohmann::json::parse(text);
+    doc = nlohmann::json::parse(text, check_keys);
   } catch (const nlohmann::json::out_of_range& e) {
     // A number too large for a double ("1e999") is a range error, not a parse error.
     std::string problem = e.what();
@@ -649,6 +668,11 @@ Result<nlohmann::json> ParseJsonText(std::string_view text, const std::string& w
     return Status(StatusCode::kBadJson,
                   what + ": line " + std::to_string(line) + ", column " + std::to_string(column) +
                       ": " + problem);
+  }
+  if (!duplicate.empty()) {
+    return Status(StatusCode::kBadJson,
+                  what + ": key \"" + duplicate.substr(0, 60) +
+                      "\" appears twice in one object (which one is meant?)");
   }
   return doc;
 }

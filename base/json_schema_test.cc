@@ -174,6 +174,19 @@ TEST(JsonSchema, NumberOverflowIsBadJsonNotACrash) {
   EXPECT_EQ(r.status().message(), "m.json: number overflow parsing '81335e719'");
 }
 
+// Issue 14 item 12: {"seed": 1, "seed": 2} passed silently (nlohmann keeps the last).
+TEST(JsonSchema, DuplicateKeysAreRefused) {
+  auto dup = ParseJsonText(R"({"a": {"seed": 1, "x": [{"k": 0}, {"k": 1}], "seed": 2}})", "c.json");
+  ASSERT_FALSE(dup.ok());
+  EXPECT_EQ(dup.status().code(), StatusCode::kBadJson);
+  EXPECT_EQ(dup.status().message(),
+            "c.json: key \"seed\" appears twice in one object (which one is meant?)");
+  // Equal keys in different objects (siblings, nesting) are fine.
+  auto ok = ParseJsonText(R"({"k": {"k": 1}, "x": [{"k": 0}, {"k": 1}]})", "c.json");
+  ASSERT_TRUE(ok.ok()) << ok.status().message();
+  EXPECT_EQ((*ok)["x"][1]["k"], 1);
+}
+
 // Issue 14 item 2: 100,000 nested '[' overflowed the stack; refused before parsing, with the byte.
 TEST(JsonSchema, DepthIsBoundedBeforeParsing) {
   EXPECT_TRUE(CheckJsonDepth(std::string(64, '[') + std::string(64, ']'), "x").ok());

@@ -273,6 +273,15 @@ std::string RenderFileStem(uint32_t render_id) {
 Result<json> MakePlan(const json& config, const fs::path& config_path, PlanSummary* summary) {
   HANDDB_RETURN_IF_ERROR(ValidateJson(config, "config.schema.json", config_path.string()));
   const std::string cfg = config_path.string();
+  // 2^64 and above parse as a float that the schema's "integer" accepts; the plan then recorded a
+  // float seed (issue 14 item 12).
+  const json& seed_json = config.at("seed");
+  if (!seed_json.is_number_integer() ||
+      (!seed_json.is_number_unsigned() && seed_json.get<int64_t>() < 0)) {
+    return Status(StatusCode::kInvalidArgument,
+                  cfg + ": seed " + config.at("seed").dump() +
+                      " is not an integer in 0..18446744073709551615");
+  }
   const uint64_t seed = config.at("seed").get<uint64_t>();
 
   Result<fs::path> hand_path = ResolveConfigPath(

@@ -141,6 +141,18 @@ TEST(Plan, RejectsBadConfigs) {
   r = MakePlan(c, kConfigPath);
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.status().code(), StatusCode::kInvalidArgument);
+
+  // Issue 14 item 12: seed 2^64 was accepted and written into the plan as a float.
+  c = SmallConfig();
+  c["seed"] = json::parse("18446744073709551616");
+  r = MakePlan(c, kConfigPath);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find(
+                "seed 1.8446744073709552e+19 is not an integer in 0..18446744073709551615"),
+            std::string::npos)
+      << r.status().message();
+  c["seed"] = json::parse("18446744073709551615");
+  EXPECT_TRUE(MakePlan(c, kConfigPath).ok());
 }
 
 // Issue 14 item 3: {"method": "pairs", "k": 1000} made `plan` pass 4 GB in 22 s and a pca count of
