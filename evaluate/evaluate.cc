@@ -91,32 +91,68 @@ Result<TestSet> ReadTestSet(const fs::path& dir_or_file) {
     }
     return doc.status();
   }
+  // The schema fixed the types; ranges are checked here (a seed of 2^64 parses as a float, a
+  // joint angle of 1e300 does not fit a float). Found by tests/fuzz/testset_fuzzer.cc.
+  const std::string what = file.string();
+  auto out_of_range = [&](const std::string& field, const nlohmann::json& value) {
+    return Status(
+        StatusCode::kOutOfRange,
+        what + ": " + field + " is " + value.dump().substr(0, 40) + ", outside its range");
+  };
+  auto to_float = [&](const nlohmann::json& value, const std::string& field) -> Result<float> {
+    const double d = value.get<double>();
+    if (!std::isfinite(d) || std::abs(d) > std::numeric_limits<float>::max()) {
+      return out_of_range(field, value);
+    }
+    return static_cast<float>(d);
+  };
   TestSet set;
   set.dir = file.parent_path();
   set.file = file;
-  set.name = doc->at("name").get<std::string>();
-  set.seed = doc->at("seed").get<uint64_t>();
-  set.hand_model_sha256 = doc->at("hand_model").at("sha256").get<std::string>();
-  set.axes.forward_axis = Vec3From(doc->at("forward_axis"));
-  set.axes.palm_normal = Vec3From(doc->at("palm_normal"));
-  set.clutter = doc->at("clutter").get<bool>();
-  for (const auto& j : doc->at("items")) {
-    TestView v;
-    v.id = j.at("id").get<uint32_t>();
-    v.basic = j.at("basic").get<bool>();
-    v.shape_name = j.at("shape_name").get<std::string>();
-    for (int k = 0; k < kNumJointAngles; ++k) {
-      v.truth.joint_angles[k] = j.at("joint_angles").at(k).get<float>();
+  try {
+    set.name = doc->at("name").get<std::string>();
+    // is_number_integer() holds for both signed and unsigned; the schema's minimum 0 has held.
+    if (!doc->at("seed").is_number_integer()) return out_of_range("seed", doc->at("seed"));
+    set.seed = doc->at("seed").get<uint64_t>();
+    set.hand_model_sha256 = doc->at("hand_model").at("sha256").get<std::string>();
+    set.axes.forward_axis = Vec3From(doc->at("forward_axis"));
+    set.axes.palm_normal = Vec3From(doc->at("palm_normal"));
+    set.clutter = doc->at("clutter").get<bool>();
+    const nlohmann::json& items = doc->at("items");
+    for (size_t i = 0; i < items.size(); ++i) {
+      const nlohmann::json& j = items[i];
+      const std::string item = "items[" + std::to_string(i) + "].";
+      TestView v;
+      if (!j.at("id").is_number_integer() ||
+          j.at("id").get<uint64_t>() > std::numeric_limits<uint32_t>::max()) {
+        return out_of_range(item + "id", j.at("id"));
+      }
+      v.id = j.at("id").get<uint32_t>();
+      v.basic = j.at("basic").get<bool>();
+      v.shape_name = j.at("shape_name").get<std::string>();
+      for (int k = 0; k < kNumJointAngles; ++k) {
+        auto a =
+            to_float(j.at("joint_angles").at(k), item + "joint_angles[" + std::to_string(k) + "]");
+        if (!a.ok()) return a.status();
+        v.truth.joint_angles[k] = *a;
+      }
+      v.truth.view_direction = Vec3From(j.at("view_direction"));
+      v.truth.camera_roll = j.at("camera_roll").get<double>();
+      for (int k = 0; k < kNumKeypoints; ++k) {
+        for (int c = 0; c < 3; ++c) {
+          auto x =
+              to_float(j.at("keypoints").at(k).at(c),
+                       item + "keypoints[" + std::to_string(k) + "][" + std::to_string(c) + "]");
+          if (!x.ok()) return x.status();
+          v.truth.keypoints[k][c] = *x;
+        }
+      }
+      v.label = set.dir / j.at("label").get<std::string>();
+      if (j.contains("photo")) v.photo = set.dir / j.at("photo").get<std::string>();
+      set.views.push_back(std::move(v));
     }
-    v.truth.view_direction = Vec3From(j.at("view_direction"));
-    v.truth.camera_roll = j.at("camera_roll").get<double>();
-    for (int k = 0; k < kNumKeypoints; ++k) {
-      for (int c = 0; c < 3; ++c)
-        v.truth.keypoints[k][c] = j.at("keypoints").at(k).at(c).get<float>();
-    }
-    v.label = set.dir / j.at("label").get<std::string>();
-    if (j.contains("photo")) v.photo = set.dir / j.at("photo").get<std::string>();
-    set.views.push_back(std::move(v));
+  } catch (const nlohmann::json::exception& e) {
+    return Status(StatusCode::kSchemaViolation, what + ": " + e.what());
   }
   return set;
 }

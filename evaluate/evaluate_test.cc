@@ -1,10 +1,16 @@
 #include "evaluate/evaluate.h"
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cmath>
+#include <filesystem>
 #include <memory>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
 
+#include "base/atomic_file.h"
 #include "base/json_schema.h"
 #include "evaluate/evaluate_testing.h"
 
@@ -126,6 +132,71 @@ TEST(Evaluate, UnreachableTruthAndFailedInputsLandInTheLastBin) {
   EXPECT_TRUE(std::isnan(report->views[1].top1_keypoint_error));
   EXPECT_EQ(report->top1_keypoint_error.count, 1);
   EXPECT_TRUE(ValidateJson(ReportToJson(*report), "evaluation.schema.json", "report").ok());
+}
+
+// A minimal schema-valid testset.json with one view; `edit` changes it before it is written.
+template <typename F>
+Result<TestSet> ReadEditedTestSet(const std::string& name, F edit) {
+  nlohmann::json item = {
+      {"id", 0},
+      {"unit", 0},
+      {"basic", true},
+      {"shape_name", "fist"},
+      {"joint_angles", std::vector<double>(20, 0.25)},
+      {"view_direction", {0, 0, 1}},
+      {"view_theta", 0},
+      {"view_phi", 0},
+      {"camera_roll", 0},
+      {"keypoints", std::vector<std::vector<double>>(21, {1, 2, 3})},
+      {"normalisation", {{"centre_px", {128, 128}}, {"diameter_px", 150}, {"scale", 1.28}}},
+      {"num_edge_points", 800},
+      {"label", "units/u00000/r000000.exr"},
+      {"sidecar", "units/u00000/r000000.json"}};
+  nlohmann::json doc = {{"format", "handdb-testset"},
+                        {"version", 1},
+                        {"name", "t"},
+                        {"seed", 1},
+                        {"plan", "testset_plan.json"},
+                        {"hand_model", {{"path", "h.json"}, {"sha256", std::string(64, '0')}}},
+                        {"forward_axis", {0, 1, 0}},
+                        {"palm_normal", {0, 0, 1}},
+                        {"resolution", 256},
+                        {"ortho_scale", 0.3},
+                        {"clutter", false},
+                        {"handdb_version", "test"},
+                        {"items", {item}}};
+  edit(doc);
+  const auto path = std::filesystem::temp_directory_path() /
+                    ("handdb-testset-" + name + "-" + std::to_string(::getpid()) + ".json");
+  THROW_CHECK(WriteFileAtomic(path, doc.dump()).ok());
+  auto set = ReadTestSet(path);
+  std::filesystem::remove(path);
+  return set;
+}
+
+// A seed of 2^64 (parsed as a float) or a joint angle beyond the float range passed the schema
+// and was cast with undefined behaviour (tests/fuzz/testset_fuzzer.cc).
+TEST(ReadTestSet, RefusesValuesOutsideTheirRange) {
+  auto ok = ReadEditedTestSet("ok", [](nlohmann::json&) {});
+  ASSERT_TRUE(ok.ok()) << ok.status().message();
+  EXPECT_FLOAT_EQ(ok->views[0].truth.joint_angles[3], 0.25f);
+  auto seed = ReadEditedTestSet(
+      "seed", [](nlohmann::json& d) { d["seed"] = nlohmann::json::parse("18446744073709551616"); });
+  ASSERT_FALSE(seed.ok());
+  EXPECT_EQ(seed.status().code(), StatusCode::kOutOfRange);
+  EXPECT_NE(seed.status().message().find(": seed is 1.8446744073709552e+19, outside its range"),
+            std::string::npos)
+      << seed.status().message();
+  auto angle = ReadEditedTestSet(
+      "angle", [](nlohmann::json& d) { d["items"][0]["joint_angles"][3] = 1e300; });
+  ASSERT_FALSE(angle.ok());
+  EXPECT_NE(
+      angle.status().message().find(": items[0].joint_angles[3] is 1e+300, outside its range"),
+      std::string::npos)
+      << angle.status().message();
+  auto id = ReadEditedTestSet("id", [](nlohmann::json& d) { d["items"][0]["id"] = 5000000000ull; });
+  ASSERT_FALSE(id.ok());
+  EXPECT_NE(id.status().message().find("items[0].id is 5000000000"), std::string::npos);
 }
 
 TEST(ChanceBaseline, HypergeometricKnownValues) {
