@@ -9,11 +9,23 @@
 //   (d) the floor: reading every point byte of the database once from memory,
 // with ratios, and the peak memory (getrusage) against the database's size on disk.
 //
+// With --db (a real database), it then measures what users send (issue 15 item 1), one query set
+// at a time: real photos (--photos, searched recursively), the photo-like and the clean label
+// renders of a test set (--testset, made by `handdb testset`), and the perturbed views above.
+// Photos and renders become query points through `handdb query`'s own path (LoadQueryEdges, label
+// EXRs with the edge options the manifest records). Per set and hand setting (`handdb query`'s
+// default --hand either, and right only): median, p90 and max search latency (wall), the share of
+// searched (view, roll) pairs refined, view kd-trees built; and brute force on the first
+// --brute-queries queries of each set, which must give identical results (else exit 1, naming the
+// query).
+//
 //   query_bench [--db DIR] [--shapes 26] [--directions 86] [--rolls 48] [--points 600]
 //               [--queries 9] [--brute-queries 3] [--baseline-fraction 0.05] [--threads 2]
 //               [--kdtree nanoflann|pcl] [--dt-cell 1] [--keep]
+//               [--photos DIR] [--testset DIR] [--set-queries 20]
 // Without --db a synthetic database (query/search_testing.h) is written to a temp directory by a
-// child process (so its memory does not count) and removed afterwards unless --keep.
+// child process (so its memory does not count) and removed afterwards unless --keep; the query
+// sets need a real database and are skipped.
 #include <pcl/kdtree/kdtree_flann.h>
 #include <pcl/point_cloud.h>
 #include <pcl/point_types.h>
@@ -29,13 +41,19 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <optional>
 #include <random>
+#include <span>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "edges/view_conversion.h"
+#include "evaluate/evaluate.h"
+#include "evaluate/photos.h"
 #include "format/manifest.h"
 #include "format/shard_writer.h"
+#include "query/input/image_edges.h"
 #include "query/search_testing.h"
 #include "query/searcher.h"
 
@@ -55,6 +73,10 @@ struct Args {
   KdTreeBackend kdtree = KdTreeBackend::kNanoflann;
   float dt_cell = 1.0f;
   bool keep = false;
+  // Query sets (with --db only). An empty path skips the set with a printed note.
+  std::string photos = "/work/shared/photos/asl-digits";
+  std::string testset;
+  int set_queries = 20;  // per set, spread evenly over the set (0: all)
 };
 
 // CPU seconds of the whole process (all threads): on a shared machine wall time includes waiting
@@ -283,6 +305,380 @@ bool SameResults(const std::vector<Match>& a, const std::vector<Match>& b) {
   return true;
 }
 
+// ---- Query sets (issue 15 item 1): what users send ----
+
+namespace fs = std::filesystem;
+
+// Nearest-rank percentile, p in (0, 1].
+double Percentile(std::vector<double> v, double p) {
+  if (v.empty()) return std::nan("");
+  std::sort(v.begin(), v.end());
+  const auto rank = static_cast<size_t>(std::ceil(p * static_cast<double>(v.size())));
+  return v[std::clamp<size_t>(rank, 1, v.size()) - 1];
+}
+
+// At most `cap` of n items, evenly spread (item floor((2i + 1) n / 2cap)); over sorted paths this
+// takes from every folder instead of the first folder's files. cap <= 0: all.
+std::vector<size_t> SpreadSample(size_t n, int cap) {
+  std::vector<size_t> picks;
+  const size_t c = cap <= 0 ? n : std::min(n, static_cast<size_t>(cap));
+  for (size_t i = 0; i < c; ++i) picks.push_back(c == n ? i : (2 * i + 1) * n / (2 * c));
+  return picks;
+}
+
+struct QuerySet {
+  std::string key;                 // first column of the output: photos, testset-photo, ...
+  std::string description;         // what the queries are
+  std::string skipped;             // not empty: the set was not measured, and why
+  std::vector<std::string> names;  // per query: the file, or the perturbed view
+  std::vector<std::vector<Point2f>> points;
+  std::vector<std::string> failed;  // "name: error" of inputs without a usable query
+  std::vector<double> input_ms;     // image -> query points
+};
+
+// The picture -> points step of `handdb query` (cli/query_commands.cc): LoadQueryEdges with the
+// query's options, so a failure here is a failure there.
+void AddImageQuery(const fs::path& image,
+                   const std::string& name,
+                   const ImageEdgeOptions& options,
+                   QuerySet* set) {
+  const double t0 = Now();
+  auto edges = LoadQueryEdges(image, options);
+  const double ms = (Now() - t0) * 1e3;
+  if (!edges.ok()) {
+    set->failed.push_back(name + ": " + edges.status().message());
+    return;
+  }
+  set->names.push_back(name);
+  set->points.push_back(edges->points_px());
+  set->input_ms.push_back(ms);
+}
+
+QuerySet PhotoQuerySet(const Args& args, const ImageEdgeOptions& options) {
+  QuerySet set;
+  set.key = "photos";
+  if (args.photos.empty()) {
+    set.skipped = "no --photos DIR";
+    return set;
+  }
+  std::error_code ec;
+  if (!fs::is_directory(args.photos, ec)) {
+    set.skipped = args.photos + ": no such directory";
+    return set;
+  }
+  std::vector<fs::path> files;
+  for (auto it = fs::recursive_directory_iterator(
+           args.photos, fs::directory_options::skip_permission_denied, ec);
+       !ec && it != fs::recursive_directory_iterator();
+       it.increment(ec)) {
+    std::error_code type_ec;
+    if (it->is_regular_file(type_ec) && IsPhotoFile(it->path())) files.push_back(it->path());
+  }
+  std::sort(files.begin(), files.end());
+  if (files.empty()) {
+    set.skipped = args.photos + ": no images";
+    return set;
+  }
+  const std::vector<size_t> picks = SpreadSample(files.size(), args.set_queries);
+  for (size_t i : picks) {
+    AddImageQuery(files[i], fs::relative(files[i], args.photos).string(), options, &set);
+  }
+  set.description = std::to_string(picks.size()) + " of " + std::to_string(files.size()) +
+                    " real photos under " + args.photos;
+  return set;
+}
+
+// The photo-like renders (photo = true) or the clean label renders of a test set, each through
+// `handdb query`'s path (the label EXRs with the database's recorded edge options).
+QuerySet TestSetQuerySet(const Args& args,
+                         const TestSet* testset,
+                         bool photo,
+                         const ImageEdgeOptions& options) {
+  QuerySet set;
+  set.key = photo ? "testset-photo" : "testset-clean";
+  if (testset == nullptr) {
+    set.skipped = "no --testset DIR (made by `handdb testset`, docs/evaluation.md)";
+    return set;
+  }
+  std::vector<const TestView*> views;
+  for (const TestView& v : testset->views) {
+    if (!photo || !v.photo.empty()) views.push_back(&v);
+  }
+  if (views.empty()) {
+    set.skipped = testset->dir.string() + ": no photos (made with --no-photos)";
+    return set;
+  }
+  const std::vector<size_t> picks = SpreadSample(views.size(), args.set_queries);
+  for (size_t i : picks) {
+    const fs::path& file = photo ? views[i]->photo : views[i]->label;
+    AddImageQuery(file, fs::relative(file, testset->dir).string(), options, &set);
+  }
+  set.description = std::to_string(picks.size()) + " of " + std::to_string(views.size()) +
+                    (photo ? " photo-like renders (" : " clean label renders (") +
+                    (testset->clutter ? "cluttered" : "plain") + " background) of test set " +
+                    testset->dir.string();
+  return set;
+}
+
+// The merged top-k of two searches, in the order Searcher::Search documents for Hand::kEither:
+// (D_c, view id, roll, right before left).
+std::vector<Match> MergeHands(std::vector<Match> right, const std::vector<Match>& left, int k) {
+  for (const Match& m : left) right.push_back(m);
+  std::stable_sort(right.begin(), right.end(), [](const Match& x, const Match& y) {
+    if (x.distance != y.distance) return x.distance < y.distance;
+    if (x.view_id != y.view_id) return x.view_id < y.view_id;
+    if (x.roll != y.roll) return x.roll < y.roll;
+    return x.hand == Hand::kRight && y.hand == Hand::kLeft;
+  });
+  if (right.size() > static_cast<size_t>(k)) right.resize(static_cast<size_t>(k));
+  return right;
+}
+
+struct HandRun {
+  std::vector<double> ms;             // wall time of Searcher::Search
+  std::vector<double> refined_share;  // refined / (searches x virtual views)
+  std::vector<double> trees;          // view kd-trees built
+  std::vector<std::vector<Match>> results;
+};
+
+struct SetMeasurement {
+  HandRun either, right;
+  int brute_checked = 0;
+  std::vector<double> brute_ms;         // per brute-force search of one hand
+  std::vector<std::string> mismatches;  // one line per query whose pruned result differs
+};
+
+Status SearchInto(const Searcher& searcher,
+                  std::span<const Point2f> query,
+                  const SearchOptions& options,
+                  HandRun* run) {
+  SearchStats stats;
+  const double t0 = Now();
+  auto res = searcher.Search(query, options, &stats);
+  const double ms = (Now() - t0) * 1e3;
+  if (!res.ok()) return res.status();
+  run->ms.push_back(ms);
+  run->refined_share.push_back(
+      static_cast<double>(stats.refined) /
+      static_cast<double>(std::max<uint64_t>(1, stats.searches * stats.virtual_views)));
+  run->trees.push_back(static_cast<double>(stats.view_trees));
+  run->results.push_back(std::move(res).value());
+  return Status::Ok();
+}
+
+// "" when equal, else where they first differ.
+std::string DescribeDifference(const std::vector<Match>& pruned, const std::vector<Match>& brute) {
+  for (size_t i = 0; i < std::max(pruned.size(), brute.size()); ++i) {
+    if (i >= pruned.size() || i >= brute.size()) {
+      return std::to_string(pruned.size()) + " pruned matches vs " + std::to_string(brute.size()) +
+             " by brute force";
+    }
+    const Match& p = pruned[i];
+    const Match& b = brute[i];
+    if (p.view_id != b.view_id || p.roll != b.roll || p.distance != b.distance ||
+        p.hand != b.hand) {
+      char buf[256];
+      std::snprintf(buf,
+                    sizeof(buf),
+                    "rank %zu: pruned view %u roll %u %s D_c %.6f, brute force view %u roll %u %s "
+                    "D_c %.6f",
+                    i + 1,
+                    p.view_id,
+                    static_cast<unsigned>(p.roll),
+                    std::string(HandName(p.hand)).c_str(),
+                    p.distance,
+                    b.view_id,
+                    static_cast<unsigned>(b.roll),
+                    std::string(HandName(b.hand)).c_str(),
+                    b.distance);
+      return buf;
+    }
+  }
+  return "";
+}
+
+// Every query with --hand either and --hand right (alternating, so load changes hit both alike),
+// then brute force on the first `brute_queries`: one brute-force search per hand, the right one
+// checking --hand right and both merged checking --hand either. `right_brute` holds brute-force
+// right-hand results already computed for the first queries ((b) of the perturbed views).
+Result<SetMeasurement> MeasureSet(const Searcher& searcher,
+                                  const QuerySet& set,
+                                  const SearchOptions& options,
+                                  int brute_queries,
+                                  const std::vector<std::vector<Match>>& right_brute) {
+  SetMeasurement m;
+  SearchOptions either = options, right = options;
+  either.hand = Hand::kEither;
+  right.hand = Hand::kRight;
+  for (const auto& q : set.points) {
+    HANDDB_RETURN_IF_ERROR(SearchInto(searcher, q, either, &m.either));
+    HANDDB_RETURN_IF_ERROR(SearchInto(searcher, q, right, &m.right));
+  }
+  for (size_t i = 0; i < std::min(set.points.size(), static_cast<size_t>(brute_queries)); ++i) {
+    SearchOptions brute = right;
+    brute.brute_force = true;
+    std::vector<Match> brute_right;
+    if (i < right_brute.size()) {
+      brute_right = right_brute[i];
+    } else {
+      const double t0 = Now();
+      auto res = searcher.Search(set.points[i], brute);
+      m.brute_ms.push_back((Now() - t0) * 1e3);
+      if (!res.ok()) return res.status();
+      brute_right = std::move(res).value();
+    }
+    brute.hand = Hand::kLeft;
+    const double t0 = Now();
+    auto brute_left = searcher.Search(set.points[i], brute);
+    m.brute_ms.push_back((Now() - t0) * 1e3);
+    if (!brute_left.ok()) return brute_left.status();
+    const std::vector<Match> brute_either = MergeHands(brute_right, *brute_left, options.top_k);
+    ++m.brute_checked;
+    auto check = [&](const char* hand,
+                     const std::vector<Match>& pruned,
+                     const std::vector<Match>& reference) {
+      const std::string diff = DescribeDifference(pruned, reference);
+      if (!diff.empty()) {
+        m.mismatches.push_back(set.key + " query " + set.names[i] + " (--hand " + hand +
+                               "): pruned search differs from brute force: " + diff);
+      }
+    };
+    check("either", m.either.results[i], brute_either);
+    check("right", m.right.results[i], brute_right);
+  }
+  return m;
+}
+
+void PrintHandRun(const std::string& key,
+                  const char* hand,
+                  const HandRun& run,
+                  double perturbed_median_ms) {
+  const double median = Median(run.ms);
+  std::printf(
+      "  %-14s %-6s median %8.1f ms  p90 %8.1f ms  max %8.1f ms  %6.2fx perturbed  refined "
+      "median %6.2f%% max %6.2f%%  view kd-trees median %.0f max %.0f\n",
+      key.c_str(),
+      hand,
+      median,
+      Percentile(run.ms, 0.9),
+      *std::max_element(run.ms.begin(), run.ms.end()),
+      median / perturbed_median_ms,
+      100 * Median(run.refined_share),
+      100 * *std::max_element(run.refined_share.begin(), run.refined_share.end()),
+      Median(run.trees),
+      *std::max_element(run.trees.begin(), run.trees.end()));
+}
+
+// The four query sets; returns the exit code (1 when a pruned result differs from brute force or
+// a search or the test set fails).
+int RunQuerySets(const Args& args,
+                 const Searcher& searcher,
+                 const SearchOptions& options,
+                 QuerySet perturbed,
+                 const std::vector<std::vector<Match>>& perturbed_right_brute) {
+  // Exactly `handdb query`'s input options: the defaults, and for label EXRs the edge options the
+  // manifest records.
+  ImageEdgeOptions image_options;
+  auto recorded = ReadDatabaseViewConversion(args.db);
+  if (!recorded.ok()) {
+    std::fprintf(stderr, "query_bench: %s\n", recorded.status().ToString().c_str());
+    return 1;
+  }
+  image_options.label_edges = recorded->edges;
+  image_options.label_joint_pairs = recorded->joint_pairs;
+  std::optional<TestSet> testset;
+  if (!args.testset.empty()) {
+    auto read = ReadTestSet(args.testset);
+    if (!read.ok()) {
+      std::fprintf(stderr, "query_bench: %s\n", read.status().ToString().c_str());
+      return 1;
+    }
+    testset = std::move(read).value();
+  }
+  const TestSet* ts = testset ? &*testset : nullptr;
+  std::vector<QuerySet> sets;
+  sets.push_back(PhotoQuerySet(args, image_options));
+  sets.push_back(TestSetQuerySet(args, ts, /*photo=*/true, image_options));
+  sets.push_back(TestSetQuerySet(args, ts, /*photo=*/false, image_options));
+  sets.push_back(std::move(perturbed));
+
+  // The perturbed views first: the other sets' medians are stated as ratios to theirs.
+  std::vector<std::optional<SetMeasurement>> measured(sets.size());
+  for (size_t order = 0; order < sets.size(); ++order) {
+    const size_t s = (order + sets.size() - 1) % sets.size();
+    if (!sets[s].skipped.empty() || sets[s].points.empty()) continue;
+    static const std::vector<std::vector<Match>> kNone;
+    const bool is_perturbed = s + 1 == sets.size();
+    auto m = MeasureSet(searcher,
+                        sets[s],
+                        options,
+                        args.brute_queries,
+                        is_perturbed ? perturbed_right_brute : kNone);
+    if (!m.ok()) {
+      std::fprintf(
+          stderr, "query_bench: %s: %s\n", sets[s].key.c_str(), m.status().ToString().c_str());
+      return 1;
+    }
+    measured[s] = std::move(m).value();
+  }
+
+  double load[3] = {0, 0, 0};
+  if (getloadavg(load, 3) < 1) load[0] = -1;
+  std::printf(
+      "\nquery sets (issue 15): `handdb query`'s search (top-%d, --hand either, kd-tree %s, DT "
+      "cell %.2f px) and --hand right, %d threads; latency = wall time of the search (not the "
+      "input step); refined = share of the (view, roll) pairs searched (2 x %llu with either); "
+      "machine load average %.1f\n",
+      options.top_k,
+      std::string(KdTreeBackendName(options.kdtree)).c_str(),
+      options.dt_cell_px,
+      args.threads,
+      static_cast<unsigned long long>(searcher.database().num_virtual_views()),
+      load[0]);
+  const SetMeasurement* ref = measured.back() ? &*measured.back() : nullptr;
+  const double ref_either = ref ? Median(ref->either.ms) : std::nan("");
+  const double ref_right = ref ? Median(ref->right.ms) : std::nan("");
+  int rc = 0;
+  for (size_t s = 0; s < sets.size(); ++s) {
+    const QuerySet& set = sets[s];
+    if (!set.skipped.empty()) {
+      std::printf("  %-14s skipped: %s\n", set.key.c_str(), set.skipped.c_str());
+      continue;
+    }
+    size_t points = 0;
+    for (const auto& q : set.points) points += q.size();
+    std::printf("  %-14s %s; %zu without a usable query; ~%zu query points",
+                set.key.c_str(),
+                set.description.c_str(),
+                set.failed.size(),
+                set.points.empty() ? 0 : points / set.points.size());
+    if (!set.input_ms.empty()) std::printf("; input step median %.1f ms", Median(set.input_ms));
+    std::printf("\n");
+    for (const std::string& f : set.failed) std::printf("  %-14s   no query: %s\n", "", f.c_str());
+    if (!measured[s]) continue;
+    const SetMeasurement& m = *measured[s];
+    PrintHandRun(set.key, "either", m.either, ref_either);
+    PrintHandRun(set.key, "right", m.right, ref_right);
+    if (m.brute_checked == 0) {
+      std::printf("  %-14s brute force not run (--brute-queries 0)\n", set.key.c_str());
+    } else {
+      std::printf(
+          "  %-14s brute force on the first %d of %zu queries (either and right; median %.0f ms "
+          "per hand): %s\n",
+          set.key.c_str(),
+          m.brute_checked,
+          set.points.size(),
+          Median(m.brute_ms),
+          m.mismatches.empty() ? "identical" : "DIFFERENT (see stderr)");
+    }
+    for (const std::string& line : m.mismatches) {
+      std::fprintf(stderr, "query_bench: %s\n", line.c_str());
+      rc = 1;
+    }
+  }
+  return rc;
+}
+
 int Run(const Args& args) {
   std::filesystem::path dir = args.db;
   bool made = false;
@@ -342,10 +738,13 @@ int Run(const Args& args) {
   std::vector<double> t_pruned;
   std::vector<double> refined, abandoned, probed, trees, bounds_ms, refine_ms;
   std::vector<std::vector<Match>> pruned_results;
+  std::vector<std::string> query_names;
   for (int i = 0; i < args.queries; ++i) {
     view_id_t v;
     roll_id_t r;
     queries.push_back(MakeQuery(db, &rng, &v, &r));
+    query_names.push_back(std::to_string(i) + " (near view " + std::to_string(v) + " roll " +
+                          std::to_string(r) + ")");
     SearchStats stats;
     const double c0 = CpuSeconds();
     const double t0 = Now();
@@ -369,6 +768,7 @@ int Run(const Args& args) {
   const MemoryBreakdown mem_after_pruned = ReadMemoryBreakdown();
 
   std::vector<double> t_brute, cpu_brute;
+  std::vector<std::vector<Match>> brute_results;  // reused by the perturbed query set
   bool identical = true;
   SearchOptions brute = options;
   brute.brute_force = true;
@@ -379,6 +779,7 @@ int Run(const Args& args) {
     t_brute.push_back(Now() - t0);
     cpu_brute.push_back(CpuSeconds() - c0);
     identical = identical && res.ok() && SameResults(*res, pruned_results[i]);
+    if (res.ok()) brute_results.push_back(*res);
   }
 
   const int stride = std::max(1, static_cast<int>(std::lround(1.0 / args.baseline_fraction)));
@@ -469,8 +870,21 @@ int Run(const Args& args) {
   std::printf("  resident before opening: %s\n", FormatBreakdown(mem_before).c_str());
   std::printf("  resident after (a):       %s\n", FormatBreakdown(mem_after_pruned).c_str());
   (void)peak_before;
+  int sets_rc = 0;
+  if (args.db.empty()) {
+    std::printf("\nquery sets (issue 15): skipped, they need a real database (--db DIR)\n");
+  } else {
+    QuerySet perturbed;
+    perturbed.key = "perturbed";
+    perturbed.description =
+        "the " + std::to_string(queries.size()) + " perturbed database views of (a) (--queries)";
+    perturbed.names = query_names;
+    perturbed.points = queries;
+    if (brute_results.size() != t_brute.size()) brute_results.clear();
+    sets_rc = RunQuerySets(args, searcher, options, std::move(perturbed), brute_results);
+  }
   if (made && !args.keep) std::filesystem::remove_all(dir);
-  return identical ? 0 : 1;
+  return identical && sets_rc == 0 ? 0 : 1;
 }
 
 }  // namespace
@@ -511,16 +925,23 @@ int main(int argc, char** argv) {
       args.dt_cell = std::stof(next());
     else if (a == "--keep")
       args.keep = true;
+    else if (a == "--photos")
+      args.photos = next();
+    else if (a == "--testset")
+      args.testset = next();
+    else if (a == "--set-queries")
+      args.set_queries = std::stoi(next());
     else {
       std::fprintf(stderr,
                    "usage: query_bench [--db DIR] [--shapes N] [--directions N] [--rolls R] "
                    "[--points N] [--queries N] [--brute-queries N] [--baseline-fraction F] "
-                   "[--threads N] [--kdtree nanoflann|pcl] [--dt-cell PX] [--keep]\n");
+                   "[--threads N] [--kdtree nanoflann|pcl] [--dt-cell PX] [--keep] "
+                   "[--photos DIR] [--testset DIR] [--set-queries N]\n");
       return 2;
     }
   }
   if (args.queries < 1 || args.threads < 1 || args.baseline_fraction <= 0 ||
-      args.baseline_fraction > 1) {
+      args.baseline_fraction > 1 || args.set_queries < 0 || args.brute_queries < 0) {
     std::fprintf(stderr, "query_bench: bad arguments\n");
     return 2;
   }
