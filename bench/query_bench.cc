@@ -627,7 +627,8 @@ int RunQuerySets(const Args& args,
   std::printf(
       "\nquery sets (issue 15): `handdb query`'s search (top-%d, --hand either, kd-tree %s, DT "
       "cell %.2f px) and --hand right, %d threads; latency = wall time of the search (not the "
-      "input step); refined = share of the (view, roll) pairs searched (2 x %llu with either); "
+      "input step); refined = SearchStats::refined over the (view, roll) pairs searched (2 x %llu "
+      "with either; a pair scored while seeding the threshold and again later counts twice); "
       "machine load average %.1f\n",
       options.top_k,
       std::string(KdTreeBackendName(options.kdtree)).c_str(),
