@@ -122,6 +122,30 @@ def table_row(report, criterion):
     return None
 
 
+QUERY_SET_LINE = re.compile(
+    r"^  (\S+)\s+(either|right)\s+median\s+([0-9.]+) ms\s+p90\s+([0-9.]+) ms\s+max\s+([0-9.]+) ms\s+"
+    r"([0-9.]+|nan)x perturbed\s+refined median\s+([0-9.]+)% max\s+([0-9.]+)%\s+"
+    r"view kd-trees median ([0-9.]+) max ([0-9.]+)", re.M)
+QUERY_SET_BRUTE = re.compile(r"^  (\S+)\s+brute force on the first (\d+) of (\d+) queries.*: (\S+)", re.M)
+QUERY_SET_TITLES = {"photos": "real photos", "testset-photo": "test-set photo-like renders",
+                    "testset-clean": "test-set clean label renders", "perturbed": "perturbed database views"}
+
+
+def query_sets(text):
+    """The per-set lines of query_bench's query sets (issue 15): {set: {hand: numbers}, ...}."""
+    sets = {}
+    for m in QUERY_SET_LINE.finditer(text or ""):
+        sets.setdefault(m.group(1), {})[m.group(2)] = {
+            "median_ms": float(m.group(3)), "p90_ms": float(m.group(4)), "max_ms": float(m.group(5)),
+            "ratio_to_perturbed_median": float(m.group(6)),
+            "refined_share_median": float(m.group(7)) / 100, "refined_share_max": float(m.group(8)) / 100,
+            "view_kdtrees_median": float(m.group(9)), "view_kdtrees_max": float(m.group(10))}
+    for m in QUERY_SET_BRUTE.finditer(text or ""):
+        sets.setdefault(m.group(1), {})["brute_force"] = {
+            "checked": int(m.group(2)), "queries": int(m.group(3)), "identical": m.group(4) == "identical"}
+    return sets
+
+
 def eval_summary(report):
     chance = {c["n"]: c["rate"] for c in report["chance"]["success"]}
     return {
@@ -214,6 +238,10 @@ def main():
             if os.path.exists(src):
                 shutil.copyfile(src, os.path.join(args.images, f"{name}_{plot}"))
 
+    results["query_sets"] = {
+        step_name: query_sets((results["steps"].get(step_name) or {}).get("stdout"))
+        for step_name in ("query", "query_pca_large")}
+
     pca = results["steps"].get("generate_pca_large")
     results["pca_large"] = {"run": pca is not None and pca["exit_code"] == 0}
 
@@ -278,6 +306,21 @@ def main():
         if mem:
             rows.append(f"| peak memory during queries, {db_title} database (RSS growth / DB size) | "
                         f"{mem[1]}x | DB {mem[0]} MiB on disk | target <= 1.5x |")
+    for step_name, db_title in [("query", "paper"), ("query_pca_large", "pca-large")]:
+        sets = results["query_sets"].get(step_name) or {}
+        for key, set_title in QUERY_SET_TITLES.items():
+            e = (sets.get(key) or {}).get("either")
+            if not e or key == "perturbed":  # the baseline column
+                continue
+            ref = (sets.get("perturbed") or {}).get("either")
+            brute = (sets.get(key) or {}).get("brute_force")
+            checked = (f"; brute force identical on {brute['checked']}" if brute and brute["identical"]
+                       else f"; brute force DIFFERENT on {brute['checked']} checked" if brute else "")
+            rows.append(f"| query latency, {db_title} database, {set_title} (`handdb query` default "
+                        f"--hand either): median / p90 / max | {e['median_ms']:.0f} / {e['p90_ms']:.0f} / "
+                        f"{e['max_ms']:.0f} ms (refined {pct(e['refined_share_median'])}{checked}) | "
+                        f"perturbed views median {num(ref and ref['median_ms'], '{:.0f}')} ms | "
+                        f"{e['ratio_to_perturbed_median']:.2f}x |")
     for name, title in EVALUATIONS:
         s = results["evaluations"].get(name)
         if not s:
@@ -324,7 +367,12 @@ def main():
             "`bench/convert_bench` on the paper renders: views/s with 1 and 2 threads.")
     section("Query", "query",
             "`bench/query_bench` on the paper database: pruned exact search vs brute force vs a naive "
-            "PCL baseline vs the read floor.")
+            "PCL baseline vs the read floor; then the query sets users send (issue 15): real photos "
+            "(`--photos`), the test set's photo-like and clean label renders (`--testset`), and the "
+            "perturbed views of (a), each searched with `handdb query`'s default `--hand either` and with "
+            "`--hand right` (latency median / p90 / max, share of the searched pairs refined, view "
+            "kd-trees), brute force on the first `--brute-queries` of each set.")
+    md += [QUERY_SETS_HOWTO, ""]
     section("Test sets", "testset_paper",
             "`handdb testset configs/testset-paper.json` (200 views: 100 basic shapes, 100 PCA samples; "
             "uniform directions and rolls) with plain photos; the cluttered set renders the same views.")
@@ -368,7 +416,7 @@ def main():
     section("Query on the pca-large database", "query_pca_large",
             "`bench/query_bench` on pca-large (1,056,768 virtual views): pruned exact search, the naive "
             "baseline (scaled from 0.1% of the views) and the read floor; brute force is left out "
-            "(minutes per query).")
+            "(minutes per query). The query sets as on the paper database, 8 queries each.")
     notes = read(os.path.join(out, "notes.md"))
     if notes:
         md += ["", notes.strip()]
@@ -379,6 +427,22 @@ def main():
     os.replace(args.markdown + ".tmp", args.markdown)
     print(f"wrote {args.results} and {args.markdown}")
 
+
+QUERY_SETS_HOWTO = (
+    "The query sets (issue 15, \"measure what users send\"): `query_bench --db DB` also searches real photos "
+    "(`--photos DIR`, default /work/shared/photos/asl-digits, searched recursively), a test set's photo-like "
+    "and clean label renders (`--testset TS` from `handdb testset`; without it those two sets are skipped with "
+    "a note) and the perturbed views of (a). Photos and renders become query points through `handdb query`'s "
+    "own input path (`LoadQueryEdges`; label EXRs with the edge options the manifest records). At most "
+    "`--set-queries N` (default 20) per set, spread evenly over the sorted files (so over every folder), not "
+    "the first N. Each query is searched with `handdb query`'s defaults (top 10, `--hand either`: the query "
+    "and its mirror image) and with `--hand right`; a set's lines give the median, p90 (nearest rank) and max "
+    "wall time of the search (the input step is reported apart), the median as a ratio to the same run's "
+    "perturbed-view median (same hand setting), the share of the searched (view, roll) pairs refined "
+    "(`SearchStats::refined`) and the view kd-trees built. Brute force runs on the first `--brute-queries` "
+    "queries of each set (one full search per hand; both merged check `either`); a pruned result that differs "
+    "makes query_bench exit 1 and name the query on stderr. Example: `query_bench --db DB --threads 2 "
+    "--testset TS --set-queries 20 --brute-queries 3`; bench/run.sh runs it after the test sets.")
 
 PCA_LARGE_NOTE = ("Not run in this report (`HANDDB_BENCH_PCA_LARGE=1` runs it). `configs/pca-large.json` is "
                   "22,016 renders (256 PCA shapes x 86 directions; x 48 rolls = 1,056,768 virtual views).")
