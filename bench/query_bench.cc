@@ -480,8 +480,8 @@ std::string DescribeDifference(const std::vector<Match>& pruned, const std::vect
       char buf[256];
       std::snprintf(buf,
                     sizeof(buf),
-                    "rank %zu: pruned view %u roll %u %s D_c %.6f, brute force view %u roll %u %s "
-                    "D_c %.6f",
+                    "rank %zu: pruned view %u roll %u %s D_c %.17g, brute force view %u roll %u %s "
+                    "D_c %.17g",
                     i + 1,
                     p.view_id,
                     static_cast<unsigned>(p.roll),
