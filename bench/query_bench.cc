@@ -9,12 +9,14 @@
 //   (d) the floor: reading every point byte of the database once from memory,
 // with ratios, and the peak memory (getrusage) against the database's size on disk.
 //
-// With --db (a real database), it then measures what users send (issue 15 item 1), one query set
-// at a time: real photos (--photos, searched recursively), the photo-like and the clean label
-// renders of a test set (--testset, made by `handdb testset`), and the perturbed views above.
+// With --db (a real database), it then measures what users send (issue 15 item 1) in four query
+// sets, searched round-robin query by query so load changes hit them alike: real photos (--photos,
+// searched recursively), the photo-like and the clean label renders of a test set (--testset,
+// made by `handdb testset`), and the perturbed views above.
 // Photos and renders become query points through `handdb query`'s own path (LoadQueryEdges, label
 // EXRs with the edge options the manifest records). Per set and hand setting (`handdb query`'s
-// default --hand either, and right only): median, p90 and max search latency (wall), the share of
+// default --hand either, and right only): median, p90 and max search latency (wall), the median
+// CPU time, each median also over the perturbed views' median, the share of
 // searched (view, roll) pairs refined, view kd-trees built; and brute force on the first
 // --brute-queries queries of each set, which must give identical results (else exit 1, naming the
 // query).
@@ -436,6 +438,7 @@ std::vector<Match> MergeHands(std::vector<Match> right, const std::vector<Match>
 
 struct HandRun {
   std::vector<double> ms;             // wall time of Searcher::Search
+  std::vector<double> cpu_ms;         // process CPU time of it (all threads; load-independent)
   std::vector<double> refined_share;  // refined / (searches x virtual views)
   std::vector<double> trees;          // view kd-trees built
   std::vector<std::vector<Match>> results;
@@ -453,11 +456,14 @@ Status SearchInto(const Searcher& searcher,
                   const SearchOptions& options,
                   HandRun* run) {
   SearchStats stats;
+  const double c0 = CpuSeconds();
   const double t0 = Now();
   auto res = searcher.Search(query, options, &stats);
   const double ms = (Now() - t0) * 1e3;
+  const double cpu_ms = (CpuSeconds() - c0) * 1e3;
   if (!res.ok()) return res.status();
   run->ms.push_back(ms);
+  run->cpu_ms.push_back(cpu_ms);
   run->refined_share.push_back(
       static_cast<double>(stats.refined) /
       static_cast<double>(std::max<uint64_t>(1, stats.searches * stats.virtual_views)));
@@ -497,23 +503,31 @@ std::string DescribeDifference(const std::vector<Match>& pruned, const std::vect
   return "";
 }
 
-// Every query with --hand either and --hand right (alternating, so load changes hit both alike),
-// then brute force on the first `brute_queries`: one brute-force search per hand, the right one
-// checking --hand right and both merged checking --hand either. `right_brute` holds brute-force
-// right-hand results already computed for the first queries ((b) of the perturbed views).
-Result<SetMeasurement> MeasureSet(const Searcher& searcher,
-                                  const QuerySet& set,
-                                  const SearchOptions& options,
-                                  int brute_queries,
-                                  const std::vector<std::vector<Match>>& right_brute) {
-  SetMeasurement m;
+// Query i of a set with --hand either and then --hand right, so load changes hit both alike.
+Status SearchBothHands(const Searcher& searcher,
+                       std::span<const Point2f> query,
+                       const SearchOptions& options,
+                       SetMeasurement* m) {
   SearchOptions either = options, right = options;
   either.hand = Hand::kEither;
   right.hand = Hand::kRight;
-  for (const auto& q : set.points) {
-    HANDDB_RETURN_IF_ERROR(SearchInto(searcher, q, either, &m.either));
-    HANDDB_RETURN_IF_ERROR(SearchInto(searcher, q, right, &m.right));
-  }
+  HANDDB_RETURN_IF_ERROR(SearchInto(searcher, query, either, &m->either));
+  return SearchInto(searcher, query, right, &m->right);
+}
+
+// Brute force on the first `brute_queries` of a set already searched: one brute-force search per
+// hand, the right one checking --hand right and both merged checking --hand either. `right_brute`
+// holds brute-force right-hand results already computed for the first queries ((b) of the
+// perturbed views).
+Status CheckAgainstBruteForce(const Searcher& searcher,
+                              const QuerySet& set,
+                              const SearchOptions& options,
+                              int brute_queries,
+                              const std::vector<std::vector<Match>>& right_brute,
+                              SetMeasurement* measurement) {
+  SetMeasurement& m = *measurement;
+  SearchOptions right = options;
+  right.hand = Hand::kRight;
   for (size_t i = 0; i < std::min(set.points.size(), static_cast<size_t>(brute_queries)); ++i) {
     SearchOptions brute = right;
     brute.brute_force = true;
@@ -546,27 +560,36 @@ Result<SetMeasurement> MeasureSet(const Searcher& searcher,
     check("either", m.either.results[i], brute_either);
     check("right", m.right.results[i], brute_right);
   }
-  return m;
+  return Status::Ok();
 }
+
+// The perturbed views' medians, the reference of every set's ratios.
+struct Reference {
+  double wall = std::nan("");
+  double cpu = std::nan("");
+};
 
 void PrintHandRun(const std::string& key,
                   const char* hand,
                   const HandRun& run,
-                  double perturbed_median_ms) {
+                  const Reference& perturbed) {
   const double median = Median(run.ms);
   std::printf(
       "  %-14s %-6s median %8.1f ms  p90 %8.1f ms  max %8.1f ms  %6.2fx perturbed  refined "
-      "median %6.2f%% max %6.2f%%  view kd-trees median %.0f max %.0f\n",
+      "median %6.2f%% max %6.2f%%  view kd-trees median %.0f max %.0f  CPU median %.1f ms "
+      "(%.2fx perturbed)\n",
       key.c_str(),
       hand,
       median,
       Percentile(run.ms, 0.9),
       *std::max_element(run.ms.begin(), run.ms.end()),
-      median / perturbed_median_ms,
+      median / perturbed.wall,
       100 * Median(run.refined_share),
       100 * *std::max_element(run.refined_share.begin(), run.refined_share.end()),
       Median(run.trees),
-      *std::max_element(run.trees.begin(), run.trees.end()));
+      *std::max_element(run.trees.begin(), run.trees.end()),
+      Median(run.cpu_ms),
+      Median(run.cpu_ms) / perturbed.cpu);
 }
 
 // The four query sets; returns the exit code (1 when a pruned result differs from brute force or
@@ -602,24 +625,44 @@ int RunQuerySets(const Args& args,
   sets.push_back(TestSetQuerySet(args, ts, /*photo=*/false, image_options));
   sets.push_back(std::move(perturbed));
 
-  // The perturbed views first: the other sets' medians are stated as ratios to theirs.
+  // Round-robin over the sets, query i of every set before query i + 1 of any, so a change of the
+  // machine's load hits every set alike and the ratios to the perturbed views stay meaningful on
+  // a shared machine. Brute force afterwards.
   std::vector<std::optional<SetMeasurement>> measured(sets.size());
-  for (size_t order = 0; order < sets.size(); ++order) {
-    const size_t s = (order + sets.size() - 1) % sets.size();
+  size_t longest = 0;
+  for (size_t s = 0; s < sets.size(); ++s) {
     if (!sets[s].skipped.empty() || sets[s].points.empty()) continue;
+    measured[s].emplace();
+    longest = std::max(longest, sets[s].points.size());
+  }
+  for (size_t i = 0; i < longest; ++i) {
+    for (size_t s = 0; s < sets.size(); ++s) {
+      if (!measured[s] || i >= sets[s].points.size()) continue;
+      const Status st = SearchBothHands(searcher, sets[s].points[i], options, &*measured[s]);
+      if (!st.ok()) {
+        std::fprintf(stderr,
+                     "query_bench: %s query %s: %s\n",
+                     sets[s].key.c_str(),
+                     sets[s].names[i].c_str(),
+                     st.ToString().c_str());
+        return 1;
+      }
+    }
+  }
+  for (size_t s = 0; s < sets.size(); ++s) {
+    if (!measured[s]) continue;
     static const std::vector<std::vector<Match>> kNone;
     const bool is_perturbed = s + 1 == sets.size();
-    auto m = MeasureSet(searcher,
-                        sets[s],
-                        options,
-                        args.brute_queries,
-                        is_perturbed ? perturbed_right_brute : kNone);
-    if (!m.ok()) {
-      std::fprintf(
-          stderr, "query_bench: %s: %s\n", sets[s].key.c_str(), m.status().ToString().c_str());
+    const Status st = CheckAgainstBruteForce(searcher,
+                                             sets[s],
+                                             options,
+                                             args.brute_queries,
+                                             is_perturbed ? perturbed_right_brute : kNone,
+                                             &*measured[s]);
+    if (!st.ok()) {
+      std::fprintf(stderr, "query_bench: %s: %s\n", sets[s].key.c_str(), st.ToString().c_str());
       return 1;
     }
-    measured[s] = std::move(m).value();
   }
 
   double load[3] = {0, 0, 0};
@@ -627,7 +670,9 @@ int RunQuerySets(const Args& args,
   std::printf(
       "\nquery sets (issue 15): `handdb query`'s search (top-%d, --hand either, kd-tree %s, DT "
       "cell %.2f px) and --hand right, %d threads; latency = wall time of the search (not the "
-      "input step); refined = SearchStats::refined over the (view, roll) pairs searched (2 x %llu "
+      "input step; the sets are searched round-robin, query by query); CPU = process CPU time of "
+      "the search, all threads; refined = SearchStats::refined over the (view, roll) pairs "
+      "searched (2 x %llu "
       "with either; a pair scored while seeding the threshold and again later counts twice); "
       "machine load average %.1f\n",
       options.top_k,
@@ -636,9 +681,11 @@ int RunQuerySets(const Args& args,
       args.threads,
       static_cast<unsigned long long>(searcher.database().num_virtual_views()),
       load[0]);
-  const SetMeasurement* ref = measured.back() ? &*measured.back() : nullptr;
-  const double ref_either = ref ? Median(ref->either.ms) : std::nan("");
-  const double ref_right = ref ? Median(ref->right.ms) : std::nan("");
+  Reference ref_either, ref_right;
+  if (measured.back()) {
+    ref_either = {Median(measured.back()->either.ms), Median(measured.back()->either.cpu_ms)};
+    ref_right = {Median(measured.back()->right.ms), Median(measured.back()->right.cpu_ms)};
+  }
   int rc = 0;
   for (size_t s = 0; s < sets.size(); ++s) {
     const QuerySet& set = sets[s];

@@ -125,7 +125,8 @@ def table_row(report, criterion):
 QUERY_SET_LINE = re.compile(
     r"^  (\S+)\s+(either|right)\s+median\s+([0-9.]+) ms\s+p90\s+([0-9.]+) ms\s+max\s+([0-9.]+) ms\s+"
     r"([0-9.]+|nan)x perturbed\s+refined median\s+([0-9.]+)% max\s+([0-9.]+)%\s+"
-    r"view kd-trees median ([0-9.]+) max ([0-9.]+)", re.M)
+    r"view kd-trees median ([0-9.]+) max ([0-9.]+)"
+    r"(?:\s+CPU median ([0-9.]+) ms \(([0-9.]+|nan)x perturbed\))?", re.M)
 QUERY_SET_BRUTE = re.compile(r"^  (\S+)\s+brute force on the first (\d+) of (\d+) queries.*: (\S+)", re.M)
 QUERY_SET_TITLES = {"photos": "real photos", "testset-photo": "test-set photo-like renders",
                     "testset-clean": "test-set clean label renders", "perturbed": "perturbed database views"}
@@ -139,7 +140,9 @@ def query_sets(text):
             "median_ms": float(m.group(3)), "p90_ms": float(m.group(4)), "max_ms": float(m.group(5)),
             "ratio_to_perturbed_median": float(m.group(6)),
             "refined_share_median": float(m.group(7)) / 100, "refined_share_max": float(m.group(8)) / 100,
-            "view_kdtrees_median": float(m.group(9)), "view_kdtrees_max": float(m.group(10))}
+            "view_kdtrees_median": float(m.group(9)), "view_kdtrees_max": float(m.group(10)),
+            "cpu_median_ms": float(m.group(11)) if m.group(11) else None,
+            "cpu_ratio_to_perturbed_median": float(m.group(12)) if m.group(12) else None}
     for m in QUERY_SET_BRUTE.finditer(text or ""):
         sets.setdefault(m.group(1), {})["brute_force"] = {
             "checked": int(m.group(2)), "queries": int(m.group(3)), "identical": m.group(4) == "identical"}
@@ -320,7 +323,9 @@ def main():
                         f"--hand either): median / p90 / max | {e['median_ms']:.0f} / {e['p90_ms']:.0f} / "
                         f"{e['max_ms']:.0f} ms (refined {pct(e['refined_share_median'])}{checked}) | "
                         f"perturbed views median {num(ref and ref['median_ms'], '{:.0f}')} ms | "
-                        f"{e['ratio_to_perturbed_median']:.2f}x |")
+                        f"{e['ratio_to_perturbed_median']:.2f}x"
+                        + (f" (CPU {e['cpu_ratio_to_perturbed_median']:.2f}x)"
+                           if e.get("cpu_ratio_to_perturbed_median") is not None else "") + " |")
     for name, title in EVALUATIONS:
         s = results["evaluations"].get(name)
         if not s:
@@ -438,7 +443,9 @@ QUERY_SETS_HOWTO = (
     "the first N. Each query is searched with `handdb query`'s defaults (top 10, `--hand either`: the query "
     "and its mirror image) and with `--hand right`; a set's lines give the median, p90 (nearest rank) and max "
     "wall time of the search (the input step is reported apart), the median as a ratio to the same run's "
-    "perturbed-view median (same hand setting), the share of the searched (view, roll) pairs refined "
+    "perturbed-view median (same hand setting; the sets are searched round-robin, query by query, so load "
+    "changes hit them alike), the median CPU time of the search (all threads; steadier on a shared machine) "
+    "with its ratio, the share of the searched (view, roll) pairs refined "
     "(`SearchStats::refined`) and the view kd-trees built. Brute force runs on the first `--brute-queries` "
     "queries of each set (one full search per hand; both merged check `either`); a pruned result that differs "
     "makes query_bench exit 1 and name the query on stderr. Example: `query_bench --db DB --threads 2 "
