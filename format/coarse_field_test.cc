@@ -7,17 +7,12 @@
 #include <random>
 #include <vector>
 
+#include "format/shard_testing.h"
+
 namespace handdb {
 namespace {
 
-std::vector<PointQ> RandomPoints(std::mt19937* rng, size_t n, int spread_units) {
-  std::uniform_int_distribution<int> u(-spread_units, spread_units);
-  std::vector<PointQ> pts;
-  for (size_t i = 0; i < n; ++i) {
-    pts.push_back({static_cast<int16_t>(u(*rng)), static_cast<int16_t>(u(*rng))});
-  }
-  return pts;
-}
+using testing::RandomPoints;
 
 uint8_t Units(int64_t d2) {
   return static_cast<uint8_t>(

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -66,6 +67,16 @@ inline std::string SyntheticMetadata() {
   for (int j = 0; j < kNumJointAngles; ++j) limits += std::string(j ? "," : "") + "[-0.5,1.6]";
   return R"({"tool_version":"test","hand_model":{"name":"synthetic","sha256":")" +
          std::string(64, '0') + R"(","joint_limits":[)" + limits + "]}}";
+}
+
+// n points uniform in [-spread_units, spread_units]^2 (1/16 px).
+inline std::vector<PointQ> RandomPoints(std::mt19937* rng, size_t n, int spread_units) {
+  std::uniform_int_distribution<int> u(-spread_units, spread_units);
+  std::vector<PointQ> pts;
+  for (size_t i = 0; i < n; ++i) {
+    pts.push_back({static_cast<int16_t>(u(*rng)), static_cast<int16_t>(u(*rng))});
+  }
+  return pts;
 }
 
 // Writes a shard of `num_views` views with 5 + (i % 7) * points_scale points each.

@@ -6,6 +6,7 @@
 #include <random>
 #include <vector>
 
+#include "format/shard_testing.h"
 #include "query/chamfer.h"
 #include "query/database.h"
 #include "query/search_testing.h"
@@ -14,14 +15,7 @@
 namespace handdb {
 namespace {
 
-std::vector<PointQ> RandomPoints(std::mt19937* rng, size_t n, int spread_units) {
-  std::uniform_int_distribution<int> u(-spread_units, spread_units);
-  std::vector<PointQ> pts;
-  for (size_t i = 0; i < n; ++i) {
-    pts.push_back({static_cast<int16_t>(u(*rng)), static_cast<int16_t>(u(*rng))});
-  }
-  return pts;
-}
+using testing::RandomPoints;
 
 // L_A <= A for random pairs, and it is not vacuous: a query far from the view gets most of A.
 TEST(CoarseBound, HistogramBoundIsBelowTheExactQueryToViewTerm) {
