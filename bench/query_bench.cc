@@ -857,7 +857,8 @@ int Run(const Args& args) {
       std::thread::hardware_concurrency());
   std::printf(
       "  (a) pruned exact     median %9.1f ms  over %d queries (bounds %.1f ms + refine %.1f ms; "
-      "refined %.0f pairs, %.0f abandoned early (%.0f by the linear scans, before a kd-tree), %.0f view "
+      "refined %.0f pairs, %.0f abandoned early (%.0f by the linear scans, before a kd-tree), %.0f "
+      "view "
       "kd-trees)\n",
       a * 1e3,
       args.queries,
