@@ -605,33 +605,31 @@ bool CheckRequiredSections(LayoutScan& c) {
   return !c.problems->done();
 }
 
-// The header's num_views / num_points equal the section counts.
+// The header's num_views / num_points equal the section counts (views and coarse_fields: one
+// per view; points: one per point).
 void CheckHeaderCounts(LayoutScan& c) {
   const Layout& layout = *c.layout;
   const RawHeader& h = layout.header;
-  if (layout.views >= 0 && layout.sections[layout.views].count != h.num_views) {
+  struct Count {
+    int section;
+    const char* name;
+    const char* header_field;
+    uint64_t header_value;
+    size_t header_offset;
+  };
+  for (const Count& k :
+       {Count{layout.views, "views", "num_views", h.num_views, kOffNumViews},
+        Count{layout.coarse_fields, "coarse_fields", "num_views", h.num_views, kOffNumViews},
+        Count{layout.points, "points", "num_points", h.num_points, kOffNumPoints}}) {
+    if (k.section < 0) continue;
+    const uint64_t count = layout.sections[static_cast<size_t>(k.section)].count;
+    if (count == k.header_value) continue;
     c.problems->Add("counts",
                     StatusCode::kSizeMismatch,
-                    kOffNumViews,
-                    "header num_views is " + std::to_string(h.num_views) +
-                        " but the views section holds " +
-                        std::to_string(layout.sections[layout.views].count));
-  }
-  if (layout.coarse_fields >= 0 && layout.sections[layout.coarse_fields].count != h.num_views) {
-    c.problems->Add("counts",
-                    StatusCode::kSizeMismatch,
-                    kOffNumViews,
-                    "header num_views is " + std::to_string(h.num_views) +
-                        " but the coarse_fields section holds " +
-                        std::to_string(layout.sections[layout.coarse_fields].count) + " fields");
-  }
-  if (layout.points >= 0 && layout.sections[layout.points].count != h.num_points) {
-    c.problems->Add("counts",
-                    StatusCode::kSizeMismatch,
-                    kOffNumPoints,
-                    "header num_points is " + std::to_string(h.num_points) +
-                        " but the points section holds " +
-                        std::to_string(layout.sections[layout.points].count));
+                    k.header_offset,
+                    std::string("header ") + k.header_field + " is " +
+                        std::to_string(k.header_value) + " but the " + k.name + " section holds " +
+                        std::to_string(count));
   }
 }
 

@@ -211,6 +211,21 @@ TEST(Validator, EveryBitFlipIsReported) {
 }
 
 // A database of three shards and its manifest.
+// Shard u of a test database: synthetic views u*4 .. u*4+3 of 9 points, with `metadata`.
+ShardSummary WriteFourViewShard(const fs::path& path, const std::string& metadata, uint32_t u) {
+  ShardWriter w;
+  ShardWriterOptions options;
+  options.metadata_json = metadata;
+  THROW_CHECK(w.Open(path, options).ok());
+  for (uint32_t i = 0; i < 4; ++i) {
+    const uint32_t id = u * 4 + i;
+    THROW_CHECK(w.AddView(testing::SyntheticLabel(id), testing::SyntheticPoints(id, 9)).ok());
+  }
+  auto summary = w.Finish();
+  THROW_CHECK(summary.ok());
+  return *summary;
+}
+
 fs::path MakeDatabase(const std::string& name) {
   auto dir = TempDir(name);
   Manifest m;
@@ -219,15 +234,7 @@ fs::path MakeDatabase(const std::string& name) {
   for (uint32_t u = 0; u < 3; ++u) {
     char file[32];
     std::snprintf(file, sizeof(file), "shard-%05u.hdb", u);
-    ShardWriter w;
-    THROW_CHECK(w.Open(dir / file, {testing::SyntheticMetadata(), {}, true}).ok());
-    for (uint32_t i = 0; i < 4; ++i) {
-      const uint32_t id = u * 4 + i;
-      THROW_CHECK(w.AddView(testing::SyntheticLabel(id), testing::SyntheticPoints(id, 9)).ok());
-    }
-    auto summary = w.Finish();
-    THROW_CHECK(summary.ok());
-    m.AddShard(*summary);
+    m.AddShard(WriteFourViewShard(dir / file, testing::SyntheticMetadata(), u));
   }
   THROW_CHECK(WriteManifest(dir, m).ok());
   return dir;
@@ -318,15 +325,7 @@ fs::path MakeRecordedDatabase(const std::string& name) {
                                  {"labels", labels},
                                  {"shapes", shapes},
                                  {"skipped", skipped_here}};
-    ShardWriter w;
-    THROW_CHECK(w.Open(dir / file, {meta.dump(), {}}).ok());
-    for (uint32_t i = 0; i < 4; ++i) {
-      const uint32_t id = u * 4 + i;
-      THROW_CHECK(w.AddView(testing::SyntheticLabel(id), testing::SyntheticPoints(id, 9)).ok());
-    }
-    auto summary = w.Finish();
-    THROW_CHECK(summary.ok());
-    m.AddShard(*summary);
+    m.AddShard(WriteFourViewShard(dir / file, meta.dump(), u));
   }
   THROW_CHECK(WriteManifest(dir, m).ok());
   return dir;
