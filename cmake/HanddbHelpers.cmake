@@ -9,7 +9,12 @@ include_guard(GLOBAL)
 function(handdb_add_library)
   cmake_parse_arguments(ARG "" "NAME" "SRCS;PUBLIC_DEPS;PRIVATE_DEPS" ${ARGN})
   add_library(${ARG_NAME} STATIC ${ARG_SRCS})
-  target_include_directories(${ARG_NAME} PUBLIC ${PROJECT_SOURCE_DIR})
+  # Rooted at the repository in the build tree, at include/handdb/ when installed (cmake/
+  # HanddbInstall.cmake), so `#include "format/shard_reader.h"` works in both. PIC: the Python
+  # module (python/) is a shared object linking these archives.
+  target_include_directories(${ARG_NAME} PUBLIC $<BUILD_INTERFACE:${PROJECT_SOURCE_DIR}>
+                                                $<INSTALL_INTERFACE:include/handdb>)
+  set_target_properties(${ARG_NAME} PROPERTIES POSITION_INDEPENDENT_CODE ON)
   target_link_libraries(${ARG_NAME} PUBLIC ${ARG_PUBLIC_DEPS} PRIVATE ${ARG_PRIVATE_DEPS})
   target_compile_options(${ARG_NAME} PRIVATE ${HANDDB_WARNINGS})
 endfunction()

@@ -1,0 +1,1021 @@
+// handdb._handdb: the Python module (issue 13), a thin layer over the libraries' public API
+// (query/database.h, query/searcher.h, query/input/image_edges.h, format/manifest.h,
+// format/validator.h), so Python reads and searches exactly what the `handdb` binary does.
+// docs/python.md describes the API; python/handdb/__init__.py re-exports it.
+//
+// - Points are zero-copy, read-only numpy views of the shard mapping (PointQ is two little-endian
+//   int16, which the library already reads in place); the array keeps the Database alive.
+// - Every long call (open, read, search, image edges, validate) releases the GIL.
+// - A library error (Status) raises handdb.Error carrying the tool's one-line message and its
+//   code name; bad arguments raise ValueError / TypeError / IndexError.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+#include <pybind11/stl/filesystem.h>
+
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "base/status.h"
+#include "base/thread_pool.h"
+#include "edges/view_conversion.h"
+#include "format/manifest.h"
+#include "format/roll.h"
+#include "format/validator.h"
+#include "format/view.h"
+#include "handdb_version.h"
+#include "query/database.h"
+#include "query/input/image_edges.h"
+#include "query/searcher.h"
+
+namespace handdb::python {
+namespace {
+
+namespace py = pybind11;
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+static_assert(std::endian::native == std::endian::little,
+              "points are handed out as views of the little-endian shard bytes");
+static_assert(sizeof(PointQ) == 2 * sizeof(int16_t) && offsetof(PointQ, y) == sizeof(int16_t));
+
+constexpr double kDeg = 180.0 / M_PI;
+
+// A library error on its way to Python: handdb.Error(message) with .code = "kChecksumMismatch".
+struct StatusError : std::exception {
+  explicit StatusError(Status s) : status(std::move(s)) {}
+  const char* what() const noexcept override { return status.message().c_str(); }
+  Status status;
+};
+
+template <typename T>
+T Unwrap(Result<T> r) {
+  if (!r.ok()) throw StatusError(r.status());
+  return std::move(r).value();
+}
+
+py::object* error_type = nullptr;  // handdb.Error, created in the module init (never freed)
+
+// Marks a fresh array read-only (it views the mapping, or is shared by every caller).
+template <typename A>
+A ReadOnly(A a) {
+  py::detail::array_proxy(a.ptr())->flags &= ~py::detail::npy_api::NPY_ARRAY_WRITEABLE_;
+  return a;
+}
+
+// Zero-copy (n, 2) int16 view of points; `owner` keeps the memory alive.
+py::array PointsView(std::span<const PointQ> pts, py::handle owner) {
+  const auto n = static_cast<py::ssize_t>(pts.size());
+  return ReadOnly(py::array_t<int16_t>({n, py::ssize_t{2}},
+                                       {py::ssize_t{sizeof(PointQ)}, py::ssize_t{sizeof(int16_t)}},
+                                       reinterpret_cast<const int16_t*>(pts.data()),
+                                       owner));
+}
+
+template <typename T, size_t N>
+py::array_t<T> Array1(const std::array<T, N>& a) {
+  py::array_t<T> out(static_cast<py::ssize_t>(N));
+  std::memcpy(out.mutable_data(), a.data(), sizeof(T) * N);
+  return out;
+}
+
+py::array_t<float> Keypoints(const ViewLabel& l) {
+  py::array_t<float> out({py::ssize_t{kNumKeypoints}, py::ssize_t{3}});
+  float* p = out.mutable_data();
+  for (const auto& k : l.keypoints) {
+    *p++ = k[0];
+    *p++ = k[1];
+    *p++ = k[2];
+  }
+  return out;
+}
+
+// The label fields as a dict of numpy arrays / numbers (names as in manifest.json's labels[]).
+py::dict LabelDict(const ViewLabel& l) {
+  py::dict d;
+  d["render_id"] = l.render_id;
+  d["shape_id"] = l.shape_id;
+  d["dir_id"] = l.dir_id;
+  d["joint_angles"] = Array1(l.joint_angles);
+  d["view_direction"] = Array1(l.view_direction);
+  d["view_theta"] = l.view_theta;
+  d["view_phi"] = l.view_phi;
+  d["camera_roll"] = l.camera_roll;
+  d["keypoints"] = Keypoints(l);
+  d["source_diameter_px"] = l.source_diameter_px;
+  d["scale"] = l.scale;
+  d["source_centre_px"] = Array1(l.source_centre_px);
+  return d;
+}
+
+// Python's json module turns our JSON text into plain dicts and lists (one conversion, no
+// hand-written walker to keep in step with nlohmann).
+py::object JsonToPython(const json& doc) {
+  static py::object* loads = new py::object(py::module_::import("json").attr("loads"));
+  return (*loads)(doc.dump());
+}
+
+// `handdb query`'s roll_deg: the roll angle in degrees in [0, 360).
+double Deg0To360(double rad) {
+  double d = std::fmod(rad * kDeg, 360.0);
+  if (d < 0) d += 360.0;
+  return d >= 360.0 ? 0.0 : d;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Query edges.
+
+struct PyQueryEdges {
+  QueryEdges edges;
+};
+
+py::array_t<int32_t> PixelArray(const std::vector<EdgePixelXY>& px) {
+  py::array_t<int32_t> out({static_cast<py::ssize_t>(px.size()), py::ssize_t{2}});
+  int32_t* p = out.mutable_data();
+  for (const auto& e : px) {
+    *p++ = e.x;
+    *p++ = e.y;
+  }
+  return out;
+}
+
+py::array_t<float> Point2fArray(const std::vector<Point2f>& pts) {
+  py::array_t<float> out({static_cast<py::ssize_t>(pts.size()), py::ssize_t{2}});
+  float* p = out.mutable_data();
+  for (const auto& q : pts) {
+    *p++ = q.x;
+    *p++ = q.y;
+  }
+  return out;
+}
+
+// "x,y,w,h" or a 4-sequence; "a,b,..." or an n-sequence of ints.
+std::vector<int> IntList(const py::handle& value, size_t n, const char* name) {
+  std::vector<int> out;
+  if (py::isinstance<py::str>(value)) {
+    const std::string text = py::cast<std::string>(value);
+    size_t pos = 0;
+    while (true) {
+      const size_t comma = text.find(',', pos);
+      const std::string item = text.substr(pos, comma == std::string::npos ? comma : comma - pos);
+      size_t used = 0;
+      try {
+        out.push_back(std::stoi(item, &used));
+      } catch (const std::exception&) {
+        used = std::string::npos;
+      }
+      if (used != item.size()) {
+        throw py::value_error(std::string(name) + ": '" + text + "' is not " + std::to_string(n) +
+                              " comma-separated integers");
+      }
+      if (comma == std::string::npos) break;
+      pos = comma + 1;
+    }
+  } else {
+    for (const py::handle item : value) out.push_back(py::cast<int>(item));
+  }
+  if (out.size() != n) {
+    throw py::value_error(std::string(name) + " needs " + std::to_string(n) + " integers");
+  }
+  return out;
+}
+
+// The keyword options of query_edges() and search(), named like `handdb query`'s flags.
+ImageEdgeOptions EdgeOptionsFromKwargs(const py::kwargs& kw) {
+  ImageEdgeOptions o;
+  for (const auto& [key_handle, value] : kw) {
+    const std::string key = py::cast<std::string>(key_handle);
+    if (key == "input") {
+      auto kind = ParseQueryInputKind(py::cast<std::string>(value));
+      if (!kind.ok()) throw py::value_error("input must be auto, photo, edges or labels");
+      o.kind = *kind;
+    } else if (key == "mask") {
+      if (!value.is_none()) o.mask = py::cast<fs::path>(value);
+    } else if (key == "roi") {
+      if (!value.is_none()) {
+        const auto v = IntList(value, 4, "roi (x, y, w, h)");
+        o.roi = {v[0], v[1], v[2], v[3]};
+        if (o.roi.empty()) throw py::value_error("roi: width and height must be positive");
+      }
+    } else if (key == "skin") {
+      if (!value.is_none()) {
+        const auto v = IntList(value, 6, "skin (Ymin, Ymax, Crmin, Crmax, Cbmin, Cbmax)");
+        o.skin = {v[0], v[1], v[2], v[3], v[4], v[5]};
+      }
+    } else if (key == "canny") {
+      if (!value.is_none()) {
+        const auto v = IntList(value, 2, "canny (low, high)");
+        o.canny_low = v[0];
+        o.canny_high = v[1];
+      }
+    } else if (key == "contour_clearance") {
+      o.contour_clearance_px = py::cast<int>(value);
+    } else if (key == "edges_outside") {
+      o.interior_edges_only = !py::cast<bool>(value);
+    } else {
+      throw py::type_error("unexpected keyword argument '" + key + "'");
+    }
+  }
+  if (!o.Check()) {
+    throw py::value_error(
+        "invalid photo options (skin box within 0..255 and min <= max, 0 <= canny low <= high, "
+        "contour_clearance 0..20)");
+  }
+  return o;
+}
+
+PyQueryEdges LoadEdges(const fs::path& image,
+                       ImageEdgeOptions options,
+                       const std::optional<fs::path>& db_dir) {
+  py::gil_scoped_release release;
+  if (db_dir) {
+    // A label EXR is converted with the edge options the database was made with (as `handdb
+    // query` does).
+    auto recorded = ReadDatabaseViewConversion(*db_dir);
+    if (!recorded.ok()) throw StatusError(recorded.status());
+    options.label_edges = recorded->edges;
+    options.label_joint_pairs = recorded->joint_pairs;
+  }
+  return PyQueryEdges{Unwrap(LoadQueryEdges(image, options))};
+}
+
+// ---------------------------------------------------------------------------------------------
+// The database.
+
+class PyDatabase;
+
+struct PyView {
+  py::object owner;  // the Database (keeps the mapping alive)
+  const PyDatabase* db = nullptr;
+  view_id_t index = 0;
+  ViewLabel label;
+  std::span<const PointQ> points;
+  std::string shape_name;
+};
+
+class PyDatabase {
+ public:
+  PyDatabase(fs::path path, bool verify) : path_(std::move(path)), verify_(verify) {
+    {
+      py::gil_scoped_release release;
+      manifest_ = Unwrap(ReadManifest(path_));
+      db_ = std::make_shared<const Database>(Unwrap(Database::Open(path_, verify)));
+    }
+  }
+
+  const Database& db() const { return *db_; }
+  const fs::path& path() const { return path_; }
+  bool verify() const { return verify_; }
+  const Manifest& manifest() const { return manifest_; }
+
+  view_id_t Index(py::ssize_t i) const {
+    const auto n = static_cast<py::ssize_t>(db_->num_views());
+    if (i < 0) i += n;
+    if (i < 0 || i >= n) {
+      throw py::index_error(path_.string() + ": view " + std::to_string(i) +
+                            " out of range (database has " + std::to_string(n) +
+                            " canonical views)");
+    }
+    return static_cast<view_id_t>(i);
+  }
+
+  PyView View(py::object self, py::ssize_t i) const {
+    const view_id_t v = Index(i);
+    PyView out;
+    out.owner = std::move(self);
+    out.db = this;
+    out.index = v;
+    out.label = db_->label(v);
+    out.points = db_->points(v);
+    out.shape_name = std::string(db_->shape_name(out.label.shape_id));
+    return out;
+  }
+
+  // Every field of views [start, stop) as columns; points zero-copy when the range's points are
+  // one contiguous run of a mapping (always inside one shard), else copied into one array.
+  py::dict Read(py::object self, py::ssize_t start, std::optional<py::ssize_t> stop_arg) const {
+    const auto n = static_cast<py::ssize_t>(db_->num_views());
+    py::ssize_t stop = stop_arg.value_or(n);
+    if (start < 0) start += n;
+    if (stop < 0) stop += n;
+    start = std::clamp<py::ssize_t>(start, 0, n);
+    stop = std::clamp<py::ssize_t>(stop, start, n);
+    const py::ssize_t count = stop - start;
+
+    py::array_t<int64_t> offsets(count + 1);
+    int64_t* off = offsets.mutable_data();
+    off[0] = 0;
+    bool contiguous = true;
+    const PointQ* first = count ? db_->points(static_cast<view_id_t>(start)).data() : nullptr;
+    for (py::ssize_t k = 0; k < count; ++k) {
+      const auto pts = db_->points(static_cast<view_id_t>(start + k));
+      if (pts.data() != first + off[k] && !pts.empty()) contiguous = false;
+      off[k + 1] = off[k] + static_cast<int64_t>(pts.size());
+    }
+    py::array points;
+    if (contiguous) {
+      points = PointsView({first, static_cast<size_t>(off[count])}, self);
+    } else {
+      py::array_t<int16_t> copy({static_cast<py::ssize_t>(off[count]), py::ssize_t{2}});
+      auto* dst = reinterpret_cast<PointQ*>(copy.mutable_data());
+      {
+        py::gil_scoped_release release;
+        for (py::ssize_t k = 0; k < count; ++k) {
+          const auto pts = db_->points(static_cast<view_id_t>(start + k));
+          std::memcpy(dst + off[k], pts.data(), pts.size_bytes());
+        }
+      }
+      points = ReadOnly(std::move(copy));
+    }
+
+    const auto c = static_cast<py::ssize_t>(count);
+    py::array_t<uint32_t> render_id(c), shape_id(c), dir_id(c);
+    py::array_t<float> joints({c, py::ssize_t{kNumJointAngles}});
+    py::array_t<float> direction({c, py::ssize_t{3}});
+    py::array_t<float> theta(c), phi(c), roll(c), diameter(c), scale(c);
+    py::array_t<float> keypoints({c, py::ssize_t{kNumKeypoints}, py::ssize_t{3}});
+    py::array_t<float> centre({c, py::ssize_t{2}});
+    {
+      uint32_t* rid = render_id.mutable_data();
+      uint32_t* sid = shape_id.mutable_data();
+      uint32_t* did = dir_id.mutable_data();
+      float* ja = joints.mutable_data();
+      float* vd = direction.mutable_data();
+      float* th = theta.mutable_data();
+      float* ph = phi.mutable_data();
+      float* cr = roll.mutable_data();
+      float* kp = keypoints.mutable_data();
+      float* sd = diameter.mutable_data();
+      float* sc = scale.mutable_data();
+      float* ce = centre.mutable_data();
+      py::gil_scoped_release release;
+      for (py::ssize_t k = 0; k < count; ++k) {
+        const ViewLabel l = db_->label(static_cast<view_id_t>(start + k));
+        rid[k] = l.render_id;
+        sid[k] = l.shape_id;
+        did[k] = l.dir_id;
+        std::memcpy(ja + k * kNumJointAngles, l.joint_angles.data(), sizeof(l.joint_angles));
+        std::memcpy(vd + k * 3, l.view_direction.data(), sizeof(l.view_direction));
+        th[k] = l.view_theta;
+        ph[k] = l.view_phi;
+        cr[k] = l.camera_roll;
+        static_assert(sizeof(l.keypoints) == sizeof(float) * kNumKeypoints * 3);
+        std::memcpy(kp + k * kNumKeypoints * 3, l.keypoints.data(), sizeof(l.keypoints));
+        sd[k] = l.source_diameter_px;
+        sc[k] = l.scale;
+        std::memcpy(ce + k * 2, l.source_centre_px.data(), sizeof(l.source_centre_px));
+      }
+    }
+    py::dict d;
+    d["start"] = start;
+    d["stop"] = stop;
+    d["points"] = points;
+    d["point_offsets"] = offsets;
+    d["render_id"] = render_id;
+    d["shape_id"] = shape_id;
+    d["dir_id"] = dir_id;
+    d["joint_angles"] = joints;
+    d["view_direction"] = direction;
+    d["view_theta"] = theta;
+    d["view_phi"] = phi;
+    d["camera_roll"] = roll;
+    d["keypoints"] = keypoints;
+    d["source_diameter_px"] = diameter;
+    d["scale"] = scale;
+    d["source_centre_px"] = centre;
+    return d;
+  }
+
+  // Built on the first search (it scans every view's points once), under the GIL.
+  const Searcher& searcher() const {
+    if (!searcher_) searcher_ = std::make_unique<Searcher>(db_);
+    return *searcher_;
+  }
+
+  fs::path source_dir() const { return path_; }
+
+ private:
+  fs::path path_;
+  bool verify_ = false;
+  Manifest manifest_;
+  std::shared_ptr<const Database> db_;
+  mutable std::unique_ptr<Searcher> searcher_;
+};
+
+// ---------------------------------------------------------------------------------------------
+// Search.
+
+struct PyMatch {
+  int rank = 0;
+  Match match;
+  std::optional<std::vector<Point2f>> keypoints_image;  // only for an image query
+};
+
+py::object KeypointsImage(const PyMatch& m) {
+  if (!m.keypoints_image) return py::none();
+  return Point2fArray(*m.keypoints_image);
+}
+
+// The match as `handdb query --json` prints it (schemas/query_result.schema.json, matches[]).
+py::dict MatchDict(const PyMatch& pm) {
+  const Match& m = pm.match;
+  const ViewLabel& l = m.label;
+  // Lists, as json.loads of the CLI's output gives.
+  auto as_list = [](const auto& a) {
+    py::list out;
+    for (const auto& x : a) out.append(x);
+    return out;
+  };
+  py::list kps_lists;
+  for (const auto& k : l.keypoints) kps_lists.append(as_list(k));
+  py::object kps_image_lists = py::none();
+  if (pm.keypoints_image) {
+    py::list list;
+    for (const Point2f& p : *pm.keypoints_image) {
+      py::list xy;
+      xy.append(p.x);
+      xy.append(p.y);
+      list.append(xy);
+    }
+    kps_image_lists = list;
+  }
+  py::dict d;
+  d["rank"] = pm.rank;
+  d["view_id"] = m.view_id;
+  d["roll"] = m.roll;
+  d["roll_deg"] = Deg0To360(m.roll_angle);
+  d["distance"] = m.distance;
+  d["a"] = m.a;
+  d["b"] = m.b;
+  d["render_id"] = l.render_id;
+  d["shape_id"] = l.shape_id;
+  d["shape_name"] = m.shape_name;
+  d["dir_id"] = l.dir_id;
+  d["joint_angles"] = as_list(l.joint_angles);
+  d["view_direction"] = as_list(l.view_direction);
+  d["view_theta"] = l.view_theta;
+  d["view_phi"] = l.view_phi;
+  d["view_theta_deg"] = l.view_theta * kDeg;
+  d["view_phi_deg"] = l.view_phi * kDeg;
+  d["camera_roll"] = l.camera_roll;
+  d["hand"] = std::string(HandName(m.hand));
+  d["keypoints"] = kps_lists;
+  if (pm.keypoints_image) d["keypoints_image_px"] = kps_image_lists;
+  return d;
+}
+
+py::dict StatsDict(const SearchStats& st, const Database& db) {
+  py::dict d;
+  d["virtual_views"] = st.virtual_views;
+  d["canonical_views"] = db.num_views();
+  d["rolls"] = db.num_rolls();
+  d["refined"] = st.refined;
+  d["abandoned"] = st.abandoned;
+  d["view_kdtrees"] = st.view_trees;
+  d["scan_abandoned"] = st.probe_abandoned;
+  d["searches"] = st.searches;
+  d["seconds"] = st.seconds_total;
+  d["seconds_bounds"] = st.seconds_bounds;
+  d["seconds_refine"] = st.seconds_refine;
+  return d;
+}
+
+// (n, 2) points: float -> normalised px; int16 -> PointQ units (1/16 px, as stored).
+std::vector<Point2f> QueryPoints(const py::array& a) {
+  if (a.ndim() != 2 || a.shape(1) != 2) {
+    throw py::value_error("query points must be an (n, 2) array (x, y in the normalised frame)");
+  }
+  std::vector<Point2f> out(static_cast<size_t>(a.shape(0)));
+  if (a.dtype().kind() == 'i' && a.itemsize() == 2) {
+    auto q = py::array_t<int16_t, py::array::c_style | py::array::forcecast>::ensure(a);
+    const int16_t* p = q.data();
+    for (size_t i = 0; i < out.size(); ++i)
+      out[i] = {PointQToPx(p[2 * i]), PointQToPx(p[2 * i + 1])};
+    return out;
+  }
+  if (a.dtype().kind() != 'f') {
+    throw py::type_error(
+        "query points must be float (px in the normalised frame) or int16 (1/16 px, as "
+        "View.points)");
+  }
+  auto f = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(a);
+  const float* p = f.data();
+  for (size_t i = 0; i < out.size(); ++i) out[i] = {p[2 * i], p[2 * i + 1]};
+  return out;
+}
+
+py::object Search(const PyDatabase& self,
+                  py::object query,
+                  int top_k,
+                  int threads,
+                  const std::string& hand,
+                  bool brute_force,
+                  const std::string& kdtree,
+                  float dt_cell_px,
+                  bool coarse_bound,
+                  bool return_stats,
+                  const py::kwargs& edge_kwargs) {
+  SearchOptions options;
+  options.top_k = top_k;
+  options.num_threads = threads;
+  options.brute_force = brute_force;
+  options.dt_cell_px = dt_cell_px;
+  options.coarse_bound = coarse_bound;
+  auto h = ParseHand(hand);
+  if (!h.ok()) throw py::value_error("hand must be right, left or either");
+  options.hand = *h;
+  auto k = ParseKdTreeBackend(kdtree);
+  if (!k.ok()) throw py::value_error("kdtree must be nanoflann or pcl");
+  options.kdtree = *k;
+  if (top_k < 1) throw py::value_error("top_k must be >= 1");
+  if (threads == 0 || threads < -1) throw py::value_error("threads must be -1 or >= 1");
+
+  std::optional<QueryEdges> edges;
+  std::vector<Point2f> points;
+  if (py::isinstance<PyQueryEdges>(query)) {
+    if (edge_kwargs.size()) throw py::type_error("image options given with a QueryEdges query");
+    edges = py::cast<const PyQueryEdges&>(query).edges;
+  } else if (py::isinstance<py::str>(query) || py::hasattr(query, "__fspath__")) {
+    edges =
+        LoadEdges(py::cast<fs::path>(query), EdgeOptionsFromKwargs(edge_kwargs), self.source_dir())
+            .edges;
+  } else {
+    if (edge_kwargs.size()) throw py::type_error("image options given with a points query");
+    points = QueryPoints(py::array::ensure(query));
+  }
+  if (edges) points = edges->points_px();
+
+  const Searcher& searcher = self.searcher();
+  SearchStats stats;
+  std::optional<Result<std::vector<Match>>> matches;
+  {
+    py::gil_scoped_release release;
+    matches.emplace(searcher.Search(points, options, &stats));
+  }
+  if (!matches->ok()) throw StatusError(matches->status());
+  py::list out;
+  int rank = 1;
+  for (Match& m : **matches) {
+    PyMatch pm;
+    pm.rank = rank++;
+    if (edges) {
+      pm.keypoints_image.emplace();
+      for (const auto& kp : m.label.keypoints) {
+        pm.keypoints_image->push_back(edges->ImageFromNormalised({kp[0], kp[1]}));
+      }
+    }
+    pm.match = std::move(m);
+    out.append(py::cast(std::move(pm)));
+  }
+  if (!return_stats) return out;
+  py::dict st = StatsDict(stats, self.db());
+  st["threads"] = ResolveNumThreads(threads);
+  return py::make_tuple(out, st);
+}
+
+py::list Validate(const fs::path& path, bool verify_checksums, size_t max_problems) {
+  ValidateOptions options;
+  options.verify_checksums = verify_checksums;
+  options.max_problems_per_check = max_problems;
+  ValidationReport r;
+  {
+    py::gil_scoped_release release;
+    r = ValidatePath(path, options);
+  }
+  py::list problems;
+  for (const auto& p : r.problems) {
+    py::dict d;
+    d["code"] = StatusCodeName(p.code);
+    d["file"] = p.file;
+    d["offset"] = p.offset;
+    d["message"] = p.message;
+    problems.append(d);
+  }
+  if (r.suppressed > 0) {
+    // The rest were counted only; say so rather than return a list that looks complete.
+    py::dict d;
+    d["code"] = "kSuppressed";
+    d["file"] = path.string();
+    d["offset"] = 0;
+    d["message"] = path.string() + ": " + std::to_string(r.suppressed) +
+                   " more problem(s) not listed (use max_problems=0 to list them)";
+    problems.append(d);
+  }
+  return problems;
+}
+
+}  // namespace
+
+PYBIND11_MODULE(_handdb, m) {
+  m.doc() =
+      "handdb: read and search databases of synthetic hand views (docs/python.md).\n\n"
+      "  db = handdb.Database('db')        # manifest + every shard, memory-mapped read-only\n"
+      "  v = db[0]                         # a View: points (zero-copy int16, 1/16 px), labels\n"
+      "  cols = db.read()                  # every view as numpy columns\n"
+      "  matches = db.search('hand.jpg')   # top-k (view, roll) by chamfer distance\n"
+      "  problems = handdb.validate('db')  # [] when the database is valid\n";
+  m.attr("__version__") = HANDDB_VERSION;
+  m.attr("POINT_SCALE") = kPointScale;
+  m.attr("NUM_JOINT_ANGLES") = kNumJointAngles;
+  m.attr("NUM_KEYPOINTS") = kNumKeypoints;
+
+  error_type = new py::object(py::exception<StatusError>(m, "Error", PyExc_RuntimeError));
+  error_type->attr("__doc__") =
+      "A handdb library error: str(e) is the one-line message `handdb` prints after "
+      "'handdb <command>: ' (it names the file and the problem); e.code is the status code name, "
+      "e.g. 'kChecksumMismatch', 'kNotFound', 'kNoHand'.";
+  py::register_exception_translator([](std::exception_ptr p) {
+    try {
+      if (p) std::rethrow_exception(p);
+    } catch (const StatusError& e) {
+      py::object exc = (*error_type)(e.status.message());
+      exc.attr("code") = StatusCodeName(e.status.code());
+      PyErr_SetObject(error_type->ptr(), exc.ptr());
+    }
+  });
+
+  py::class_<PyQueryEdges>(m,
+                           "QueryEdges",
+                           "A query image's edge points in the database's normalised frame "
+                           "(handdb.query_edges(); docs/query.md 'From a picture to edges').")
+      .def_property_readonly(
+          "kind",
+          [](const PyQueryEdges& q) { return std::string(QueryInputKindName(q.edges.kind)); },
+          "the input kind used: 'photo', 'edges' or 'labels'")
+      .def_property_readonly(
+          "points",
+          [](py::object self) {
+            const auto& q = py::cast<const PyQueryEdges&>(self).edges;
+            return PointsView(q.points, self);
+          },
+          "(n, 2) int16, read-only: normalised points in 1/16 px (sorted by y, x; unique)")
+      .def_property_readonly(
+          "points_px",
+          [](const PyQueryEdges& q) { return Point2fArray(q.edges.points_px()); },
+          "(n, 2) float32: the same in px (what the search uses)")
+      .def_property_readonly(
+          "edge_pixels",
+          [](const PyQueryEdges& q) { return PixelArray(q.edges.edge_pixels); },
+          "(n, 2) int32: edge pixels (column, row) of the input image")
+      .def_property_readonly(
+          "contour_pixels",
+          [](const PyQueryEdges& q) { return PixelArray(q.edges.contour_pixels); },
+          "(n, 2) int32: the silhouette contour used for the normalisation")
+      .def_property_readonly("width", [](const PyQueryEdges& q) { return q.edges.width; })
+      .def_property_readonly("height", [](const PyQueryEdges& q) { return q.edges.height; })
+      .def_property_readonly("hand_pixels",
+                             [](const PyQueryEdges& q) { return q.edges.hand_pixels; })
+      .def_property_readonly(
+          "touches_border",
+          [](const PyQueryEdges& q) { return q.edges.touches_border; },
+          "the hand region reaches the image border")
+      .def_property_readonly("diameter_px",
+                             [](const PyQueryEdges& q) { return q.edges.diameter_px; })
+      .def_property_readonly(
+          "centre_px",
+          [](const PyQueryEdges& q) { return py::make_tuple(q.edges.centre_x, q.edges.centre_y); },
+          "normalisation centre in image px: normalised = (pixel centre - centre) * scale")
+      .def_property_readonly("scale", [](const PyQueryEdges& q) { return q.edges.scale; })
+      .def(
+          "image_from_normalised",
+          [](const PyQueryEdges& q,
+             py::array_t<float, py::array::c_style | py::array::forcecast> xy) {
+            if (xy.ndim() != 2 || xy.shape(1) < 2)
+              throw py::value_error("expected an (n, 2) array");
+            std::vector<Point2f> out;
+            for (py::ssize_t i = 0; i < xy.shape(0); ++i) {
+              out.push_back(q.edges.ImageFromNormalised({xy.at(i, 0), xy.at(i, 1)}));
+            }
+            return Point2fArray(out);
+          },
+          py::arg("xy"),
+          "Normalised px (n, 2) -> input image px (pixel centres at integer + 0.5).")
+      .def("__len__", [](const PyQueryEdges& q) { return q.edges.points.size(); })
+      .def("__repr__", [](const PyQueryEdges& q) {
+        return "<handdb.QueryEdges " + std::string(QueryInputKindName(q.edges.kind)) + " " +
+               std::to_string(q.edges.width) + "x" + std::to_string(q.edges.height) + ", " +
+               std::to_string(q.edges.points.size()) + " points>";
+      });
+
+  py::class_<PyView>(m,
+                     "View",
+                     "One canonical (roll 0) view: its edge points and pose label, read from the "
+                     "database's mapping. Label fields follow docs/format.md 3.2 and "
+                     "docs/conventions.md (radians, normalised px).")
+      .def_readonly("index", &PyView::index, "canonical view index (manifest order)")
+      .def_property_readonly(
+          "points",
+          [](const PyView& v) { return PointsView(v.points, v.owner); },
+          "(n, 2) int16, read-only, zero-copy view of the shard: x, y in 1/16 px (divide by "
+          "handdb.POINT_SCALE for px), normalised frame")
+      .def_property_readonly(
+          "points_px",
+          [](const PyView& v) {
+            py::array_t<float> out({static_cast<py::ssize_t>(v.points.size()), py::ssize_t{2}});
+            float* p = out.mutable_data();
+            for (const PointQ& q : v.points) {
+              *p++ = PointQToPx(q.x);
+              *p++ = PointQToPx(q.y);
+            }
+            return out;
+          },
+          "(n, 2) float32 copy of the points in px")
+      .def_property_readonly(
+          "shape_name",
+          [](const PyView& v) { return v.shape_name; },
+          "name of the shape from the database's shape table, '' if unknown")
+      .def_property_readonly("render_id", [](const PyView& v) { return v.label.render_id; })
+      .def_property_readonly("shape_id", [](const PyView& v) { return v.label.shape_id; })
+      .def_property_readonly("dir_id", [](const PyView& v) { return v.label.dir_id; })
+      .def_property_readonly(
+          "joint_angles",
+          [](const PyView& v) { return Array1(v.label.joint_angles); },
+          "(20,) float32, radians, hand-model DOF order (docs/conventions.md)")
+      .def_property_readonly(
+          "view_direction",
+          [](const PyView& v) { return Array1(v.label.view_direction); },
+          "(3,) float32 unit vector hand -> camera, hand frame")
+      .def_property_readonly("view_theta", [](const PyView& v) { return v.label.view_theta; })
+      .def_property_readonly("view_phi", [](const PyView& v) { return v.label.view_phi; })
+      .def_property_readonly(
+          "camera_roll", [](const PyView& v) { return v.label.camera_roll; }, "radians")
+      .def_property_readonly(
+          "keypoints",
+          [](const PyView& v) { return Keypoints(v.label); },
+          "(21, 3) float32: x, y in normalised px, z depth in the same units")
+      .def_property_readonly("source_diameter_px",
+                             [](const PyView& v) { return v.label.source_diameter_px; })
+      .def_property_readonly("scale", [](const PyView& v) { return v.label.scale; })
+      .def_property_readonly("source_centre_px",
+                             [](const PyView& v) { return Array1(v.label.source_centre_px); })
+      .def(
+          "label",
+          [](const PyView& v) { return LabelDict(v.label); },
+          "Every label field as a dict of numbers and numpy arrays.")
+      .def(
+          "rolled",
+          [](const PyView& v, int64_t roll) {
+            const uint32_t rolls = v.db->db().num_rolls();
+            if (roll < 0 || roll >= static_cast<int64_t>(rolls)) {
+              throw py::index_error("roll " + std::to_string(roll) + " out of range 0.." +
+                                    std::to_string(rolls - 1));
+            }
+            const float angle = RollAngle(static_cast<roll_id_t>(roll), rolls);
+            std::vector<Point2f> pts;
+            RollPoints(v.points, angle, &pts);
+            return py::make_tuple(Point2fArray(pts), LabelDict(RollLabel(v.label, angle)));
+          },
+          py::arg("roll"),
+          "Virtual view (index, roll): (points in px (n, 2) float32, label dict), rotated by "
+          "2*pi*roll/R as the search sees it (camera_roll and keypoints rolled too).")
+      .def("__len__", [](const PyView& v) { return v.points.size(); })
+      .def("__repr__", [](const PyView& v) {
+        return "<handdb.View " + std::to_string(v.index) + " shape " +
+               std::to_string(v.label.shape_id) +
+               (v.shape_name.empty() ? "" : " '" + v.shape_name + "'") + ", " +
+               std::to_string(v.points.size()) + " points>";
+      });
+
+  py::class_<PyMatch>(m,
+                      "Match",
+                      "One search result: virtual view (view_id, roll), its chamfer distance "
+                      "D_c = a + b (px) and its rolled pose label, as `handdb query --json` "
+                      "reports it (to_dict() gives exactly that match object).")
+      .def_readonly("rank", &PyMatch::rank)
+      .def_property_readonly("view_id", [](const PyMatch& p) { return p.match.view_id; })
+      .def_property_readonly("roll", [](const PyMatch& p) { return p.match.roll; })
+      .def_property_readonly(
+          "roll_angle", [](const PyMatch& p) { return p.match.roll_angle; }, "radians")
+      .def_property_readonly("roll_deg",
+                             [](const PyMatch& p) { return Deg0To360(p.match.roll_angle); })
+      .def_property_readonly(
+          "distance", [](const PyMatch& p) { return p.match.distance; }, "D_c = a + b, px")
+      .def_property_readonly(
+          "a", [](const PyMatch& p) { return p.match.a; }, "query -> view term, px")
+      .def_property_readonly(
+          "b", [](const PyMatch& p) { return p.match.b; }, "view -> query term, px")
+      .def_property_readonly("hand",
+                             [](const PyMatch& p) { return std::string(HandName(p.match.hand)); })
+      .def_property_readonly("shape_name", [](const PyMatch& p) { return p.match.shape_name; })
+      .def_property_readonly("render_id", [](const PyMatch& p) { return p.match.label.render_id; })
+      .def_property_readonly("shape_id", [](const PyMatch& p) { return p.match.label.shape_id; })
+      .def_property_readonly("dir_id", [](const PyMatch& p) { return p.match.label.dir_id; })
+      .def_property_readonly("joint_angles",
+                             [](const PyMatch& p) { return Array1(p.match.label.joint_angles); })
+      .def_property_readonly("view_direction",
+                             [](const PyMatch& p) { return Array1(p.match.label.view_direction); })
+      .def_property_readonly("view_theta",
+                             [](const PyMatch& p) { return p.match.label.view_theta; })
+      .def_property_readonly("view_phi", [](const PyMatch& p) { return p.match.label.view_phi; })
+      .def_property_readonly("camera_roll",
+                             [](const PyMatch& p) { return p.match.label.camera_roll; })
+      .def_property_readonly(
+          "keypoints",
+          [](const PyMatch& p) { return Keypoints(p.match.label); },
+          "(21, 3) float32 in the query's normalised frame (rolled, mirrored back for a left "
+          "hand)")
+      .def_property_readonly(
+          "keypoints_image_px",
+          &KeypointsImage,
+          "(21, 2) float32 keypoints in the input image's pixels, or None for a points query")
+      .def(
+          "label",
+          [](const PyMatch& p) { return LabelDict(p.match.label); },
+          "The rolled label as a dict of numbers and numpy arrays.")
+      .def("to_dict", &MatchDict, "The match as in `handdb query --json` (plain lists).")
+      .def("__repr__", [](const PyMatch& p) {
+        char buf[160];
+        std::snprintf(buf,
+                      sizeof(buf),
+                      "<handdb.Match #%d view %u roll %u D_c %.3f %s%s%s>",
+                      p.rank,
+                      p.match.view_id,
+                      p.match.roll,
+                      p.match.distance,
+                      std::string(HandName(p.match.hand)).c_str(),
+                      p.match.shape_name.empty() ? "" : " ",
+                      p.match.shape_name.c_str());
+        return std::string(buf);
+      });
+
+  py::class_<PyDatabase>(
+      m,
+      "Database",
+      "A database directory (manifest.json + shard-*.hdb), memory-mapped read-only.\n\n"
+      "Database(path, verify=False) runs the open checks of `handdb query` (manifest schema, "
+      "every shard's header, section table, footer and labels, counts against the manifest); "
+      "verify=True also hashes every section. Errors raise handdb.Error with the tool's "
+      "one-line message.\n\n"
+      "A sequence of canonical views: len(db), db[i] / db.view(i) -> View, db[a:b] -> list of "
+      "View, iteration; db.read(start, stop) -> every field as numpy columns. Pickling "
+      "reopens the path, so each worker process of a data loader maps the shards itself.")
+      .def(py::init<fs::path, bool>(), py::arg("path"), py::arg("verify") = false)
+      .def_property_readonly(
+          "path", [](const PyDatabase& d) { return d.path().string(); }, "the directory")
+      .def_property_readonly(
+          "num_views",
+          [](const PyDatabase& d) { return d.db().num_views(); },
+          "canonical (roll 0) views")
+      .def_property_readonly(
+          "num_rolls",
+          [](const PyDatabase& d) { return d.db().num_rolls(); },
+          "R: virtual rolls per canonical view")
+      .def_property_readonly("num_virtual_views",
+                             [](const PyDatabase& d) { return d.db().num_virtual_views(); })
+      .def_property_readonly(
+          "num_points", [](const PyDatabase& d) { return d.db().num_points(); }, "edge points")
+      .def_property_readonly("num_shards",
+                             [](const PyDatabase& d) { return d.manifest().shards.size(); })
+      .def_property_readonly(
+          "size_bytes",
+          [](const PyDatabase& d) { return d.db().size_bytes(); },
+          "bytes of the shards on disk")
+      .def_property_readonly("shards_with_coarse_fields",
+                             [](const PyDatabase& d) {
+                               return d.manifest().shards.size() -
+                                      d.db().shards_without_coarse_fields();
+                             })
+      .def_property_readonly(
+          "manifest",
+          [](const PyDatabase& d) { return JsonToPython(ManifestToJson(d.manifest())); },
+          "manifest.json as a dict (what `handdb info DB --json` prints under 'manifest')")
+      .def_property_readonly(
+          "metadata",
+          [](const PyDatabase& d) { return JsonToPython(d.manifest().metadata); },
+          "the manifest's metadata (generation config, hand model, conversion, shapes)")
+      .def_property_readonly(
+          "shape_names",
+          [](const PyDatabase& d) {
+            std::map<shape_id_t, std::string> names;
+            for (view_id_t v = 0; v < d.db().num_views(); ++v) {
+              const shape_id_t id = d.db().label(v).shape_id;
+              if (!names.count(id)) names[id] = std::string(d.db().shape_name(id));
+            }
+            return names;
+          },
+          "{shape_id: name} of the shapes the views use")
+      .def(
+          "view",
+          [](py::object self, py::ssize_t i) {
+            return py::cast<const PyDatabase&>(self).View(self, i);
+          },
+          py::arg("i"),
+          "View i (negative counts from the end).")
+      .def(
+          "points",
+          [](py::object self, py::ssize_t i) {
+            const auto& d = py::cast<const PyDatabase&>(self);
+            return PointsView(d.db().points(d.Index(i)), self);
+          },
+          py::arg("i"),
+          "View i's points: (n, 2) int16, read-only, zero-copy (1/16 px).")
+      .def(
+          "label",
+          [](const PyDatabase& d, py::ssize_t i) { return LabelDict(d.db().label(d.Index(i))); },
+          py::arg("i"),
+          "View i's label as a dict of numbers and numpy arrays.")
+      .def(
+          "read",
+          [](py::object self, py::ssize_t start, std::optional<py::ssize_t> stop) {
+            return py::cast<const PyDatabase&>(self).Read(self, start, stop);
+          },
+          py::arg("start") = 0,
+          py::arg("stop") = py::none(),
+          "Views [start, stop) as numpy columns: points (P, 2) int16 (read-only; zero-copy when "
+          "the range lies in one shard, else one copy) with point_offsets (n + 1,) int64 (view "
+          "k is points[point_offsets[k]:point_offsets[k+1]]), and one array per label field "
+          "(render_id, shape_id, dir_id, joint_angles (n, 20), view_direction (n, 3), "
+          "view_theta, view_phi, camera_roll, keypoints (n, 21, 3), source_diameter_px, scale, "
+          "source_centre_px (n, 2)).")
+      .def("__len__", [](const PyDatabase& d) { return d.db().num_views(); })
+      .def("__getitem__",
+           [](py::object self, py::object key) -> py::object {
+             const auto& d = py::cast<const PyDatabase&>(self);
+             if (py::isinstance<py::slice>(key)) {
+               size_t start = 0, stop = 0, step = 0, length = 0;
+               if (!py::cast<py::slice>(key).compute(
+                       d.db().num_views(), &start, &stop, &step, &length)) {
+                 throw py::error_already_set();
+               }
+               py::list out;
+               for (size_t k = 0; k < length; ++k) {
+                 out.append(d.View(self, static_cast<py::ssize_t>(start + k * step)));
+               }
+               return out;
+             }
+             return py::cast(d.View(self, py::cast<py::ssize_t>(key)));
+           })
+      .def(
+          "search",
+          &Search,
+          py::arg("query"),
+          py::arg("top_k") = 10,
+          py::arg("threads") = -1,
+          py::arg("hand") = "either",
+          py::arg("brute_force") = false,
+          py::arg("kdtree") = "nanoflann",
+          py::arg("dt_cell_px") = 1.0f,
+          py::arg("coarse_bound") = true,
+          py::arg("return_stats") = false,
+          "Exact top-k (view, roll) by the chamfer distance (docs/query.md), best first, as a list "
+          "of Match; the GIL is released while searching.\n\n"
+          "query: an image path (photo, edge image or label EXR: converted like `handdb query "
+          "DB IMAGE`, label EXRs with the database's recorded edge options; keyword options as "
+          "in query_edges()), a QueryEdges, or an (n, 2) array of normalised points (float: px; "
+          "int16: 1/16 px, e.g. a View's points).\n"
+          "hand: 'either' (default, as `handdb query`), 'right' or 'left'. threads: -1 = all "
+          "cores. return_stats=True returns (matches, stats) with the stats of `handdb query "
+          "--json`.")
+      .def("__repr__",
+           [](const PyDatabase& d) {
+             return "<handdb.Database '" + d.path().string() +
+                    "': " + std::to_string(d.db().num_views()) + " views x " +
+                    std::to_string(d.db().num_rolls()) + " rolls>";
+           })
+      .def(py::pickle(
+          [](const PyDatabase& d) { return py::make_tuple(d.path().string(), d.verify()); },
+          [](const py::tuple& t) {
+            if (t.size() != 2) throw py::value_error("bad handdb.Database pickle");
+            return PyDatabase(py::cast<fs::path>(t[0]), py::cast<bool>(t[1]));
+          }));
+
+  m.def(
+      "query_edges",
+      [](const fs::path& image, py::object database, const py::kwargs& kw) {
+        std::optional<fs::path> db_dir;
+        if (py::isinstance<PyDatabase>(database)) {
+          db_dir = py::cast<const PyDatabase&>(database).path();
+        } else if (!database.is_none()) {
+          db_dir = py::cast<fs::path>(database);
+        }
+        return LoadEdges(image, EdgeOptionsFromKwargs(kw), db_dir);
+      },
+      py::arg("image"),
+      py::arg("database") = py::none(),
+      "A query image -> QueryEdges (normalised points), exactly as `handdb query` converts it.\n\n"
+      "Options, named like the command's flags: input='auto'|'photo'|'edges'|'labels', "
+      "mask=path, roi=(x, y, w, h), skin=(Ymin, Ymax, Crmin, Crmax, Cbmin, Cbmax), "
+      "canny=(low, high), contour_clearance=2, edges_outside=False. database (a Database or "
+      "its path): label EXRs use the edge options it was converted with.");
+
+  m.def("validate",
+        &Validate,
+        py::arg("path"),
+        py::arg("verify_checksums") = true,
+        py::arg("max_problems") = ValidateOptions{}.max_problems_per_check,
+        "Checks a shard file or a database directory completely (`handdb validate`) and returns "
+        "the problems as dicts {code, file, offset, message} (the --json report's); [] when it "
+        "is valid. max_problems per file and kind of check, 0 = all (if more were found, a last "
+        "entry with code 'kSuppressed' counts them).");
+}
+
+}  // namespace handdb::python
