@@ -1,0 +1,56 @@
+#!/usr/bin/env bash
+# install/consumer_test (issue 13): the installed package works from outside this repository.
+#   consumer_test.sh BUILD_DIR THIS_DIR WRITE_TEST_DATABASE HANDDB_PYTHON PYTHON3
+# 1. `cmake --install BUILD_DIR --prefix TMP/prefix`; the layout: binary, archives, door headers
+#    only, schemas, config files, Python package.
+# 2. A small database (write_test_database) and an edge image of view 5 at roll 3 drawn by the
+#    installed `handdb show`.
+# 3. consumer/ configured with find_package(handdb) against the prefix, built, run: its top match
+#    must be view 5 roll 3; the installed Python module must print the same line.
+set -euo pipefail
+build="$1"; here="$2"; writer="$3"; with_python="$4"; python="${5:-/usr/bin/python3}"
+tmp="$(mktemp -d /tmp/handdb-install-test.XXXXXX)"
+trap 'rm -rf "$tmp"' EXIT
+prefix="$tmp/prefix"
+fail() { echo "install/consumer_test: $*" >&2; exit 1; }
+
+cmake --install "$build" --prefix "$prefix" > "$tmp/install.log" || { cat "$tmp/install.log"; fail "cmake --install failed"; }
+for f in bin/handdb lib/libhanddb_format.a lib/libhanddb_query.a lib/cmake/handdb/handdbConfig.cmake \
+         lib/cmake/handdb/handdbConfigVersion.cmake lib/cmake/handdb/handdbTargets.cmake \
+         include/handdb/query/searcher.h include/handdb/format/shard_reader.h \
+         include/handdb/handdb_version.h share/handdb/schemas/manifest.schema.json; do
+  [ -f "$prefix/$f" ] || fail "$prefix/$f: not installed"
+done
+# Internals stay out of the installed tree.
+for f in format/shard_layout.h format/shard_testing.h query/chamfer.h query/simd.h \
+         query/search_testing.h base/testing.h edges/synthetic_hand.h; do
+  [ ! -e "$prefix/include/handdb/$f" ] || fail "$prefix/include/handdb/$f: an internal header was installed"
+done
+echo "installed: $(find "$prefix/include" -name '*.h' | wc -l) headers, $(ls "$prefix/lib"/*.a | wc -l) archives"
+
+"$writer" "$tmp/db" > /dev/null
+"$prefix/bin/handdb" validate -q "$tmp/db"
+"$prefix/bin/handdb" show "$tmp/db" --view 5 --roll 3 -o "$tmp/query.png"
+
+cmake -S "$here/consumer" -B "$tmp/consumer" -G Ninja -DCMAKE_PREFIX_PATH="$prefix" \
+  -DCMAKE_BUILD_TYPE=Release > "$tmp/configure.log" 2>&1 || { cat "$tmp/configure.log"; fail "configuring the consumer failed"; }
+cmake --build "$tmp/consumer" > "$tmp/build.log" 2>&1 || { cat "$tmp/build.log"; fail "building the consumer failed"; }
+out="$("$tmp/consumer/consumer" "$tmp/db" "$tmp/query.png")"
+echo "consumer: $out"
+# Rank 1 is the drawn view (D_c is not 0: the drawing is rasterised and normalised again).
+[[ "$out" =~ ^"top match: view 5 roll 3 D_c "[0-9.]+" shape fist"$ ]] || fail "consumer printed '$out', expected view 5 roll 3 (fist) first"
+expected="$out"
+
+if [ "$with_python" = "ON" ]; then
+  site="$(cd "$prefix" && ls -d lib/python3/dist-packages 2>/dev/null || true)"
+  [ -n "$site" ] || fail "$prefix/lib/python3/dist-packages: the Python package was not installed"
+  py_out="$(cd "$tmp" && PYTHONPATH="$prefix/$site" "$python" -c '
+import sys, handdb
+assert handdb.__file__.startswith(sys.argv[1]), handdb.__file__
+m = handdb.Database(sys.argv[2]).search(sys.argv[3], top_k=3, hand="right")[0]
+print("top match: view %d roll %d D_c %.3f shape %s" % (m.view_id, m.roll, m.distance, m.shape_name))
+' "$prefix" "$tmp/db" "$tmp/query.png")"
+  echo "python:   $py_out"
+  [ "$py_out" = "$expected" ] || fail "the installed Python module printed '$py_out', expected '$expected'"
+fi
+echo "install/consumer_test: ok"
