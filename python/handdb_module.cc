@@ -267,8 +267,9 @@ class PyDatabase {
   PyDatabase(fs::path path, bool verify) : path_(std::move(path)), verify_(verify) {
     {
       py::gil_scoped_release release;
-      manifest_ = Unwrap(ReadManifest(path_));
+      // Database::Open first: its errors are the ones `handdb query` prints.
       db_ = std::make_shared<const Database>(Unwrap(Database::Open(path_, verify)));
+      manifest_ = Unwrap(ReadManifest(path_));
     }
   }
 

@@ -1,0 +1,235 @@
+"""The handdb Python module against the handdb binary (issue 13): what Python reads and finds is
+what `handdb info --json`, `handdb show`, `handdb query --json` and `handdb validate --json`
+report; errors carry the tool's one-line message; several processes read one database at once.
+"""
+
+import json
+import multiprocessing
+import os
+import pydoc
+import shutil
+
+import numpy as np
+import pytest
+
+from conftest import handdb_json, import_handdb, run_handdb
+
+cv2 = pytest.importorskip("cv2")
+
+
+def test_counts_and_manifest_equal_info_json(db, db_dir):
+    info = handdb_json("info", db_dir, "--json")
+    assert db.num_shards == info["num_shards"]
+    assert db.size_bytes == info["total_bytes"]
+    assert db.num_points == info["total_points"]
+    assert db.shards_with_coarse_fields == info["shards_with_coarse_fields"]
+    assert db.manifest == info["manifest"]
+    assert db.metadata == info["manifest"]["metadata"]
+    assert len(db) == db.num_views == info["manifest"]["num_views"]
+    assert db.num_rolls == info["manifest"]["rolls"]
+    assert db.num_virtual_views == info["manifest"]["num_virtual_views"]
+    assert sum(len(v) for v in db) == db.num_points
+
+
+def show_pixels(db_dir, tmp_path, view, roll):
+    """The lit pixels of `handdb show --view --roll` (384 px: 1 px per normalised px) and its
+    caption (PNG text)."""
+    png = tmp_path / f"show-{view}-{roll}.png"
+    run_handdb("show", db_dir, "--view", view, "--roll", roll, "-o", png)
+    img = cv2.imread(str(png), cv2.IMREAD_GRAYSCALE)
+    ys, xs = np.nonzero(img)
+    data = png.read_bytes()
+    start = data.index(b"tEXtDescription\0") + len(b"tEXtDescription\0")
+    length = int.from_bytes(data[start - len(b"tEXtDescription\0") - 4:start - len(b"tEXtDescription\0")], "big")
+    caption = data[start:start + length - len(b"Description\0")].decode("latin-1")
+    return set(zip(xs.tolist(), ys.tolist())), caption
+
+
+def drawn(points_px):
+    """show's rasterisation: pixel floor(192 + p) inside the 384 x 384 image."""
+    px = np.floor(192.0 + points_px.astype(np.float64)).astype(int)
+    keep = (px >= 0).all(axis=1) & (px < 384).all(axis=1)
+    return set(map(tuple, px[keep].tolist()))
+
+
+@pytest.mark.parametrize("view,roll", [(0, 0), (5, 3), (-1, 7)])
+def test_points_equal_show(db, db_dir, tmp_path, view, roll):
+    v = db[view]
+    index = v.index
+    assert index == (view if view >= 0 else len(db) + view)
+    pixels, caption = show_pixels(db_dir, tmp_path, index, roll)
+    rolled_px, label = v.rolled(roll)
+    assert drawn(rolled_px) == pixels
+    if roll == 0:
+        assert drawn(v.points / np.float32(16)) == pixels
+    assert caption.endswith(f"view {index} roll {roll}/{db.num_rolls}  {v.shape_name}  {len(v)} pts")
+    assert v.points.dtype == np.int16 and v.points.shape == (len(v), 2)
+    assert np.array_equal(v.points_px, v.points.astype(np.float32) / 16)
+
+
+def test_points_are_read_only_zero_copy_views(db):
+    v = db[3]
+    p = v.points
+    assert not p.flags.writeable and not p.flags.owndata
+    with pytest.raises(ValueError):
+        p[0, 0] = 1
+    # Two reads of one view share the mapping's bytes.
+    assert np.shares_memory(p, db.points(3))
+    # A range inside one shard is one zero-copy run; across shards it is copied once.
+    first_shard = db.manifest["shards"][0]["views"]
+    inside = db.read(0, first_shard)
+    assert not inside["points"].flags.owndata and np.shares_memory(inside["points"], db.points(0))
+    across = db.read(first_shard - 2, first_shard + 2)
+    assert not across["points"].flags.writeable
+
+
+def test_read_columns_equal_views(db):
+    cols = db.read()
+    assert cols["point_offsets"][-1] == db.num_points == len(cols["points"])
+    for i in [0, 1, len(db) // 2, len(db) - 1]:
+        v = db[i]
+        a, b = cols["point_offsets"][i], cols["point_offsets"][i + 1]
+        assert np.array_equal(cols["points"][a:b], v.points)
+        label = v.label()
+        for key, value in label.items():
+            assert np.array_equal(cols[key][i], value), key
+        assert np.array_equal(v.keypoints, label["keypoints"]) and v.keypoints.shape == (21, 3)
+        assert v.joint_angles.shape == (20,) and v.view_direction.shape == (3,)
+    part = db.read(-5)
+    assert part["start"] == len(db) - 5 and len(part["joint_angles"]) == 5
+    assert [v.index for v in db[2:9:3]] == [2, 5, 8]
+    with pytest.raises(IndexError):
+        db[len(db)]
+
+
+def test_search_equals_query_json(handdb, db, db_dir, view_image):
+    for hand in ["either", "right"]:
+        cli = handdb_json("query", db_dir, view_image, "--json", "--top", 10, "--threads", 2, "--hand", hand)
+        matches, stats = db.search(view_image, top_k=10, threads=2, hand=hand, return_stats=True)
+        assert [m.to_dict() for m in matches] == cli["matches"]
+        # (the counters of pruning depend on the threads' timing; the matches do not)
+        assert stats["searches"] == cli["stats"]["searches"] == (2 if hand == "either" else 1)
+        assert stats["virtual_views"] == cli["stats"]["virtual_views"]
+    top = matches[0]
+    assert (top.view_id, top.roll, top.rank) == (5, 3, 1)
+    assert top.keypoints.shape == (21, 3) and top.keypoints_image_px.shape == (21, 2)
+    # The match's label is the stored view's, rolled (right-hand matches).
+    for m in matches:
+        _, label = db[m.view_id].rolled(m.roll)
+        for key in ["joint_angles", "view_direction", "keypoints", "camera_roll", "view_theta"]:
+            assert np.array_equal(label[key], m.label()[key]), key
+    # The edges the search used are query_edges' (label EXRs would use the database's options).
+    edges = handdb.query_edges(view_image, database=db)
+    q = db.search(edges, top_k=10, threads=2, hand="right")
+    assert [m.to_dict() for m in q] == [m.to_dict() for m in matches]
+
+
+def test_points_query_finds_the_view(db):
+    v = db[7]
+    for query in [v.points, v.points_px]:
+        (m,) = db.search(query, top_k=1, hand="right")
+        assert (m.view_id, m.roll, m.distance) == (7, 0, 0.0)
+        assert m.keypoints_image_px is None
+    rolled, _ = v.rolled(4)
+    best = db.search(rolled, top_k=3)
+    assert (best[0].view_id, best[0].roll) == (7, 4)
+    assert db.search(rolled, top_k=3, brute_force=True)[0].to_dict() == best[0].to_dict()
+
+
+def test_query_edges(handdb, view_image):
+    q = handdb.query_edges(view_image)
+    assert q.kind == "edges" and (q.width, q.height) == (384, 384)
+    assert q.points.dtype == np.int16 and len(q) == len(q.points) == len(q.points_px)
+    assert np.array_equal(q.points_px, q.points / np.float32(16))
+    assert q.image_from_normalised(np.zeros((1, 2), np.float32))[0].tolist() == pytest.approx(q.centre_px)
+    with pytest.raises(TypeError):
+        handdb.query_edges(view_image, no_such_option=1)
+    with pytest.raises(ValueError):
+        handdb.query_edges(view_image, canny=(5, 1))
+    with pytest.raises(handdb.Error) as e:
+        handdb.query_edges(view_image + ".missing.png")
+    assert e.value.code == "kNotFound"
+
+
+def error_line(result, command):
+    """The one line `handdb <command>` printed, without its 'handdb <command>: ' prefix."""
+    assert result.returncode == 1
+    (line,) = result.stderr.strip().splitlines()
+    prefix = f"handdb {command}: "
+    assert line.startswith(prefix)
+    return line[len(prefix):]
+
+
+def test_errors_carry_the_tools_message(handdb, db_dir, tmp_path, view_image):
+    missing = tmp_path / "no-db"
+    with pytest.raises(handdb.Error) as e:
+        handdb.Database(missing)
+    assert str(e.value) == error_line(run_handdb("query", missing, view_image, check=False), "query")
+    assert e.value.code == "kNotFound" and isinstance(e.value, RuntimeError)
+
+
+def corrupt_copy(db_dir, tmp_path, offset_in, value=None):
+    bad = tmp_path / "bad-db"
+    shutil.copytree(db_dir, bad)
+    shard = bad / "shard-00001.hdb"
+    data = bytearray(shard.read_bytes())
+    at = offset_in(data)
+    data[at] ^= 0x10
+    shard.write_bytes(bytes(data))
+    return bad
+
+
+def test_corrupt_shard_raises(handdb, db_dir, tmp_path, view_image):
+    # A flipped header byte fails the open checks: the same line as `handdb query`.
+    bad = corrupt_copy(db_dir, tmp_path / "header", lambda d: 40)
+    with pytest.raises(handdb.Error) as e:
+        handdb.Database(bad)
+    assert str(e.value) == error_line(run_handdb("query", bad, view_image, check=False), "query")
+    assert "shard-00001.hdb" in str(e.value)
+    # A flipped point byte is found by the checksums: verify=True and validate().
+    bad = corrupt_copy(db_dir, tmp_path / "points", lambda d: len(d) // 2)
+    with pytest.raises(handdb.Error) as e:
+        handdb.Database(bad, verify=True)
+    assert e.value.code == "kChecksumMismatch" and "shard-00001.hdb" in str(e.value)
+    problems = handdb.validate(bad)
+    cli = run_handdb("validate", "--json", bad, check=False)
+    assert cli.returncode == 1
+    assert problems and problems == json.loads(cli.stdout)["paths"][0]["problems"]
+    assert handdb.validate(db_dir) == []
+
+
+def read_everything(db, barrier, out):
+    """A data-loader worker: waits for the other, then reads every view of its own mapping."""
+    handdb = import_handdb()
+    barrier.wait(timeout=60)
+    total = 0
+    for v in db:
+        total += int(v.points.astype(np.int64).sum()) + int(round(float(v.joint_angles.sum()) * 1e6))
+    cols = db.read()
+    out.put((os.getpid(), total, int(cols["points"].astype(np.int64).sum()), handdb.__file__))
+
+
+def test_two_processes_read_concurrently(db):
+    ctx = multiprocessing.get_context("spawn")  # no inherited mapping: each child opens its own
+    barrier, out = ctx.Barrier(2), ctx.Queue()
+    procs = [ctx.Process(target=read_everything, args=(db, barrier, out)) for _ in range(2)]
+    for p in procs:
+        p.start()
+    results = [out.get(timeout=120) for _ in procs]
+    for p in procs:
+        p.join(timeout=60)
+        assert p.exitcode == 0
+    expected = sum(int(v.points.astype(np.int64).sum()) + int(round(float(v.joint_angles.sum()) * 1e6)) for v in db)
+    assert {r[0] for r in results} == {p.pid for p in procs}
+    for _, total, points_sum, _ in results:
+        assert total == expected
+        assert points_sum == int(db.read()["points"].astype(np.int64).sum())
+
+
+def test_help_explains_itself(handdb):
+    text = pydoc.render_doc(handdb.Database, renderer=pydoc.plaintext)
+    for word in ["search(", "read(", "top_k", "zero-copy", "handdb.Error", "verify"]:
+        assert word in text, word
+    assert "GIL" in handdb.Database.search.__doc__
+    assert "query_edges" in handdb.__doc__ or "search" in handdb.__doc__
+    assert handdb.View.points.__doc__ and handdb.Match.to_dict.__doc__
