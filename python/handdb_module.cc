@@ -267,16 +267,20 @@ class PyDatabase {
   PyDatabase(fs::path path, bool verify) : path_(std::move(path)), verify_(verify) {
     {
       py::gil_scoped_release release;
-      // Database::Open first: its errors are the ones `handdb query` prints.
+      // The errors are the ones `handdb query` prints.
       db_ = std::make_shared<const Database>(Unwrap(Database::Open(path_, verify)));
-      manifest_ = Unwrap(ReadManifest(path_));
     }
   }
 
   const Database& db() const { return *db_; }
   const fs::path& path() const { return path_; }
   bool verify() const { return verify_; }
-  const Manifest& manifest() const { return manifest_; }
+  // Read on first use (Database::Open has checked it; a data loader that only reads views does
+  // not parse it twice).
+  const Manifest& manifest() const {
+    if (!manifest_) manifest_ = Unwrap(ReadManifest(path_));
+    return *manifest_;
+  }
 
   view_id_t Index(py::ssize_t i) const {
     const auto n = static_cast<py::ssize_t>(db_->num_views());
@@ -396,6 +400,24 @@ class PyDatabase {
     return d;
   }
 
+  // [start, stop) of each shard's views: the maximal runs whose points are one contiguous array
+  // (a shard's point ranges are contiguous and in order, docs/format.md 3.2; two shards' points
+  // never touch, their headers lie between).
+  std::vector<std::pair<size_t, size_t>> ShardRanges() const {
+    std::vector<std::pair<size_t, size_t>> out;
+    const PointQ* next = nullptr;
+    for (size_t v = 0; v < db_->num_views(); ++v) {
+      const auto pts = db_->points(static_cast<view_id_t>(v));
+      if (out.empty() || (pts.data() != next && !pts.empty())) {
+        out.emplace_back(v, v + 1);
+      } else {
+        out.back().second = v + 1;
+      }
+      if (!pts.empty()) next = pts.data() + pts.size();
+    }
+    return out;
+  }
+
   // Built on the first search (it scans every view's points once), under the GIL.
   const Searcher& searcher() const {
     if (!searcher_) searcher_ = std::make_unique<Searcher>(db_);
@@ -407,7 +429,7 @@ class PyDatabase {
  private:
   fs::path path_;
   bool verify_ = false;
-  Manifest manifest_;
+  mutable std::optional<Manifest> manifest_;
   std::shared_ptr<const Database> db_;
   mutable std::unique_ptr<Searcher> searcher_;
 };
@@ -876,6 +898,11 @@ PYBIND11_MODULE(_handdb, m) {
           "num_points", [](const PyDatabase& d) { return d.db().num_points(); }, "edge points")
       .def_property_readonly("num_shards",
                              [](const PyDatabase& d) { return d.manifest().shards.size(); })
+      .def_property_readonly(
+          "shard_ranges",
+          [](const PyDatabase& d) { return d.ShardRanges(); },
+          "[(start, stop)] view ranges of the shards, in order: read(start, stop) of one is "
+          "zero-copy (a data loader's natural chunks)")
       .def_property_readonly(
           "size_bytes",
           [](const PyDatabase& d) { return d.db().size_bytes(); },

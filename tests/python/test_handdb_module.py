@@ -80,7 +80,10 @@ def test_points_are_read_only_zero_copy_views(db):
     inside = db.read(0, first_shard)
     assert not inside["points"].flags.owndata and np.shares_memory(inside["points"], db.points(0))
     across = db.read(first_shard - 2, first_shard + 2)
-    assert not across["points"].flags.writeable
+    assert not across["points"].flags.writeable and across["points"].flags.owndata
+    # shard_ranges are the manifest's shards.
+    ends = np.cumsum([s["views"] for s in db.manifest["shards"]]).tolist()
+    assert db.shard_ranges == list(zip([0] + ends[:-1], ends))
 
 
 def test_read_columns_equal_views(db):
