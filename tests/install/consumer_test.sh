@@ -1,14 +1,15 @@
 #!/usr/bin/env bash
 # install/consumer_test (issue 13): the installed package works from outside this repository.
-#   consumer_test.sh BUILD_DIR THIS_DIR WRITE_TEST_DATABASE HANDDB_PYTHON PYTHON3
+#   consumer_test.sh BUILD_DIR THIS_DIR WRITE_TEST_DATABASE HANDDB_PYTHON PYTHON3 PYTHON_SITE
 # 1. `cmake --install BUILD_DIR --prefix TMP/prefix`; the layout: binary, archives, door headers
 #    only, schemas, config files, Python package.
 # 2. A small database (write_test_database) and an edge image of view 5 at roll 3 drawn by the
 #    installed `handdb show`.
-# 3. consumer/ configured with find_package(handdb) against the prefix, built, run: its top match
-#    must be view 5 roll 3; the installed Python module must print the same line.
+# 3. consumer/ configured with find_package(handdb) against the prefix and built: the README's
+#    "From C++" program (extracted from README.md) and every installed header in one unit. The
+#    program's top match must be view 5 roll 3; the installed Python module must print the same.
 set -euo pipefail
-build="$1"; here="$2"; writer="$3"; with_python="$4"; python="${5:-/usr/bin/python3}"
+build="$1"; here="$2"; writer="$3"; with_python="$4"; python="${5:-/usr/bin/python3}"; site="${6:-}"
 tmp="$(mktemp -d /tmp/handdb-install-test.XXXXXX)"
 trap 'rm -rf "$tmp"' EXIT
 prefix="$tmp/prefix"
@@ -32,18 +33,21 @@ echo "installed: $(find "$prefix/include" -name '*.h' | wc -l) headers, $(ls "$p
 "$prefix/bin/handdb" validate -q "$tmp/db"
 "$prefix/bin/handdb" show "$tmp/db" --view 5 --roll 3 -o "$tmp/query.png"
 
+readme="${HANDDB_SOURCE_DIR:-$here/../..}/README.md"
+awk '/^## From C\+\+/ { section = 1 } section && /^```cpp/ { code = 1; next } code && /^```/ { exit } code' \
+  "$readme" > "$tmp/top_match.cc"
+grep -q "int main" "$tmp/top_match.cc" || fail "$readme: no C++ program under '## From C++'"
 cmake -S "$here/consumer" -B "$tmp/consumer" -G Ninja -DCMAKE_PREFIX_PATH="$prefix" \
-  -DCMAKE_BUILD_TYPE=Release > "$tmp/configure.log" 2>&1 || { cat "$tmp/configure.log"; fail "configuring the consumer failed"; }
+  -DCMAKE_BUILD_TYPE=Release -DTOP_MATCH_SOURCE="$tmp/top_match.cc" > "$tmp/configure.log" 2>&1 || { cat "$tmp/configure.log"; fail "configuring the consumer failed"; }
 cmake --build "$tmp/consumer" > "$tmp/build.log" 2>&1 || { cat "$tmp/build.log"; fail "building the consumer failed"; }
-out="$("$tmp/consumer/consumer" "$tmp/db" "$tmp/query.png")"
-echo "consumer: $out"
+out="$("$tmp/consumer/top_match" "$tmp/db" "$tmp/query.png")"
+echo "top_match: $out"
 # Rank 1 is the drawn view (D_c is not 0: the drawing is rasterised and normalised again).
-[[ "$out" =~ ^"top match: view 5 roll 3 D_c "[0-9.]+" shape fist"$ ]] || fail "consumer printed '$out', expected view 5 roll 3 (fist) first"
+[[ "$out" =~ ^"top match: view 5 roll 3 D_c "[0-9.]+" shape fist"$ ]] || fail "top_match printed '$out', expected view 5 roll 3 (fist) first"
 expected="$out"
 
 if [ "$with_python" = "ON" ]; then
-  site="$(cd "$prefix" && ls -d lib/python3/dist-packages 2>/dev/null || true)"
-  [ -n "$site" ] || fail "$prefix/lib/python3/dist-packages: the Python package was not installed"
+  [ -f "$prefix/$site/handdb/__init__.py" ] || fail "$prefix/$site/handdb: the Python package was not installed"
   py_out="$(cd "$tmp" && PYTHONPATH="$prefix/$site" "$python" -c '
 import sys, handdb
 assert handdb.__file__.startswith(sys.argv[1]), handdb.__file__
