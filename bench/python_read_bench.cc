@@ -79,7 +79,8 @@ json Scan(const std::string& db_dir, int reps) {
     cpu.push_back(ProcessCpu() - c0);
     checksum = acc;
   }
-  return {{"wall", wall}, {"cpu", cpu}, {"views", views}, {"points", points}, {"checksum", checksum}};
+  return {
+      {"wall", wall}, {"cpu", cpu}, {"views", views}, {"points", points}, {"checksum", checksum}};
 }
 
 json Query(const std::string& db_dir,

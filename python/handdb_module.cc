@@ -1010,7 +1010,10 @@ PYBIND11_MODULE(_handdb, m) {
                     std::to_string(d.db().num_rolls()) + " rolls>";
            })
       .def(py::pickle(
-          [](const PyDatabase& d) { return py::make_tuple(d.path().string(), d.verify()); },
+          // Absolute: a spawned worker may start in another directory.
+          [](const PyDatabase& d) {
+            return py::make_tuple(fs::absolute(d.path()).string(), d.verify());
+          },
           [](const py::tuple& t) {
             if (t.size() != 2) throw py::value_error("bad handdb.Database pickle");
             return PyDatabase(py::cast<fs::path>(t[0]), py::cast<bool>(t[1]));

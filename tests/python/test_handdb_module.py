@@ -236,3 +236,31 @@ def test_help_explains_itself(handdb):
     assert "GIL" in handdb.Database.search.__doc__
     assert "query_edges" in handdb.__doc__ or "search" in handdb.__doc__
     assert handdb.View.points.__doc__ and handdb.Match.to_dict.__doc__
+
+
+def test_search_releases_the_gil(db):
+    """While one thread searches, another runs Python code; and threads sharing one Database
+    get the sequential results."""
+    import threading
+
+    query = db[11].rolled(5)[0]
+    expected = [m.to_dict() for m in db.search(query, top_k=5, threads=1, brute_force=True)]
+    results = []
+    searcher = threading.Thread(target=lambda: results.extend(
+        [m.to_dict() for m in db.search(query, top_k=5, threads=1, brute_force=True)] for _ in range(3)))
+    spins = 0
+    searcher.start()
+    while searcher.is_alive():
+        spins += 1
+    searcher.join()
+    # With the GIL held for the whole search this loop would barely run (the searching thread
+    # only lets go of it between its three calls).
+    assert spins > 10000, spins
+    assert results == [expected] * 3
+    pool = [threading.Thread(target=lambda: results.append(
+        [m.to_dict() for m in db.search(query, top_k=5, threads=1)])) for _ in range(2)]
+    for t in pool:
+        t.start()
+    for t in pool:
+        t.join()
+    assert results[3:] == [expected] * 2
