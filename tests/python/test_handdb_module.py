@@ -264,3 +264,24 @@ def test_search_releases_the_gil(db):
     for t in pool:
         t.join()
     assert results[3:] == [expected] * 2
+
+
+@pytest.mark.parametrize("flags,options", [
+    ([], {}),
+    (["--contour-clearance", "4", "--canny", "30,100", "--edges-outside"],
+     {"contour_clearance": 4, "canny": (30, 100), "edges_outside": True}),
+])
+def test_photo_search_equals_query_json(handdb, db, db_dir, flags, options):
+    """A real photo (tests/data/photos) through the skin-colour path, with the command's photo
+    flags given as keywords: the same matches as `handdb query --json`."""
+    from conftest import REPO
+    photo = os.path.join(REPO, "tests/data/photos/asl-digits/asl-5", sorted(
+        os.listdir(os.path.join(REPO, "tests/data/photos/asl-digits/asl-5")))[0])
+    cli = handdb_json("query", db_dir, photo, "--json", "--top", 5, *flags)
+    matches = db.search(photo, top_k=5, **options)
+    assert [m.to_dict() for m in matches] == cli["matches"]
+    assert len(matches) == 5 and cli["input_kind"] == "photo"
+    edges = handdb.query_edges(photo, **options)
+    assert (len(edges), edges.kind, edges.hand_pixels) == (
+        cli["query"]["edge_points"], "photo", cli["query"]["hand_pixels"])
+    assert edges.centre_px == tuple(cli["query"]["centre_px"]) and edges.scale == cli["query"]["scale"]
