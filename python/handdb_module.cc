@@ -15,6 +15,7 @@
 
 #include <bit>
 #include <cmath>
+#include <cstddef>
 #include <cstring>
 #include <filesystem>
 #include <map>
@@ -424,8 +425,6 @@ class PyDatabase {
     return *searcher_;
   }
 
-  fs::path source_dir() const { return path_; }
-
  private:
   fs::path path_;
   bool verify_ = false;
@@ -569,8 +568,7 @@ py::object Search(const PyDatabase& self,
     edges = py::cast<const PyQueryEdges&>(query).edges;
   } else if (py::isinstance<py::str>(query) || py::hasattr(query, "__fspath__")) {
     edges =
-        LoadEdges(py::cast<fs::path>(query), EdgeOptionsFromKwargs(edge_kwargs), self.source_dir())
-            .edges;
+        LoadEdges(py::cast<fs::path>(query), EdgeOptionsFromKwargs(edge_kwargs), self.path()).edges;
   } else {
     if (edge_kwargs.size()) throw py::type_error("image options given with a points query");
     points = QueryPoints(py::array::ensure(query));
