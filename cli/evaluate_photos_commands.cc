@@ -87,8 +87,10 @@ int RunEvaluatePhotos(const PhotoEvaluateRequest& request) {
   auto photos = ListPhotoFolders(request.dir, shape_names, request.skip_unknown);
   if (!photos.ok()) return Fail("evaluate", photos.status());
 
+  // Each file is read as `handdb query` reads it (auto: photo, edge image or label EXR), so a
+  // folder of edge images or label renders is scored like one of photos.
   ImageEdgeOptions image_options;
-  image_options.kind = QueryInputKind::kPhoto;
+  image_options.kind = QueryInputKind::kAuto;
   const PhotoPointsFn points_fn =
       [image_options](const PhotoItem& item) -> Result<std::vector<Point2f>> {
     auto edges = LoadQueryEdges(item.path, image_options);

@@ -187,6 +187,37 @@ TEST_F(EvaluatePhotosCli, UnknownFolderIsAnErrorUnlessSkipped) {
   EXPECT_EQ(doc["accuracy"][0]["hits"], 1);
 }
 
+// Files are read as `handdb query` reads them: a folder of edge images (a view's points drawn
+// white on black) is scored like one of photos, each at rank 1 with D_c near 0.
+TEST_F(EvaluatePhotosCli, ReadsEdgeImagesLikeQuery) {
+  const fs::path photos = *dir_ / "edge-images";
+  fs::create_directories(photos / "alpha");
+  fs::create_directories(photos / "beta");
+  auto edge_image = [](uint32_t v, uint32_t r) {
+    std::vector<Point2f> rolled;
+    RollPoints(testing::SyntheticEdgeSet(v, 300), RollAngle(r, kRolls), &rolled);
+    cv::Mat edges = cv::Mat::zeros(400, 400, CV_8U);
+    for (const auto& p : rolled) {
+      edges.at<uint8_t>(static_cast<int>(std::lround(200 + p.y)),
+                        static_cast<int>(std::lround(200 + p.x))) = 255;
+    }
+    return edges;
+  };
+  ASSERT_TRUE(cv::imwrite((photos / "alpha" / "e04.png").string(), edge_image(4, 3)));
+  ASSERT_TRUE(cv::imwrite((photos / "beta" / "e15.png").string(), edge_image(15, 7)));
+  const fs::path json_path = *dir_ / "edge-images.json";
+  CliRun r = Handdb(Db() + " --photos " + photos.string() + " -q --json " + json_path.string());
+  ASSERT_EQ(r.code, 0) << r.err;
+  std::ifstream f(json_path);
+  const auto doc = nlohmann::json::parse(f);
+  EXPECT_EQ(doc["failed_inputs"], 0) << doc.dump();
+  EXPECT_EQ(doc["accuracy"][0]["hits"], 2) << doc.dump();
+  for (const auto& p : doc["photos"]) {
+    EXPECT_EQ(p["rank"], 1) << p.dump();
+    EXPECT_LT(p["match_distances"][0].get<double>(), 1.0) << p.dump();
+  }
+}
+
 TEST_F(EvaluatePhotosCli, BadUsage) {
   EXPECT_EQ(Handdb(Db()).code, 2);                                               // neither
   EXPECT_EQ(Handdb(Db() + " " + Photos() + " --photos " + Photos()).code, 2);    // both
