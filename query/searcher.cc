@@ -291,6 +291,15 @@ Searcher::Searcher(std::shared_ptr<const Database> db) : db_(std::move(db)) {
     }
     max_abs_[v] = m;
   }
+  // The grid holds distances to the rolled query, looked up only at view points; its bounds
+  // are the same at every node whatever the extent (it grows to contain the query), so the
+  // smallest extent that keeps every view on the grid gives identical bounds at the least cost.
+  // Views are normalised to lie within 166.3 px of the origin, in practice ~115 px: half the
+  // nodes of the 170 px default (docs/query.md).
+  const int32_t db_max_abs =
+      max_abs_.empty() ? 0 : *std::max_element(max_abs_.begin(), max_abs_.end());
+  grid_half_extent_px_ =
+      std::clamp(static_cast<float>(db_max_abs) / kPointScale + 1.0f, 8.0f, 2000.0f);
   coarse_ = CoarseFields(*db_, -1);
 }
 
@@ -329,6 +338,7 @@ class QueryRun {
  public:
   QueryRun(const Database& db,
            std::span<const int32_t> max_abs,
+           float grid_half_extent_px,
            const CoarseFields* coarse,
            std::span<const Point2f> query_px,
            const SearchOptions& options,
@@ -337,6 +347,7 @@ class QueryRun {
            ThreadPool* pool)
       : db_(db),
         max_abs_(max_abs),
+        grid_half_extent_px_(grid_half_extent_px),
         options_(options),
         threads_(threads),
         pool_(pool),
@@ -382,7 +393,7 @@ class QueryRun {
   // matter).
   std::vector<Bound> Bounds() {
     std::vector<Bound> bound(num_views_ * num_rolls_);
-    const DistanceGridOptions grid_options{options_.dt_cell_px, 170.0f};
+    const DistanceGridOptions grid_options{options_.dt_cell_px, grid_half_extent_px_};
     std::vector<DistanceGrid> grids(threads_, DistanceGrid(grid_options));
     ParallelFor(
         num_rolls_,
@@ -553,6 +564,7 @@ class QueryRun {
 
   const Database& db_;
   std::span<const int32_t> max_abs_;
+  float grid_half_extent_px_;
   const SearchOptions& options_;
   const int threads_;
   ThreadPool* const pool_;
@@ -606,6 +618,7 @@ std::vector<Match> Searcher::SearchOnce(std::span<const Point2f> query_px,
   const auto start = std::chrono::steady_clock::now();
   QueryRun run(*db_,
                max_abs_,
+               grid_half_extent_px_,
                options.coarse_bound && !coarse_.empty() ? &coarse_ : nullptr,
                query_px,
                options,

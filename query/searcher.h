@@ -124,7 +124,10 @@ class Searcher {
 
   std::shared_ptr<const Database> db_;
   std::vector<int32_t> max_abs_;  // per view: max |x|, |y| of its points (PointQ units)
-  CoarseFields coarse_;           // per view: the A bound's coarse field
+  // Half extent of the per-roll distance grids: the largest |x|, |y| of any view (px), so every
+  // view's points are on the grid (the fast path) and no node is computed that no view reads.
+  float grid_half_extent_px_ = 0;
+  CoarseFields coarse_;  // per view: the A bound's coarse field
 };
 
 }  // namespace handdb
