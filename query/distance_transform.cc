@@ -174,9 +174,12 @@ void DistanceGrid::Build(std::span<const PointQ> points) {
   }
 }
 
-float DistanceGrid::LowerBound(PointQ p) const {
-  const int ax = std::abs(static_cast<int>(p.x));
-  const int ay = std::abs(static_cast<int>(p.y));
+float DistanceGrid::LowerBound(PointQ p, bool negate) const {
+  // 32-bit coordinates: -(-32768) is representable.
+  const int x = negate ? -static_cast<int>(p.x) : p.x;
+  const int y = negate ? -static_cast<int>(p.y) : p.y;
+  const int ax = std::abs(x);
+  const int ay = std::abs(y);
   if (ax > fast_limit_ || ay > fast_limit_) {
     // Off the grid: distance to the box holding every point of the set.
     const double dx = std::max(0, ax - half_extent_u_);
@@ -185,22 +188,23 @@ float DistanceGrid::LowerBound(PointQ p) const {
   }
   const int mask = cell_u_ - 1;
   const int half = cell_u_ / 2;
-  const float off = offset_table_[(((p.y + half) & mask) << shift_) | ((p.x + half) & mask)];
+  const float off = offset_table_[(((y + half) & mask) << shift_) | ((x + half) & mask)];
   const float d =
-      static_cast<float>(dt_[static_cast<size_t>(NodeIndex(p.y)) * size_ + NodeIndex(p.x)]) *
+      static_cast<float>(dt_[static_cast<size_t>(NodeIndex(y)) * size_ + NodeIndex(x)]) *
       (1.0f / kUnitsPerPx);
   return std::max(0.0f, d - off);
 }
 
-double DistanceGrid::SumLowerBounds(std::span<const PointQ> points) const {
+double DistanceGrid::SumLowerBounds(std::span<const PointQ> points, bool negate) const {
   double sum = 0;
-  for (const PointQ& p : points) sum += LowerBound(p);
+  for (const PointQ& p : points) sum += LowerBound(p, negate);
   return sum;
 }
 
 namespace {
 
 #ifdef HANDDB_HAVE_AVX2_PATH
+template <bool kNegate>
 __attribute__((target("avx2"), always_inline)) inline __m256 Step(const PointQ* p,
                                                                   __m256i vbias,
                                                                   __m256i vhalf,
@@ -211,8 +215,12 @@ __attribute__((target("avx2"), always_inline)) inline __m256 Step(const PointQ* 
                                                                   const uint16_t* dt,
                                                                   const float* table) {
   const __m256i v = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
-  const __m256i x = _mm256_srai_epi32(_mm256_slli_epi32(v, 16), 16);
-  const __m256i y = _mm256_srai_epi32(v, 16);
+  __m256i x = _mm256_srai_epi32(_mm256_slli_epi32(v, 16), 16);
+  __m256i y = _mm256_srai_epi32(v, 16);
+  if constexpr (kNegate) {  // the point reflected through the origin: -p (32-bit lanes, exact)
+    x = _mm256_sub_epi32(_mm256_setzero_si256(), x);
+    y = _mm256_sub_epi32(_mm256_setzero_si256(), y);
+  }
   const __m256i ix = _mm256_sra_epi32(_mm256_add_epi32(x, vbias), vshift);
   const __m256i iy = _mm256_sra_epi32(_mm256_add_epi32(y, vbias), vshift);
   const __m256i idx = _mm256_add_epi32(_mm256_mullo_epi32(iy, vsize), ix);
@@ -230,6 +238,7 @@ __attribute__((target("avx2"), always_inline)) inline __m256 Step(const PointQ* 
 
 // Eight points per step: unpack int16 x/y, compute node and offset-table indices, two gathers.
 // Returns the sum over the first n - n % 8 points; *done receives that count.
+template <bool kNegate>
 __attribute__((target("avx2"))) double SumLowerBoundsAvx2(const PointQ* pts,
                                                           size_t n,
                                                           const uint16_t* dt,
@@ -251,12 +260,14 @@ __attribute__((target("avx2"))) double SumLowerBoundsAvx2(const PointQ* pts,
   __m256 acc1 = zero;
   size_t i = 0;
   for (; i + 16 <= n; i += 16) {
-    acc0 = _mm256_add_ps(acc0, Step(pts + i, vbias, vhalf, vmask, vsize, vshift, zero, dt, table));
-    acc1 =
-        _mm256_add_ps(acc1, Step(pts + i + 8, vbias, vhalf, vmask, vsize, vshift, zero, dt, table));
+    acc0 = _mm256_add_ps(
+        acc0, Step<kNegate>(pts + i, vbias, vhalf, vmask, vsize, vshift, zero, dt, table));
+    acc1 = _mm256_add_ps(
+        acc1, Step<kNegate>(pts + i + 8, vbias, vhalf, vmask, vsize, vshift, zero, dt, table));
   }
   for (; i + 8 <= n; i += 8)
-    acc0 = _mm256_add_ps(acc0, Step(pts + i, vbias, vhalf, vmask, vsize, vshift, zero, dt, table));
+    acc0 = _mm256_add_ps(
+        acc0, Step<kNegate>(pts + i, vbias, vhalf, vmask, vsize, vshift, zero, dt, table));
   alignas(32) float lanes[16];
   _mm256_store_ps(lanes, acc0);
   _mm256_store_ps(lanes + 8, acc1);
@@ -270,7 +281,8 @@ __attribute__((target("avx2"))) double SumLowerBoundsAvx2(const PointQ* pts,
 
 }  // namespace
 
-double DistanceGrid::SumLowerBoundsFast(std::span<const PointQ> points) const {
+template <bool kNegate>
+double DistanceGrid::SumLowerBoundsFastImpl(std::span<const PointQ> points) const {
   const uint16_t* dt = dt_.data();
   const float* table = offset_table_.data();
   const int mask = cell_u_ - 1;
@@ -285,12 +297,12 @@ double DistanceGrid::SumLowerBoundsFast(std::span<const PointQ> points) const {
   double vector_sum = 0;
 #ifdef HANDDB_HAVE_AVX2_PATH
   if (HaveAvx2()) {
-    vector_sum = SumLowerBoundsAvx2(pts, n, dt, table, mask, half, bias, shift, size, &i);
+    vector_sum = SumLowerBoundsAvx2<kNegate>(pts, n, dt, table, mask, half, bias, shift, size, &i);
   }
 #endif
   auto one = [&](const PointQ& p) {
-    const int x = p.x;
-    const int y = p.y;
+    const int x = kNegate ? -static_cast<int>(p.x) : p.x;
+    const int y = kNegate ? -static_cast<int>(p.y) : p.y;
     const float off = table[(((y + half) & mask) << shift) | ((x + half) & mask)];
     const float d = static_cast<float>(dt[((y + bias) >> shift) * size + ((x + bias) >> shift)]) *
                     (1.0f / kUnitsPerPx);
@@ -305,6 +317,10 @@ double DistanceGrid::SumLowerBoundsFast(std::span<const PointQ> points) const {
   for (; i < n; ++i) acc[0] += one(pts[i]);
   return vector_sum + (static_cast<double>(acc[0]) + acc[1]) +
          (static_cast<double>(acc[2]) + acc[3]);
+}
+
+double DistanceGrid::SumLowerBoundsFast(std::span<const PointQ> points, bool negate) const {
+  return negate ? SumLowerBoundsFastImpl<true>(points) : SumLowerBoundsFastImpl<false>(points);
 }
 
 double DistanceGrid::MeanLowerBoundMargin(size_t n, double mean) {

@@ -54,15 +54,18 @@ class DistanceGrid {
     return static_cast<float>(dt_[static_cast<size_t>(iy) * size_ + ix]) / kUnitsPerPx;
   }
   // Node nearest to p (may be outside [0, size) for points off the grid).
-  int NodeIndex(int16_t coord) const { return (coord + half_extent_u_ + cell_u_ / 2) >> shift_; }
-  // The lower bound of d(p, Q) in px described above.
-  float LowerBound(PointQ p) const;
+  int NodeIndex(int coord) const { return (coord + half_extent_u_ + cell_u_ / 2) >> shift_; }
+  // The lower bound of d(p, Q) in px described above; negate: of d(-p, Q), which is d(p, -Q):
+  // the grid of Q also bounds distances to Q rotated by 180 degrees (the searcher's roll
+  // r + R/2, docs/query.md).
+  float LowerBound(PointQ p, bool negate = false) const;
   // Sum of LowerBound over points (float accumulation; see MeanLowerBoundMargin()).
-  double SumLowerBounds(std::span<const PointQ> points) const;
-  // True if every point with |x|, |y| <= max_abs (PointQ units) is on the grid's fast path.
+  double SumLowerBounds(std::span<const PointQ> points, bool negate = false) const;
+  // True if every point with |x|, |y| <= max_abs (PointQ units) is on the grid's fast path
+  // (for p and for -p alike).
   bool Covers(int max_abs) const { return max_abs <= fast_limit_; }
   // SumLowerBounds for points known to satisfy Covers(); no bounds checks.
-  double SumLowerBoundsFast(std::span<const PointQ> points) const;
+  double SumLowerBoundsFast(std::span<const PointQ> points, bool negate = false) const;
 
   int size() const { return size_; }
   // The grid step of the last Build (px): options' cell_px, doubled while a far point would make
@@ -75,6 +78,9 @@ class DistanceGrid {
   static double MeanLowerBoundMargin(size_t n, double mean);
 
  private:
+  template <bool kNegate>
+  double SumLowerBoundsFastImpl(std::span<const PointQ> points) const;
+
   DistanceGridOptions options_;
   int shift_ = 4;          // log2(cell in PointQ units)
   int cell_u_ = 16;        // cell in PointQ units

@@ -153,6 +153,24 @@ class QueryContext {
     return *query_trees_[r];
   }
   std::span<const PointQ> rolled(roll_id_t r) const { return rolled_[r]; }
+  // max_i |rolled(r2)[i] + rolled(r)[i]| (px): how far rolled(r2) is from rolled(r) turned by
+  // 180 degrees, point by point (both are the query's points in the same order). For r2 = r + R/2
+  // it is 0 unless a coordinate sits on a rounding tie; either way d(y, rolled(r2)) >=
+  // d(-y, rolled(r)) - gap for every y, so roll r's grid read at -y, minus the gap, bounds B of
+  // roll r2.
+  double NegationGap(roll_id_t r, roll_id_t r2) const {
+    const std::vector<PointQ>& a = rolled_[r];
+    const std::vector<PointQ>& b = rolled_[r2];
+    THROW_CHECK_EQ(a.size(), b.size());
+    int64_t worst = 0;
+    for (size_t i = 0; i < a.size(); ++i) {
+      const int64_t dx = static_cast<int64_t>(a[i].x) + b[i].x;
+      const int64_t dy = static_cast<int64_t>(a[i].y) + b[i].y;
+      worst = std::max(worst, dx * dx + dy * dy);
+    }
+    // Rounded up: a slightly larger gap keeps the bound valid.
+    return worst == 0 ? 0.0 : std::sqrt(static_cast<double>(worst)) / kPointScale * (1 + 1e-12);
+  }
 
   // The kd-tree over view v's points from worker `worker`'s cache. Pairs are visited in
   // increasing bound and the rolls of one view have similar bounds, so a small per-worker LRU
@@ -391,12 +409,18 @@ class QueryRun {
   // pairs are scored exactly, and a pair's bound stops accumulating as soon as it exceeds the
   // current k-th best D_c (the partial sum is still a valid lower bound, and already too large to
   // matter).
+  //
+  // With an even number of rolls, roll r + R/2 is roll r turned by 180 degrees: d(y, -Q) =
+  // d(-y, Q), so one grid serves both, read at -y for the second (minus the point-by-point gap
+  // between the two rolled queries, 0 but for rounding ties): half the distance transforms.
   std::vector<Bound> Bounds() {
     std::vector<Bound> bound(num_views_ * num_rolls_);
     const DistanceGridOptions grid_options{options_.dt_cell_px, grid_half_extent_px_};
     std::vector<DistanceGrid> grids(threads_, DistanceGrid(grid_options));
+    const bool pairs = num_rolls_ >= 2 && num_rolls_ % 2 == 0;
+    const uint32_t tasks = pairs ? num_rolls_ / 2 : num_rolls_;
     ParallelFor(
-        num_rolls_,
+        tasks,
         threads_,
         [&](size_t ri, int worker) {
           const roll_id_t r = static_cast<roll_id_t>(ri);
@@ -404,8 +428,15 @@ class QueryRun {
           DistanceGrid& grid = grids[worker];
           grid.Build(ctx_.rolled(r));
           Bound* out = bound.data() + ri * num_views_;
-          BoundRoll(grid, r, out);
+          BoundRoll(grid, r, /*negate=*/false, /*gap_px=*/0.0, out);
           ScoreRollBest(r, out, worker);
+          if (pairs) {
+            const roll_id_t r2 = static_cast<roll_id_t>(r + num_rolls_ / 2);
+            ctx_.PrepareRoll(r2);
+            Bound* out2 = bound.data() + static_cast<size_t>(r2) * num_views_;
+            BoundRoll(grid, r2, /*negate=*/true, ctx_.NegationGap(r, r2), out2);
+            ScoreRollBest(r2, out2, worker);
+          }
           return true;
         },
         pool_);
@@ -477,8 +508,10 @@ class QueryRun {
   }
 
  private:
-  // The bound of every view against one roll's distance grid, into out[v].
-  void BoundRoll(const DistanceGrid& grid, roll_id_t r, Bound* out) const {
+  // The bound of every view against one roll's distance grid, into out[v]. negate: the grid is
+  // of a roll whose query is rolled(r) turned by 180 degrees, up to gap_px per point (Bounds()).
+  void BoundRoll(
+      const DistanceGrid& grid, roll_id_t r, bool negate, double gap_px, Bound* out) const {
     constexpr size_t kChunk = 64;
     for (view_id_t v = 0; v < num_views_; ++v) {
       const std::span<const PointQ> pts = db_.points(v);
@@ -494,15 +527,17 @@ class QueryRun {
         out[v] = BoundBelow(bound_a);
         continue;
       }
-      const double limit = Limit(threshold, bound_a, static_cast<double>(pts.size()));
+      const double n = static_cast<double>(pts.size());
+      const double limit = Limit(threshold, bound_a, n) + gap_px * n;
       const bool fast = grid.Covers(max_abs_[v]);
       double sum = 0;
       for (size_t i = 0; i < pts.size() && sum <= limit; i += kChunk) {
         const auto chunk = pts.subspan(i, std::min(kChunk, pts.size() - i));
-        sum += fast ? grid.SumLowerBoundsFast(chunk) : grid.SumLowerBounds(chunk);
+        sum += fast ? grid.SumLowerBoundsFast(chunk, negate) : grid.SumLowerBounds(chunk, negate);
       }
-      const double mean = sum / static_cast<double>(pts.size());
-      out[v] = BoundBelow(bound_a + mean - DistanceGrid::MeanLowerBoundMargin(pts.size(), mean));
+      const double mean = sum / n;
+      out[v] = BoundBelow(bound_a + mean - DistanceGrid::MeanLowerBoundMargin(pts.size(), mean) -
+                          gap_px);
     }
   }
 

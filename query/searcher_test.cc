@@ -171,6 +171,32 @@ TEST(Searcher, PrunedEqualsBruteForce) {
   }
 }
 
+// Rolls r and r + R/2 share one distance grid when R is even (the second read at -p); odd R and
+// R = 2 take the other paths. Pruned equals brute force, and every bound is below its D_c.
+TEST(Searcher, PrunedEqualsBruteForceForOddAndTinyRollCounts) {
+  for (const uint32_t rolls : {1u, 2u, 15u, 48u}) {
+    const auto db = std::make_shared<const Database>(
+        SyntheticDatabase(kViews, kPoints, rolls, /*views_per_shape=*/6));
+    const Searcher searcher(db);
+    std::mt19937 rng(rolls);
+    std::uniform_int_distribution<uint32_t> view(0, kViews - 1);
+    std::uniform_int_distribution<uint32_t> roll(0, rolls - 1);
+    std::uniform_real_distribution<float> u(-1, 1);
+    for (int i = 0; i < 12; ++i) {
+      const auto q = Transform(
+          RolledView(*db, view(rng), roll(rng)), 0.3f * u(rng), 4 * u(rng), 4 * u(rng), 0.8, i);
+      SearchOptions pruned = Options(1 + i % 6, 1 + i % 2);
+      SearchOptions brute = pruned;
+      brute.brute_force = true;
+      auto a = searcher.Search(q, pruned);
+      auto b = searcher.Search(q, brute);
+      ASSERT_TRUE(a.ok() && b.ok());
+      ExpectSameResults(*a, *b);
+      for (const Match& m : *a) EXPECT_LE(m.lower_bound, m.distance + 1e-9) << rolls;
+    }
+  }
+}
+
 TEST(Searcher, BackendsAndThreadCountsGiveIdenticalResults) {
   const Searcher searcher(TestDatabase());
   const auto q = Transform(RolledView(*TestDatabase(), 17, 3), 0.05f, 1, 1, 0.9, 7);
