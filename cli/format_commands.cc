@@ -118,19 +118,27 @@ int InfoShard(const fs::path& path, bool as_json) {
 }
 
 int InfoDatabase(const fs::path& dir, bool as_json) {
-  auto manifest = ReadManifest(dir);
+  // Shards with the v1.1 coarse-fields section: the search computes the others' on open. The
+  // manifest and the shards come from one database even while a convert rewrites it.
+  size_t with_fields = 0;
+  auto manifest = ReadWithStableManifest(dir, [&]() -> Result<Manifest> {
+    with_fields = 0;
+    Result<Manifest> read = ReadManifest(dir);
+    if (!read.ok()) return read;
+    for (const auto& s : read->shards) {
+      auto reader = ShardReader::Open(dir / s.file);
+      if (!reader.ok()) return reader.status();
+      if (reader->has_coarse_fields()) ++with_fields;
+    }
+    return read;
+  });
   if (!manifest.ok()) return Fail("info", manifest.status());
   const Manifest& m = *manifest;
   uint64_t bytes = 0;
   uint64_t points = 0;
-  // Shards with the v1.1 coarse-fields section: the search computes the others' on open.
-  size_t with_fields = 0;
   for (const auto& s : m.shards) {
     bytes += s.bytes;
     points += s.points;
-    auto reader = ShardReader::Open(dir / s.file);
-    if (!reader.ok()) return Fail("info", reader.status());
-    if (reader->has_coarse_fields()) ++with_fields;
   }
   if (as_json) {
     json out = {{"path", dir.string()},

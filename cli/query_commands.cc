@@ -358,7 +358,10 @@ int RunQuery(int argc, char** argv) {
   const Searcher searcher(shared_db);
 
   // A label EXR is converted with the edge options the database was made with.
-  auto recorded = ReadDatabaseViewConversion(db_dir);
+  // From the manifest Open read (a convert may have replaced manifest.json since).
+  auto recorded = DatabaseViewConversionFromMetadata(
+      nlohmann::json::parse(shared_db->manifest_metadata_json()),
+      (std::filesystem::path(db_dir) / kManifestFileName).string());
   if (!recorded.ok()) return Fail("query", recorded.status());
   edge_options.label_edges = recorded->edges;
   edge_options.label_joint_pairs = recorded->joint_pairs;

@@ -216,8 +216,15 @@ Result<ViewConversionOptions> ReadDatabaseViewConversion(const fs::path& db_dir,
   if (fallback_reason != nullptr) fallback_reason->clear();
   auto manifest = ReadManifest(db_dir);
   if (!manifest.ok()) return ViewConversionOptions{};
-  auto recorded =
-      ViewConversionOptionsFromMetadata(manifest->metadata, (db_dir / kManifestFileName).string());
+  return DatabaseViewConversionFromMetadata(
+      manifest->metadata, (db_dir / kManifestFileName).string(), fallback_reason);
+}
+
+Result<ViewConversionOptions> DatabaseViewConversionFromMetadata(const nlohmann::json& metadata,
+                                                                 const std::string& what,
+                                                                 std::string* fallback_reason) {
+  if (fallback_reason != nullptr) fallback_reason->clear();
+  auto recorded = ViewConversionOptionsFromMetadata(metadata, what);
   if (recorded.status().code() == StatusCode::kNotFound) {
     if (fallback_reason != nullptr) *fallback_reason = recorded.status().message();
     return ViewConversionOptions{};

@@ -89,5 +89,12 @@ Result<ViewConversionOptions> ViewConversionOptionsFromMetadata(const nlohmann::
 // says so; it is cleared otherwise); an error when they are recorded but malformed.
 Result<ViewConversionOptions> ReadDatabaseViewConversion(const std::filesystem::path& db_dir,
                                                          std::string* fallback_reason = nullptr);
+// The same rule on the `metadata` of a manifest already read (Database::manifest_metadata_json()),
+// so the options come from the manifest whose shards are searched even when a convert has
+// replaced DB_DIR/manifest.json since. `what` names the manifest in messages.
+Result<ViewConversionOptions> DatabaseViewConversionFromMetadata(
+    const nlohmann::json& metadata,
+    const std::string& what,
+    std::string* fallback_reason = nullptr);
 
 }  // namespace handdb

@@ -1,6 +1,9 @@
 #include "format/manifest.h"
 
+#include <sys/stat.h>
+
 #include <algorithm>
+#include <cstring>
 #include <optional>
 #include <regex>
 #include <set>
@@ -248,7 +251,7 @@ std::vector<std::string> ManifestShardCheck::Check(const ManifestShard& entry,
                   DottedPath(field.manifest) + ")");
   }
   // The unit a shard was converted from is the number in its file name (shard-00007.hdb: 7).
-  static const std::regex kShardFile(R"(shard-([0-9]{1,9})\.hdb)");
+  static const std::regex kShardFile(R"(shard-([0-9]{1,9})(\.next)?\.hdb)");
   std::smatch m;
   if (metadata.contains("unit") && metadata["unit"].is_number_unsigned() &&
       std::regex_match(entry.file, m, kShardFile) &&
@@ -305,6 +308,28 @@ std::string ManifestLabelsMismatch(const Manifest& manifest) {
     }
   }
   return "";
+}
+
+std::string ShardFinalFileName(const std::string& file) {
+  if (!IsShardStagingFileName(file)) return file;
+  return file.substr(0, file.size() - std::strlen(kShardStagingSuffix)) + ".hdb";
+}
+
+bool IsShardStagingFileName(const std::string& file) {
+  static const std::regex kStaging(R"(shard-[0-9]+\.next\.hdb)");
+  return std::regex_match(file, kStaging);
+}
+
+ManifestStamp StampManifest(const std::filesystem::path& db_dir) {
+  struct stat st {};
+  if (::stat((db_dir / kManifestFileName).c_str(), &st) != 0) return {};
+  ManifestStamp stamp;
+  stamp.device = static_cast<uint64_t>(st.st_dev);
+  stamp.inode = static_cast<uint64_t>(st.st_ino);
+  stamp.size = static_cast<int64_t>(st.st_size);
+  stamp.mtime_ns = int64_t{st.st_mtim.tv_sec} * 1000000000 + st.st_mtim.tv_nsec;
+  stamp.ctime_ns = int64_t{st.st_ctim.tv_sec} * 1000000000 + st.st_ctim.tv_nsec;
+  return stamp;
 }
 
 Result<Manifest> ReadManifest(const std::filesystem::path& db_dir) {

@@ -1,6 +1,9 @@
 // DB_DIR/manifest.json (schemas/manifest.schema.json): the list of complete shards with their
 // counts, sizes and whole-file checksums, the roll count and the label semantics. Written last and
-// atomically, so a database directory lists exactly the shards that are complete.
+// atomically, so a database directory lists exactly the shards that are complete. A file the
+// current manifest lists is never modified or removed (docs/format.md section 8, "Rewriting a
+// database"): readers that open the database while a convert rewrites it see the old database or
+// the new one, whole.
 #pragma once
 
 #include <cstdint>
@@ -26,6 +29,46 @@ constexpr int kManifestVersion = 1;
 // steps). Readers size per-roll work by R: a manifest with rolls = 10^8 made `query` grow to 4 GB
 // and die with std::bad_alloc (issue 14 item 3); above this ReadManifest refuses it.
 constexpr uint32_t kMaxRolls = 3600;
+
+// A unit's shard is "shard-00007.hdb"; while a convert rewrites a database whose manifest lists
+// that name, the new shard is written as "shard-00007.next.hdb" and listed under that name by an
+// intermediate manifest until the plain name holds the new bytes (docs/format.md section 8).
+constexpr char kShardStagingSuffix[] = ".next.hdb";
+// "shard-00007.next.hdb" -> "shard-00007.hdb"; any other name is returned unchanged.
+std::string ShardFinalFileName(const std::string& file);
+// True for "shard-00007.next.hdb".
+bool IsShardStagingFileName(const std::string& file);
+
+// Identity of DB_DIR/manifest.json: a convert replaces it by rename(), so every new manifest is a
+// new inode with its own times. All zero when there is none.
+struct ManifestStamp {
+  uint64_t device = 0;
+  uint64_t inode = 0;
+  int64_t size = -1;
+  int64_t mtime_ns = 0;
+  int64_t ctime_ns = 0;
+  bool operator==(const ManifestStamp&) const = default;
+};
+ManifestStamp StampManifest(const std::filesystem::path& db_dir);
+
+// How often ReadWithStableManifest runs `read` at most: each retry means a convert swapped the
+// manifest during the read, which happens at most twice per convert.
+constexpr int kManifestReadAttempts = 8;
+
+// Runs `read` (which reads DB_DIR/manifest.json and the shards it lists) again while the manifest
+// was replaced during it, so what it returns comes from one manifest and that manifest's shards.
+// A convert removes a shard only after a manifest that no longer lists it is in place, and a
+// reader that opened (mmapped) a shard keeps its bytes after the unlink; a reader that read the
+// old manifest but reached a shard too late (gone, or with the new bytes) fails, sees the new
+// stamp and starts again from the new manifest.
+template <typename F>
+auto ReadWithStableManifest(const std::filesystem::path& db_dir, F&& read) -> decltype(read()) {
+  for (int attempt = 1;; ++attempt) {
+    const ManifestStamp before = StampManifest(db_dir);
+    auto result = read();
+    if (attempt >= kManifestReadAttempts || StampManifest(db_dir) == before) return result;
+  }
+}
 
 struct ManifestShard {
   std::string file;  // "shard-00007.hdb", relative to the database directory

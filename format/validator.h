@@ -50,6 +50,9 @@ ValidationReport ValidateShardFile(const std::filesystem::path& path,
                                    const ValidateOptions& options = {});
 // A database directory: manifest.json against its schema, every listed shard (present, size,
 // whole-file checksum, counts, contents), no unlisted shard-*.hdb files, render ids unique.
+// Staging files (shard-00007.next.hdb) that the manifest does not list are a rewrite in progress
+// or an interrupted one, not part of the database, and are not checked. Run again while a
+// convert replaced the manifest meanwhile (ReadWithStableManifest).
 ValidationReport ValidateDatabase(const std::filesystem::path& db_dir,
                                   const ValidateOptions& options = {});
 // A shard file or a database directory.

@@ -70,12 +70,17 @@ Result<Database> Database::Open(const std::filesystem::path& dir, bool verify_ch
   if (!std::filesystem::is_directory(dir, ec)) {
     return Status(StatusCode::kNotFound, dir.string() + ": not a database directory");
   }
+  return ReadWithStableManifest(dir, [&] { return OpenOnce(dir, verify_checksums); });
+}
+
+Result<Database> Database::OpenOnce(const std::filesystem::path& dir, bool verify_checksums) {
   Result<Manifest> manifest = ReadManifest(dir);
   if (!manifest.ok()) return manifest.status();
   Database db;
   db.path_ = dir;
   db.num_rolls_ = manifest->rolls;
-  db.shape_names_ = ShapeNamesFromMetadata(manifest->metadata.dump());
+  db.manifest_metadata_json_ = manifest->metadata.dump();
+  db.shape_names_ = ShapeNamesFromMetadata(db.manifest_metadata_json_);
   for (const ManifestShard& entry : manifest->shards) {
     const std::filesystem::path path = dir / entry.file;
     Result<ShardReader> reader = ShardReader::Open(path);

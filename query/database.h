@@ -31,6 +31,8 @@ class Database {
   // Opens DB_DIR: reads manifest.json (schema-checked), opens every shard it lists (header,
   // section table, footer and view-table checks; see ShardReader::Open), and checks that the
   // shards' view counts match the manifest. With verify_checksums, also hashes every section.
+  // A convert rewriting DB_DIR meanwhile is invisible: the manifest and the shards opened are one
+  // consistent database, the old one or the new one (ReadWithStableManifest, format/manifest.h).
   static Result<Database> Open(const std::filesystem::path& dir, bool verify_checksums = false);
 
   // A database held in memory. labels.size() == points.size(); shape_names indexed by shape id
@@ -58,8 +60,13 @@ class Database {
   // Bytes of the database on disk (sum of shard sizes) or in memory (points + labels).
   uint64_t size_bytes() const { return size_bytes_; }
   const std::filesystem::path& path() const { return path_; }
+  // The `metadata` object of the manifest these shards were opened from, as JSON text ("{}" for
+  // FromMemory databases): read options from here, not from DB_DIR/manifest.json again, which a
+  // convert may have replaced since Open.
+  const std::string& manifest_metadata_json() const { return manifest_metadata_json_; }
 
  private:
+  static Result<Database> OpenOnce(const std::filesystem::path& dir, bool verify_checksums);
   struct ViewRef {
     uint32_t shard = 0;
     uint32_t index = 0;  // inside the shard
@@ -73,6 +80,7 @@ class Database {
   uint64_t size_bytes_ = 0;
   std::filesystem::path path_;
   std::vector<std::string> shape_names_;
+  std::string manifest_metadata_json_ = "{}";
   std::vector<std::unique_ptr<ShardReader>> shards_;
   // FromMemory storage.
   std::vector<ViewLabel> memory_labels_;

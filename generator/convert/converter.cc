@@ -1,11 +1,14 @@
 #include "generator/convert/converter.h"
 
 #include <OpenImageIO/imageio.h>
+#include <unistd.h>
 #include <xxhash.h>
 
 #include <algorithm>
 #include <chrono>
+#include <cerrno>
 #include <cmath>
+#include <cstring>
 #include <map>
 #include <mutex>
 #include <optional>
@@ -46,6 +49,12 @@ bool ConvertOptions::Check() const {
 std::string ShardFileName(uint32_t unit_id) {
   char buf[32];
   std::snprintf(buf, sizeof(buf), "shard-%05u.hdb", unit_id);
+  return buf;
+}
+
+std::string ShardStagingFileName(uint32_t unit_id) {
+  char buf[40];
+  std::snprintf(buf, sizeof(buf), "shard-%05u%s", unit_id, kShardStagingSuffix);
   return buf;
 }
 
@@ -198,7 +207,11 @@ std::string JoinVersions(const std::set<std::string>& versions) {
 
 struct UnitState {
   const PlanUnit* unit = nullptr;
-  fs::path shard_path;
+  fs::path shard_path;    // DB_DIR/shard-00007.hdb, where the unit's shard ends up
+  fs::path staging_path;  // DB_DIR/shard-00007.next.hdb (docs/format.md section 8)
+  // Where the unit's shard is (kept) or goes (written): shard_path, or staging_path while the
+  // current manifest lists shard_path and so its bytes may not change.
+  fs::path file;
   bool kept = false;
   json key;
   // Per render of the unit (checking pass).
@@ -213,10 +226,10 @@ struct UnitState {
 
 // A shard already in DB_DIR that is complete, intact and made from the same inputs with the
 // same options. Fills the manifest entry and the skipped views it recorded.
-bool KeepExistingShard(UnitState* st, bool skip_bad) {
+bool KeepShardFile(UnitState* st, const fs::path& path, bool skip_bad) {
   std::error_code ec;
-  if (!fs::is_regular_file(st->shard_path, ec)) return false;
-  auto reader = ShardReader::Open(st->shard_path);
+  if (!fs::is_regular_file(path, ec)) return false;
+  auto reader = ShardReader::Open(path);
   if (!reader.ok() || !reader->VerifyChecksums().ok()) return false;
   const json meta = json::parse(reader->metadata_json(), nullptr, /*allow_exceptions=*/false);
   if (!meta.is_object() || !meta.contains("conversion") || meta["conversion"] != st->key) {
@@ -237,12 +250,23 @@ bool KeepExistingShard(UnitState* st, bool skip_bad) {
                            s["reason"].get<std::string>()});
   }
   const std::span<const uint8_t> bytes = reader->bytes();
-  st->manifest_shard.file = st->shard_path.filename().string();
+  st->file = path;
+  st->manifest_shard.file = path.filename().string();
   st->manifest_shard.views = reader->num_views();
   st->manifest_shard.points = reader->all_points().size();
   st->manifest_shard.bytes = bytes.size();
   st->manifest_shard.xxh3 = Hex64(XXH3_64bits(bytes.data(), bytes.size()));
   return true;
+}
+
+// The unit's shard under its own name or, left by a per-unit run or an interrupted rewrite, under
+// its staging name.
+bool KeepExistingShard(UnitState* st, bool skip_bad) {
+  if (KeepShardFile(st, st->shard_path, skip_bad)) return true;
+  st->skipped.clear();
+  if (KeepShardFile(st, st->staging_path, skip_bad)) return true;
+  st->skipped.clear();
+  return false;
 }
 
 // Temp files a killed run left behind (base/atomic_file.h names them "<target>.tmp-*"): those
@@ -253,7 +277,9 @@ void RemoveStaleTempFiles(const fs::path& db_dir,
                           bool writes_manifest) {
   std::set<std::string> prefixes;
   for (const UnitState& st : units) {
-    if (!st.kept) prefixes.insert(st.shard_path.filename().string() + ".tmp-");
+    if (st.kept) continue;
+    prefixes.insert(st.shard_path.filename().string() + ".tmp-");
+    prefixes.insert(st.staging_path.filename().string() + ".tmp-");
   }
   if (writes_manifest) prefixes.insert(std::string(kManifestFileName) + ".tmp-");
   std::error_code ec;
@@ -351,6 +377,7 @@ Result<std::vector<UnitState>> PrepareUnits(const RunContext& ctx,
     UnitState& st = units[u];
     st.unit = &ctx.plan.units[u];
     st.shard_path = db_dir / ShardFileName(st.unit->id);
+    st.staging_path = db_dir / ShardStagingFileName(st.unit->id);
     st.key = ConversionKey(ctx, st.unit->id, options.edges);
     if (!selected[u] || check_only) continue;
     const fs::path unit_dir = ctx.render_dir / "units" / UnitDirName(st.unit->id);
@@ -455,24 +482,25 @@ Status WriteShards(const RunContext& ctx,
                    std::vector<UnitState>& units,
                    const ConvertOptions& options,
                    int threads) {
-  // Writing pass. The old manifest goes first: while shards are replaced no manifest may list
-  // a shard whose checksum is about to change.
+  // Writing pass. The current manifest stays in place and no file it lists is touched, so a
+  // query meanwhile reads the old database whole (docs/format.md section 8). While a manifest is
+  // in place every new shard goes to its staging name, unless the manifest lists that name (an
+  // interrupted rewrite): then the plain name is the one no reader uses.
   std::error_code ec;
   fs::create_directories(db_dir, ec);
   if (ec) return Status(StatusCode::kIoError, db_dir.string() + ": cannot create: " + ec.message());
-  const bool any_to_write =
-      std::any_of(units.begin(), units.end(), [](const UnitState& st) { return !st.kept; });
-  if (any_to_write && fs::exists(db_dir / kManifestFileName, ec)) {
-    fs::remove(db_dir / kManifestFileName, ec);
-    if (ec) {
-      return Status(StatusCode::kIoError,
-                    (db_dir / kManifestFileName).string() + ": cannot remove: " + ec.message());
-    }
-    HANDDB_RETURN_IF_ERROR(SyncDirectory(db_dir));
+  std::set<std::string> listed;
+  const Result<Manifest> current = ReadManifest(db_dir);
+  if (current.ok()) {
+    for (const ManifestShard& s : current->shards) listed.insert(s.file);
   }
   std::vector<size_t> to_write;
   for (size_t u = 0; u < units.size(); ++u) {
-    if (!units[u].kept) to_write.push_back(u);
+    UnitState& st = units[u];
+    if (st.kept) continue;
+    to_write.push_back(u);
+    const bool staged = current.ok() && listed.count(st.staging_path.filename().string()) == 0;
+    st.file = staged ? st.staging_path : st.shard_path;
   }
   RemoveStaleTempFiles(db_dir, units, options.units.empty());
   const json generation = GenerationJson(ctx);
@@ -497,7 +525,7 @@ Status WriteShards(const RunContext& ctx,
     ShardWriterOptions wopt;
     wopt.metadata_json = meta.dump();
     ShardWriter writer;
-    HANDDB_RETURN_IF_ERROR(writer.Open(st.shard_path, wopt));
+    HANDDB_RETURN_IF_ERROR(writer.Open(st.file, wopt));
     for (size_t r = 0; r < st.errors.size(); ++r) {
       if (!st.errors[r].ok()) continue;
       if (st.dropped[r]) {
@@ -511,7 +539,7 @@ Status WriteShards(const RunContext& ctx,
     }
     auto summary = writer.Finish();
     if (!summary.ok()) return summary.status();
-    st.manifest_shard.file = st.shard_path.filename().string();
+    st.manifest_shard.file = st.file.filename().string();
     st.manifest_shard.views = summary->num_views;
     st.manifest_shard.points = summary->num_points;
     st.manifest_shard.bytes = summary->file_size;
@@ -519,6 +547,66 @@ Status WriteShards(const RunContext& ctx,
     return Status::Ok();
   }));
 
+  return Status::Ok();
+}
+
+// `to` (not listed by the current manifest) becomes a second name of `from`'s bytes, atomically:
+// a hard link renamed over it, or a copy where the filesystem has no hard links.
+Status ReplaceWithLink(const fs::path& from, const fs::path& to) {
+  const fs::path temp = to.string() + ".tmp-link";  // a stale one is removed like any temp file
+  std::error_code ec;
+  fs::remove(temp, ec);
+  if (::link(from.c_str(), temp.c_str()) != 0) {
+    AtomicFileWriter copy;
+    HANDDB_RETURN_IF_ERROR(copy.Open(to));
+    Result<std::string> bytes = ReadFileToString(from);
+    if (!bytes.ok()) return bytes.status();
+    HANDDB_RETURN_IF_ERROR(copy.Write(*bytes));
+    return copy.Commit();
+  }
+  if (::rename(temp.c_str(), to.c_str()) != 0) {
+    const int err = errno;
+    fs::remove(temp, ec);
+    return Status(StatusCode::kIoError,
+                  to.string() + ": cannot rename " + temp.filename().string() +
+                      " over it: " + std::strerror(err));
+  }
+  return Status::Ok();
+}
+
+// Puts `manifest` (every unit's shard under UnitState::file) in place so that at every moment
+// the manifest.json a reader finds lists complete files with exactly the listed bytes
+// (docs/format.md section 8):
+//   1. a manifest naming the staging files of the units that have them (the old manifest's files
+//      are untouched up to here);
+//   2. each plain name replaced by a hard link to its staging file (no manifest lists the plain
+//      name now);
+//   3. the final manifest, plain names only: byte for byte what a fresh convert writes;
+//   4. the staging files removed (no manifest lists them now).
+// A crash between any two steps leaves a complete database; the next convert finishes the job.
+Status SwapInManifest(const fs::path& db_dir, std::vector<UnitState>& units, Manifest* manifest) {
+  std::vector<size_t> staged;
+  for (size_t u = 0; u < units.size(); ++u) {
+    if (units[u].file == units[u].staging_path) staged.push_back(u);
+  }
+  if (!staged.empty()) {
+    HANDDB_RETURN_IF_ERROR(WriteManifest(db_dir, *manifest));
+    for (size_t u : staged) {
+      HANDDB_RETURN_IF_ERROR(ReplaceWithLink(units[u].staging_path, units[u].shard_path));
+    }
+    HANDDB_RETURN_IF_ERROR(SyncDirectory(db_dir));
+    for (ManifestShard& entry : manifest->shards) entry.file = ShardFinalFileName(entry.file);
+  }
+  HANDDB_RETURN_IF_ERROR(WriteManifest(db_dir, *manifest));
+  // Staging files of this run and ones an interrupted run left: best effort, a leftover is
+  // unlisted and harmless (validate ignores it, the next convert removes it).
+  bool removed = false;
+  for (UnitState& st : units) {
+    std::error_code ec;
+    removed |= fs::remove(st.staging_path, ec);
+    st.file = st.shard_path;
+  }
+  if (removed) return SyncDirectory(db_dir);
   return Status::Ok();
 }
 
@@ -563,7 +651,7 @@ Result<ConvertSummary> FinishRun(const RunContext& ctx,
   }
   manifest.UpdateTotals();
   // The manifest lists every shard: only a run over all units writes it.
-  if (options.units.empty()) HANDDB_RETURN_IF_ERROR(WriteManifest(db_dir, manifest));
+  if (options.units.empty()) HANDDB_RETURN_IF_ERROR(SwapInManifest(db_dir, units, &manifest));
   return summary;
 }
 

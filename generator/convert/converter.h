@@ -9,7 +9,9 @@
 // before anything is written; with skip_bad the view is left out and recorded in the shard
 // metadata and the manifest's `skipped`. Resumable and idempotent: a shard already present and
 // valid for its unit (checksums, same plan, same options) is kept; shards are byte-identical
-// across runs and thread counts.
+// across runs and thread counts. Rewriting a database never takes it away from readers: no file
+// the current manifest lists is modified or removed before a manifest that does not list it has
+// replaced it (docs/format.md section 8).
 #pragma once
 
 #include <array>
@@ -79,5 +81,8 @@ Result<std::vector<bool>> FindCompleteShards(const std::filesystem::path& render
 
 // "shard-00007.hdb"
 std::string ShardFileName(uint32_t unit_id);
+// "shard-00007.next.hdb": where a rewrite puts the unit's new shard while the current manifest
+// lists shard-00007.hdb (docs/format.md section 8).
+std::string ShardStagingFileName(uint32_t unit_id);
 
 }  // namespace handdb
