@@ -418,7 +418,7 @@ TEST_F(ConvertDir, ReadersSeeTheOldOrTheNewDatabaseDuringARewrite) {
   EXPECT_GT(validations.load(), 0);
   // Afterwards: no staging file left, and byte for byte what a fresh convert writes.
   ASSERT_TRUE(ConvertRenderDir(run_, root_ / "fresh", on).ok());
-  EXPECT_EQ(ReadDir(db), ReadDir(root_ / "fresh"));
+  EXPECT_TRUE(ReadDir(db) == ReadDir(root_ / "fresh"));  // (no byte dump on failure)
 }
 
 // A rewrite interrupted between its two manifests, and a per-unit run over a live database: the
@@ -468,7 +468,7 @@ TEST_F(ConvertDir, StagedShardsAreKeptAndSwappedIn) {
   EXPECT_EQ(whole->shards_written, 2u);
   EXPECT_FALSE(fs::exists(db / ShardStagingFileName(1)));
   ASSERT_TRUE(ConvertRenderDir(run_, root_ / "fresh", off).ok());
-  EXPECT_EQ(ReadDir(db), ReadDir(root_ / "fresh"));
+  EXPECT_TRUE(ReadDir(db) == ReadDir(root_ / "fresh"));  // (no byte dump on failure)
   EXPECT_TRUE(ValidateDatabase(db).ok());
 }
 
