@@ -32,6 +32,13 @@ Progress::~Progress() { Finish(); }
 
 void Progress::SetTotal(uint64_t total) { total_ = total; }
 
+void Progress::QuietUnlessSlow(std::chrono::steady_clock::time_point since) {
+  std::lock_guard<std::mutex> lock(mu_);
+  quiet_unless_slow_ = true;
+  hold_until_ = since + (tty_ ? std::chrono::milliseconds(1000) : std::chrono::milliseconds(5000));
+  last_draw_ = since;
+}
+
 void Progress::Add(uint64_t n) {
   done_ += n;
   if (!enabled_) return;
@@ -39,6 +46,7 @@ void Progress::Add(uint64_t n) {
   const auto interval = tty_ ? std::chrono::milliseconds(200) : std::chrono::milliseconds(5000);
   std::unique_lock<std::mutex> lock(mu_, std::try_to_lock);
   if (!lock.owns_lock() || now - last_draw_ < interval) return;
+  if (quiet_unless_slow_ && now < hold_until_) return;
   last_draw_ = now;
   Draw(false);
 }
@@ -50,10 +58,12 @@ void Progress::Finish() {
     return;
   }
   finished_ = true;
+  if (quiet_unless_slow_ && !drawn_) return;
   Draw(true);
 }
 
 void Progress::Draw(bool final) {
+  drawn_ = true;
   const double elapsed =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
   const uint64_t done = done_.load();

@@ -18,6 +18,12 @@ class Progress {
   Progress(const Progress&) = delete;
   Progress& operator=(const Progress&) = delete;
 
+  // For work that is usually short (one query): nothing is drawn before `since` + 1 s on a
+  // terminal or + 5 s otherwise (the normal cadence), and no final line unless a line was drawn,
+  // so a fast run prints nothing and a slow one shows it is alive. `since` may be earlier than
+  // this object (the start of the whole command).
+  void QuietUnlessSlow(std::chrono::steady_clock::time_point since);
+
   void Add(uint64_t n = 1);
   void SetTotal(uint64_t total);
   void Finish();
@@ -32,6 +38,9 @@ class Progress {
   bool enabled_;
   bool tty_;
   bool finished_ = false;
+  bool quiet_unless_slow_ = false;
+  bool drawn_ = false;
+  std::chrono::steady_clock::time_point hold_until_;
   std::mutex mu_;
   std::chrono::steady_clock::time_point start_;
   std::chrono::steady_clock::time_point last_draw_;

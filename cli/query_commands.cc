@@ -1,5 +1,6 @@
 // `handdb query DB IMAGE` (issue 5): the top-k database views for a picture of a hand.
 #include <CLI/CLI.hpp>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -145,7 +146,7 @@ struct QueryFlags {
   std::string input = "auto";
   std::string hand = "either";  // the query default; the library's SearchOptions keeps kRight
   std::string kdtree = std::string(KdTreeBackendName(SearchOptions{}.kdtree));
-  bool as_json = false, verify = false;
+  bool as_json = false, verify = false, quiet = false;
   SearchOptions search;
   ImageEdgeOptions edges;
   void Add(CLI::App& app);
@@ -205,9 +206,14 @@ void QueryFlags::Add(CLI::App& app) {
       [this] { edges.interior_edges_only = false; },
       "photo: also keep Canny edges up to 4 px outside the hand region (before issue 16)");
   app.add_flag("--verify", verify, "hash every shard section before searching");
+  app.add_flag("--quiet,-q",
+               quiet,
+               "no progress line (otherwise one on stderr once a search runs 1 s on a "
+               "terminal, 5 s otherwise)");
 }
 
 bool QueryFlags::Finish() {
+  search.progress = !quiet;
   if (search.num_threads == 0 || search.num_threads < -1) {
     std::fprintf(stderr, "handdb query: --threads must be -1 or >= 1\n");
     return false;
@@ -343,6 +349,9 @@ int RunQuery(int argc, char** argv) {
       "edge image (non-zero pixels are edges) or a Blender label EXR.",
       "handdb query"};
   QueryFlags flags;
+  // A long query shows progress counted from here: opening the database and loading the image
+  // count towards the few seconds after which a progress line appears.
+  flags.search.progress_since = std::chrono::steady_clock::now();
   flags.Add(app);
   if (int rc = ParseArgs(app, argc, argv); rc >= 0) return rc;
   if (!flags.Finish()) return kExitUsage;

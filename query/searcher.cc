@@ -8,6 +8,7 @@
 #include <mutex>
 #include <optional>
 
+#include "base/progress.h"
 #include "base/thread_pool.h"
 #include "query/chamfer.h"
 #include "query/coarse_bound.h"
@@ -362,7 +363,9 @@ class QueryRun {
            const SearchOptions& options,
            double threshold,
            int threads,
-           ThreadPool* pool)
+           ThreadPool* pool,
+           Hand hand,
+           std::chrono::steady_clock::time_point progress_since)
       : db_(db),
         max_abs_(max_abs),
         grid_half_extent_px_(grid_half_extent_px),
@@ -373,7 +376,9 @@ class QueryRun {
         num_rolls_(db.num_rolls()),
         k_(static_cast<size_t>(options.top_k)),
         ctx_(db, max_abs, coarse, query_px, options),
-        top_(k_, threshold) {}
+        top_(k_, threshold),
+        hand_(hand),
+        progress_since_(progress_since) {}
 
   // The reference: exact D_c for every (view, roll).
   void BruteForce(SearchStats* stats, std::chrono::steady_clock::time_point start) {
@@ -387,17 +392,20 @@ class QueryRun {
         pool_);
     stats->seconds_bounds = Seconds(start);
     const auto refine_start = std::chrono::steady_clock::now();
+    const auto progress = MakeProgress("brute force", num_views_ * num_rolls_, "pairs");
     ParallelFor(
         num_views_,
         threads_,
         [&](size_t v, int worker) {
-          if (db_.points(static_cast<view_id_t>(v)).empty()) return true;
-          for (roll_id_t r = 0; r < num_rolls_; ++r) {
-            Scored s;
-            ctx_.Score(static_cast<view_id_t>(v), r, kInf, 0.0, worker, &s);
-            top_.Insert(s);
+          if (!db_.points(static_cast<view_id_t>(v)).empty()) {
+            for (roll_id_t r = 0; r < num_rolls_; ++r) {
+              Scored s;
+              ctx_.Score(static_cast<view_id_t>(v), r, kInf, 0.0, worker, &s);
+              top_.Insert(s);
+            }
+            refined_.fetch_add(num_rolls_, std::memory_order_relaxed);
           }
-          refined_.fetch_add(num_rolls_, std::memory_order_relaxed);
+          progress->Add(num_rolls_);
           return true;
         },
         pool_);
@@ -419,6 +427,7 @@ class QueryRun {
     std::vector<DistanceGrid> grids(threads_, DistanceGrid(grid_options));
     const bool pairs = num_rolls_ >= 2 && num_rolls_ % 2 == 0;
     const uint32_t tasks = pairs ? num_rolls_ / 2 : num_rolls_;
+    const auto progress = MakeProgress("bounds", num_rolls_, "rolls");
     ParallelFor(
         tasks,
         threads_,
@@ -437,6 +446,7 @@ class QueryRun {
             BoundRoll(grid, r2, /*negate=*/true, ctx_.NegationGap(r, r2), out2);
             ScoreRollBest(r2, out2, worker);
           }
+          progress->Add(pairs ? 2 : 1);
           return true;
         },
         pool_);
@@ -476,7 +486,10 @@ class QueryRun {
       }
     }
     std::sort(rest.begin(), rest.end(), by_bound);
-    Visit(bound, rest);
+    // `rest` bounds the pairs to refine; the visit stops early once bounds pass the k-th best.
+    const auto progress = MakeProgress("refine", rest.size(), "pairs");
+    Visit(bound, rest, progress.get());
+    progress->SetTotal(progress->done());
   }
 
   // The top k, best first, with labels rolled (and mirrored back for kLeft) and shape names.
@@ -573,7 +586,9 @@ class QueryRun {
   }
 
   // Scores the pairs of `order` (increasing bound) until a bound exceeds the k-th best.
-  void Visit(const std::vector<Bound>& bound, std::span<const uint32_t> order) {
+  void Visit(const std::vector<Bound>& bound,
+             std::span<const uint32_t> order,
+             Progress* progress = nullptr) {
     ParallelFor(
         order.size(),
         threads_,
@@ -581,6 +596,7 @@ class QueryRun {
           const uint32_t idx = order[i];
           const double threshold = top_.threshold();
           if (BoundPx(bound[idx]) > threshold) return false;  // every later pair: a larger bound
+          if (progress != nullptr) progress->Add();
           const view_id_t v = idx % num_views_;
           const roll_id_t r = static_cast<roll_id_t>(idx / num_views_);
           refined_.fetch_add(1, std::memory_order_relaxed);
@@ -597,6 +613,17 @@ class QueryRun {
         pool_);
   }
 
+  // One phase's progress line (SearchOptions::progress), e.g. "query refine (left)".
+  std::unique_ptr<Progress> MakeProgress(const std::string& phase,
+                                         uint64_t total,
+                                         const char* unit) const {
+    std::string label = "query " + phase;
+    if (options_.hand == Hand::kEither) label += " (" + std::string(HandName(hand_)) + ")";
+    auto progress = std::make_unique<Progress>(label, total, options_.progress, unit);
+    progress->QuietUnlessSlow(progress_since_);
+    return progress;
+  }
+
   const Database& db_;
   std::span<const int32_t> max_abs_;
   float grid_half_extent_px_;
@@ -610,6 +637,8 @@ class QueryRun {
   TopK top_;
   std::atomic<uint64_t> refined_{0};
   std::atomic<uint64_t> abandoned_{0};
+  const Hand hand_;
+  const std::chrono::steady_clock::time_point progress_since_;
 };
 
 }  // namespace
@@ -649,6 +678,7 @@ std::vector<Match> Searcher::SearchOnce(std::span<const Point2f> query_px,
                                         Hand hand,
                                         int threads,
                                         ThreadPool* pool,
+                                        std::chrono::steady_clock::time_point progress_since,
                                         SearchStats* stats) const {
   const auto start = std::chrono::steady_clock::now();
   QueryRun run(*db_,
@@ -659,7 +689,9 @@ std::vector<Match> Searcher::SearchOnce(std::span<const Point2f> query_px,
                options,
                threshold,
                threads,
-               pool);
+               pool,
+               hand,
+               progress_since);
   SearchStats local;
   if (options.brute_force) {
     run.BruteForce(&local, start);
@@ -689,13 +721,17 @@ Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
   // One pool for the query's parallel loops (both hands); the calling thread is worker 0.
   std::optional<ThreadPool> pool_storage;
   ThreadPool* pool = threads > 1 ? &pool_storage.emplace(threads - 1) : nullptr;
+  const auto progress_since = options.progress_since == std::chrono::steady_clock::time_point{}
+                                  ? start
+                                  : options.progress_since;
   SearchStats local;
   local.virtual_views = db_->num_virtual_views();
   local.query_points = query_px.size();
 
   std::vector<Match> matches;
   if (options.hand != Hand::kLeft) {
-    matches = SearchOnce(query_px, options, kInf, Hand::kRight, threads, pool, &local);
+    matches =
+        SearchOnce(query_px, options, kInf, Hand::kRight, threads, pool, progress_since, &local);
   }
   if (options.hand != Hand::kRight) {
     // x -> -x is exact in float, so the mirrored query of a mirrored view is the view itself.
@@ -706,8 +742,8 @@ Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
     const size_t k = static_cast<size_t>(options.top_k);
     const double threshold =
         !options.brute_force && matches.size() == k ? matches.back().distance : kInf;
-    std::vector<Match> left =
-        SearchOnce(mirrored, options, threshold, Hand::kLeft, threads, pool, &local);
+    std::vector<Match> left = SearchOnce(
+        mirrored, options, threshold, Hand::kLeft, threads, pool, progress_since, &local);
     for (Match& m : left) matches.push_back(std::move(m));
     std::stable_sort(matches.begin(), matches.end(), [](const Match& x, const Match& y) {
       if (x.distance != y.distance) return x.distance < y.distance;

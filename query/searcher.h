@@ -11,6 +11,7 @@
 // identical for any thread count and either kd-tree backend.
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <memory>
 #include <span>
@@ -49,6 +50,14 @@ struct SearchOptions {
   // Also bound the query -> view term A from the views' coarse fields (query/coarse_field.h)
   // before any kd-tree. Off: the B bound alone (for comparison; results are identical).
   bool coarse_bound = true;
+  // A progress line on stderr (base/progress.h) per phase of a long search ("query bounds" over
+  // rolls, "query refine" / "query brute force" over (view, roll) pairs, per hand searched), but
+  // only once the work has run 1 s on a terminal or 5 s otherwise, counted from progress_since
+  // (default: the start of Search); a fast search prints nothing (Progress::QuietUnlessSlow).
+  // `handdb query` turns it on (off with --quiet) from the command's start; `--top 100000`,
+  // `--bruteforce` and big photo queries otherwise ran for minutes without a sign of life.
+  bool progress = false;
+  std::chrono::steady_clock::time_point progress_since{};
   bool Check() const;
 };
 
@@ -120,6 +129,7 @@ class Searcher {
                                 Hand hand,
                                 int threads,
                                 ThreadPool* pool,
+                                std::chrono::steady_clock::time_point progress_since,
                                 SearchStats* stats) const;
 
   std::shared_ptr<const Database> db_;

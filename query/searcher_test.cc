@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
 #include <random>
 #include <vector>
@@ -101,6 +102,56 @@ TEST(Searcher, ViewQueriedWithItsOwnEdgesIsRankOneAtDistanceZero) {
       EXPECT_EQ((*res)[0].label.joint_angles, canonical.joint_angles);
       EXPECT_EQ((*res)[0].shape_name, "shape" + std::to_string(canonical.shape_id));
     }
+  }
+}
+
+// Issue 14 item 12: `--top 100000`, `--bruteforce` and big photo queries ran for minutes without
+// a progress line. A search that has run long enough (progress_since in the past) reports every
+// phase on stderr with its final count; a fast one prints nothing; the result is the same.
+TEST(Searcher, LongSearchesShowProgressOnStderrFastOnesNothing) {
+  const Searcher searcher(TestDatabase());
+  const auto query = RolledView(*TestDatabase(), 7, 3);
+  SearchOptions options = Options();
+  options.hand = Hand::kEither;
+  auto quiet = searcher.Search(query, options);
+  ASSERT_TRUE(quiet.ok());
+
+  options.progress = true;
+  ::testing::internal::CaptureStderr();
+  auto fast = searcher.Search(query, options);
+  EXPECT_EQ(::testing::internal::GetCapturedStderr(), "");  // stderr is not a terminal: 5 s
+  ASSERT_TRUE(fast.ok());
+
+  options.progress_since = std::chrono::steady_clock::now() - std::chrono::minutes(1);
+  ::testing::internal::CaptureStderr();
+  auto slow = searcher.Search(query, options);
+  const std::string log = ::testing::internal::GetCapturedStderr();
+  ASSERT_TRUE(slow.ok());
+  for (const char* line : {"query bounds (right) ",
+                           "query refine (right) ",
+                           "query bounds (left) ",
+                           "query refine (left) "}) {
+    EXPECT_NE(log.find(line), std::string::npos) << line << " missing from:\n" << log;
+  }
+  const std::string rolls = std::to_string(kRolls) + "/" + std::to_string(kRolls);
+  EXPECT_NE(log.find(rolls + " 100.0%  "), std::string::npos) << log;
+  EXPECT_EQ(log.find("\r"), std::string::npos);  // not a terminal: whole lines only
+
+  options.brute_force = true;
+  options.hand = Hand::kRight;
+  ::testing::internal::CaptureStderr();
+  auto brute = searcher.Search(query, options);
+  const std::string brute_log = ::testing::internal::GetCapturedStderr();
+  ASSERT_TRUE(brute.ok());
+  const uint64_t pairs = TestDatabase()->num_virtual_views();
+  EXPECT_NE(brute_log.find("query brute force " + std::to_string(pairs) + "/" +
+                           std::to_string(pairs) + " 100.0%  "),
+            std::string::npos)
+      << brute_log;
+  ASSERT_EQ(slow->size(), quiet->size());
+  for (size_t i = 0; i < quiet->size(); ++i) {
+    EXPECT_EQ((*slow)[i].view_id, (*quiet)[i].view_id);
+    EXPECT_EQ((*slow)[i].distance, (*quiet)[i].distance);
   }
 }
 
