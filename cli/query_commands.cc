@@ -235,6 +235,14 @@ bool QueryFlags::Finish() {
                    "handdb query: --skin needs six integers Ymin,Ymax,Crmin,Crmax,Cbmin,Cbmax\n");
       return false;
     }
+    for (int i = 0; i < 6; i += 2) {
+      if (v[i] < 0 || v[i] > v[i + 1] || v[i + 1] > 255) {
+        std::fprintf(stderr,
+                     "handdb query: --skin %s: each of Y, Cr, Cb needs 0 <= min <= max <= 255\n",
+                     skin.c_str());
+        return false;
+      }
+    }
     edges.skin = {v[0], v[1], v[2], v[3], v[4], v[5]};
   }
   if (!canny.empty()) {
@@ -242,8 +250,22 @@ bool QueryFlags::Finish() {
       std::fprintf(stderr, "handdb query: --canny needs two integers low,high\n");
       return false;
     }
+    if (v[0] < 0 || v[0] > v[1]) {
+      std::fprintf(stderr, "handdb query: --canny %s: needs 0 <= low <= high\n", canny.c_str());
+      return false;
+    }
     edges.canny_low = v[0];
     edges.canny_high = v[1];
+  }
+  // One line naming the flag for what the flags can get wrong (issue 14 item 8: the option
+  // checks below print source paths); they stay as the backstop for the rest.
+  bool dt_cell_ok = false;
+  for (int k = 0; k <= 4; ++k) dt_cell_ok |= search.dt_cell_px == 1.0f / static_cast<float>(1 << k);
+  if (!dt_cell_ok) {
+    std::fprintf(stderr,
+                 "handdb query: --dt-cell %g: must be 1, 0.5, 0.25, 0.125 or 0.0625 (px)\n",
+                 static_cast<double>(search.dt_cell_px));
+    return false;
   }
   if (!edges.Check()) {
     std::fprintf(stderr, "handdb query: invalid photo options (see above)\n");

@@ -374,9 +374,10 @@ ValidationReport ValidateDatabaseOnce(const fs::path& db_dir, const ValidateOpti
 
   uint64_t total_views = 0;
   for (const auto* s : listed) total_views += s->views;
+  // Nothing to check (no readable manifest, no shard): no "0/0" line before the one error line.
   Progress progress("validate",
                     manifest.ok() ? total_views : listed.size(),
-                    options.show_progress,
+                    options.show_progress && !listed.empty(),
                     manifest.ok() ? "views" : "shards");
   RenderIdMap seen;
   // Issue 14 item 4: every manifest field against what the shards record.

@@ -6,7 +6,8 @@
 // line (items 6 and 8); validate cross-checks the manifest against the shards (item 4); labels
 // out of range are refused at open (item 5); rolls, image pixels and plan sizes are bounded
 // before allocating (item 3); `show`'s image finds its own view (item 11); a second writer is
-// refused and a bad config leaves no directory (items 10, 12). Every command runs under
+// refused and a bad config leaves no directory (items 10, 12); bad --skin / --canny / --dt-cell
+// values are one line (item 8). Every command runs under
 // `timeout`, so a regression fails instead of hanging.
 #include <gtest/gtest.h>
 #include <sys/stat.h>
@@ -232,6 +233,33 @@ TEST_F(HardeningCli, TruncatedOrMissingImagesAreRefusedWithOneLine) {
   EXPECT_EQ(
       r.err,
       "handdb query: " + loop.string() + ": too many levels of symbolic links (a symlink loop?)\n");
+}
+
+// Item 8: bad --skin / --canny / --dt-cell values printed the option checks' source paths and
+// three lines; now one line naming the flag, the value and the rule, exit 2 (bad usage).
+TEST_F(HardeningCli, BadPhotoAndSearchFlagsAreOneLineNamingTheFlag) {
+  const std::string query = "query " + Db() + " " + (*dir_ / "q.pgm").string() + " ";
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"--skin 0,300,0,0,0,0",
+       "handdb query: --skin 0,300,0,0,0,0: each of Y, Cr, Cb needs 0 <= min <= max <= 255\n"},
+      {"--skin 0,255,200,100,0,255",
+       "handdb query: --skin 0,255,200,100,0,255: each of Y, Cr, Cb needs 0 <= min <= max <= "
+       "255\n"},
+      {"--skin 1,2,3",
+       "handdb query: --skin needs six integers Ymin,Ymax,Crmin,Crmax,Cbmin,Cbmax\n"},
+      {"--canny 200,100", "handdb query: --canny 200,100: needs 0 <= low <= high\n"},
+      {"--canny -5,10", "handdb query: --canny -5,10: needs 0 <= low <= high\n"},
+      {"--canny 5", "handdb query: --canny needs two integers low,high\n"},
+      {"--dt-cell 0.3",
+       "handdb query: --dt-cell 0.3: must be 1, 0.5, 0.25, 0.125 or 0.0625 (px)\n"},
+      {"--dt-cell 2", "handdb query: --dt-cell 2: must be 1, 0.5, 0.25, 0.125 or 0.0625 (px)\n"},
+  };
+  for (const auto& [flags, message] : cases) {
+    const CliRun r = Handdb(query + flags);
+    EXPECT_EQ(r.code, 2) << flags;
+    EXPECT_EQ(r.err, message) << flags;
+  }
+  EXPECT_EQ(Handdb(query + "--dt-cell 0.5 --canny 10,20 --skin 0,255,0,255,0,255").code, 0);
 }
 
 // A database of one shard whose metadata is `metadata_json`, after `patch` edited the shard's
