@@ -96,6 +96,17 @@ Result<Database> Database::OpenOnce(const std::filesystem::path& dir, bool verif
                         std::to_string(entry.views) + ", " + std::to_string(entry.points) + ", " +
                         std::to_string(entry.bytes));
     }
+    // The one manifest field that sizes the search: a manifest saying 24 rolls over shards made
+    // with 48 made `query` search 24 silently (issue 14 item 4; validate checks every field).
+    const nlohmann::json meta =
+        nlohmann::json::parse(reader->metadata_json(), nullptr, /*allow_exceptions=*/false);
+    if (meta.is_object() && meta.contains("rolls") && meta["rolls"].is_number_unsigned() &&
+        meta["rolls"].get<uint64_t>() != manifest->rolls) {
+      return Status(StatusCode::kSizeMismatch,
+                    path.string() + ": rolls is " + std::to_string(manifest->rolls) +
+                        " in the manifest but " + meta["rolls"].dump() +
+                        " in the shard's metadata (run 'handdb validate' for every problem)");
+    }
     const uint32_t shard_index = static_cast<uint32_t>(db.shards_.size());
     auto owned = std::make_unique<ShardReader>(std::move(reader).value());
     if (db.shape_names_.empty()) db.shape_names_ = ShapeNamesFromMetadata(owned->metadata_json());

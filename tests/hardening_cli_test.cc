@@ -307,9 +307,18 @@ TEST_F(HardeningCli, ValidateCrossChecksTheManifestAgainstTheShards) {
                              "shard's metadata (rolls)"),
             std::string::npos)
       << report << r.err;
+  // query no longer searches the manifest's 24 rolls over 48-roll shards: one line, exit 1.
+  const std::string q = (*dir_ / "q.pgm").string();
+  const CliRun query = Handdb("query " + db + " " + q + " --input edges");
+  EXPECT_EQ(query.code, 1);
+  EXPECT_EQ(query.err,
+            "handdb query: " + db +
+                "/shard-00000.hdb: rolls is 24 in the manifest but 48 in the shard's metadata "
+                "(run 'handdb validate' for every problem)\n");
   const std::string good =
       WriteDb(*dir_ / "rolls-ok", R"({"unit": 0, "rolls": 24})", 24, [](std::vector<uint8_t>*) {});
   EXPECT_EQ(Handdb("validate " + good + " -q").code, 0);
+  EXPECT_EQ(Handdb("query " + good + " " + q + " --input edges").code, 0);
 }
 
 // Item 5: a NaN joint angle / an infinite keypoint under recomputed checksums was served by
