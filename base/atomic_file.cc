@@ -13,6 +13,8 @@
 namespace handdb {
 namespace {
 
+// Named by the file the caller asked for, not its temp file: "out.json: write failed: No space
+// left on device" (issue 14 item 8: one line naming the file and the problem).
 Status Errno(const std::string& what, const std::filesystem::path& path) {
   return Status(StatusCode::kIoError, path.string() + ": " + what + ": " + std::strerror(errno));
 }
@@ -53,7 +55,7 @@ Status AtomicFileWriter::Open(const std::filesystem::path& target) {
   temp_ = dir / (target.filename().string() + ".tmp-" + RandomSuffix());
   fd_ = ::open(temp_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
   if (fd_ < 0) {
-    Status s = Errno("cannot create temp file", temp_);
+    Status s = Errno("cannot create temp file " + temp_.filename().string(), target);
     temp_.clear();
     return s;
   }
@@ -70,7 +72,7 @@ Status AtomicFileWriter::Write(const void* data, size_t size) {
     ssize_t n = ::write(fd_, p, left);
     if (n < 0) {
       if (errno == EINTR) continue;
-      return Errno("write failed", temp_);
+      return Errno("write failed", target_);
     }
     p += n;
     left -= static_cast<size_t>(n);
@@ -88,7 +90,7 @@ Status AtomicFileWriter::WriteAt(uint64_t offset, const void* data, size_t size)
     ssize_t n = ::pwrite(fd_, p, left, static_cast<off_t>(offset));
     if (n < 0) {
       if (errno == EINTR) continue;
-      return Errno("pwrite failed", temp_);
+      return Errno("pwrite failed", target_);
     }
     p += n;
     offset += static_cast<uint64_t>(n);
@@ -99,10 +101,10 @@ Status AtomicFileWriter::WriteAt(uint64_t offset, const void* data, size_t size)
 
 Status AtomicFileWriter::Commit() {
   THROW_CHECK_MSG(fd_ >= 0, "AtomicFileWriter::Commit before Open");
-  if (::fsync(fd_) != 0) return Errno("fsync failed", temp_);
+  if (::fsync(fd_) != 0) return Errno("fsync failed", target_);
   if (::close(fd_) != 0) {
     fd_ = -1;
-    return Errno("close failed", temp_);
+    return Errno("close failed", target_);
   }
   fd_ = -1;
   if (::rename(temp_.c_str(), target_.c_str()) != 0) return Errno("rename failed", target_);

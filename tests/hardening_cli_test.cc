@@ -152,6 +152,39 @@ TEST_F(HardeningCli, StdoutOnFullDiskIsExitOneWithOneLine) {
   }
 }
 
+// Item 1, files: a command whose output file does not fit on the disk (a full 64 KiB tmpfs) is
+// exit 1 with one line naming that file (not its temp file) and the reason, and leaves neither
+// the file nor a temp file behind. Needs mount(2) (root); skipped elsewhere.
+TEST_F(HardeningCli, OutputFilesOnAFullDiskAreExitOneNamingTheFile) {
+  const fs::path full = *dir_ / "full";
+  fs::create_directories(full);
+  if (std::system(("mount -t tmpfs -o size=64k tmpfs " + full.string() + " 2>/dev/null").c_str()) !=
+      0) {
+    GTEST_SKIP() << "cannot mount a tmpfs here";
+  }
+  // Fill it but for a few KB: the outputs below are larger.
+  std::system(
+      ("dd if=/dev/zero of=" + (full / "fill").string() + " bs=1k count=60 2>/dev/null").c_str());
+  const std::string q = (*dir_ / "q.pgm").string();
+  const std::vector<std::pair<std::string, fs::path>> runs = {
+      {"plan configs/demo.json -o ", full / "plan.json"},
+      {"query " + Db() + " " + q + " --input edges --sheet ", full / "sheet.png"},
+  };
+  for (const auto& [args, file] : runs) {
+    SCOPED_TRACE(args);
+    const CliRun r = Handdb(args + file.string());
+    EXPECT_EQ(r.code, 1) << r.err;
+    EXPECT_NE(r.err.find(": " + file.string() + ": write failed: No space left on device\n"),
+              std::string::npos)
+        << r.err;
+    EXPECT_EQ(Lines(r.err), 1) << r.err;
+  }
+  std::vector<std::string> left;
+  for (const auto& e : fs::directory_iterator(full)) left.push_back(e.path().filename().string());
+  EXPECT_EQ(left, std::vector<std::string>{"fill"});
+  std::system(("umount " + full.string()).c_str());
+}
+
 // Item 2: 100,000 nested '[' crashed plan / validate / info / query (stack overflow).
 TEST_F(HardeningCli, DeeplyNestedJsonIsRefusedWithOneLine) {
   const std::string deep = std::string(100000, '[') + std::string(100000, ']');
