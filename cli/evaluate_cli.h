@@ -12,6 +12,7 @@
 
 #include "cli/slurm_cli.h"
 #include "evaluate/evaluate.h"
+#include "query/database.h"
 
 namespace handdb::cli {
 
@@ -34,7 +35,10 @@ struct EvaluateFlags {
 
 // Test view -> query edge points: the clean label render through the database's own conversion
 // (the edge options its manifest records), or the photo through the real-image path.
-Result<QueryPointsFn> MakeQueryPointsFn(QueryInput input, const std::filesystem::path& db_dir);
+// `db` is DB_DIR opened: its manifest's recorded edge options convert clean (label) queries.
+Result<QueryPointsFn> MakeQueryPointsFn(QueryInput input,
+                                        const std::filesystem::path& db_dir,
+                                        const Database& db);
 
 // Warns on stderr when the database's manifest records the test set's seed or another hand model.
 void WarnIfTestSetMatchesDatabase(const std::filesystem::path& db_dir, const TestSet& testset);

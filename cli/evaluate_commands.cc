@@ -241,12 +241,16 @@ std::vector<std::string> EvaluateFlags::Args() const {
   return args;
 }
 
-Result<QueryPointsFn> MakeQueryPointsFn(QueryInput input, const fs::path& db_dir) {
+Result<QueryPointsFn> MakeQueryPointsFn(QueryInput input,
+                                        const fs::path& db_dir,
+                                        const Database& db) {
   if (input == QueryInput::kClean) {
     // The label render through the database's own conversion (edges, normalisation): the edge
-    // options its manifest records (conversion.edges), else the defaults.
+    // options its manifest records (conversion.edges), else the defaults. From the manifest the
+    // searched shards were opened with (a convert may have replaced manifest.json since).
     std::string fallback;
-    auto recorded = ReadDatabaseViewConversion(db_dir, &fallback);
+    auto recorded = DatabaseViewConversionFromMetadata(
+        json::parse(db.manifest_metadata_json()), (db_dir / kManifestFileName).string(), &fallback);
     if (!recorded.ok()) return recorded.status();
     if (!fallback.empty()) {
       std::fprintf(stderr,
@@ -370,7 +374,7 @@ int RunEvaluate(int argc, char** argv) {
   WarnIfTestSetMatchesDatabase(db_dir, *testset);
 
   const QueryInput query_input = flags.query_input();
-  auto points_fn = MakeQueryPointsFn(query_input, db_dir);
+  auto points_fn = MakeQueryPointsFn(query_input, db_dir, (*searcher)->database());
   if (!points_fn.ok()) return Fail("evaluate", points_fn.status());
   auto report = Evaluate(**searcher, *testset, query_input, *points_fn, flags.options);
   if (!report.ok()) return Fail("evaluate", report.status());

@@ -338,7 +338,7 @@ int UnitEvaluateCommands::Run() {
   auto fp = ComputeEvaluationFingerprint(db_, *testset, input, options, tasks_);
   if (!fp.ok()) return Fail(cmd, fp.status());
   const std::vector<uint32_t> selected = SelectTestViews(*testset, options);
-  auto points = MakeQueryPointsFn(input, db_);
+  auto points = MakeQueryPointsFn(input, db_, (*searcher)->database());
   if (!points.ok()) return Fail(cmd, points.status());
 
   if (merge) {

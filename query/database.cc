@@ -124,6 +124,7 @@ Result<Database> Database::OpenOnce(const std::filesystem::path& dir, bool verif
   if (db.views_.size() >= kInvalidViewId) {
     return Status(StatusCode::kOutOfRange, dir.string() + ": too many views");
   }
+  db.manifest_ = std::move(manifest).value();
   return db;
 }
 

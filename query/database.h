@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "base/status.h"
+#include "format/manifest.h"
 #include "format/view.h"
 
 namespace handdb {
@@ -60,9 +61,10 @@ class Database {
   // Bytes of the database on disk (sum of shard sizes) or in memory (points + labels).
   uint64_t size_bytes() const { return size_bytes_; }
   const std::filesystem::path& path() const { return path_; }
-  // The `metadata` object of the manifest these shards were opened from, as JSON text ("{}" for
-  // FromMemory databases): read options from here, not from DB_DIR/manifest.json again, which a
-  // convert may have replaced since Open.
+  // The manifest these shards were opened from (a default one for FromMemory databases), and its
+  // `metadata` object as JSON text ("{}"): read options and shard lists from here, not from
+  // DB_DIR/manifest.json again, which a convert may have replaced since Open.
+  const Manifest& manifest() const { return manifest_; }
   const std::string& manifest_metadata_json() const { return manifest_metadata_json_; }
 
  private:
@@ -80,6 +82,7 @@ class Database {
   uint64_t size_bytes_ = 0;
   std::filesystem::path path_;
   std::vector<std::string> shape_names_;
+  Manifest manifest_;
   std::string manifest_metadata_json_ = "{}";
   std::vector<std::unique_ptr<ShardReader>> shards_;
   // FromMemory storage.
