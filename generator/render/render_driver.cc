@@ -1,6 +1,7 @@
 #include "generator/render/render_driver.h"
 
 #include <signal.h>
+#include <sys/statvfs.h>
 #include <sys/wait.h>
 
 #include <algorithm>
@@ -81,6 +82,31 @@ std::string LastErrorLine(const fs::path& log) {
   std::string out = last_render.empty() ? last : last_render;
   if (out.size() > 240) out = out.substr(0, 237) + "...";
   return out;
+}
+
+// Below this many free bytes the render directory's filesystem counts as full: one render (EXR +
+// sidecar) of the paper plan is ~1 MB.
+constexpr uint64_t kLowDiskBytes = uint64_t{16} << 20;
+
+// Why a worker failed when the disk is full (issue 14 item 8): Blender then leaves a half-written
+// EXR and render.py reports "unreadable EXR header", the real cause only in the log. The log's
+// "No space left on device" line, or else the filesystem's free space when nearly none is left;
+// "" when neither.
+std::string DiskFullCause(const fs::path& dir, const fs::path& log) {
+  {
+    std::ifstream in(log);
+    std::string line;
+    while (std::getline(in, line)) {
+      if (line.find("No space left on device") == std::string::npos) continue;
+      if (line.size() > 160) line = line.substr(0, 157) + "...";
+      return "the disk is full (the log says: " + line + ")";
+    }
+  }
+  struct statvfs st {};
+  if (::statvfs(dir.c_str(), &st) != 0) return "";
+  const uint64_t free_bytes = static_cast<uint64_t>(st.f_bavail) * st.f_frsize;
+  if (free_bytes >= kLowDiskBytes) return "";
+  return "the disk is full (" + dir.string() + ": " + std::to_string(free_bytes) + " bytes free)";
 }
 
 struct Worker {
@@ -340,11 +366,12 @@ class RenderRun {
       return Status::Ok();
     }
     const std::string line = LastErrorLine(log);
+    const std::string disk_full = DiskFullCause(out_dir_, log);
     return Stop(Status(StatusCode::kExternalToolFailed,
                        "unit " + std::to_string(w.unit) + " failed after " +
                            std::to_string(w.attempt) + " attempt" + (w.attempt == 1 ? "" : "s") +
-                           " (" + why + ")" + (line.empty() ? "" : ": " + line) +
-                           "; log: " + log.string()));
+                           " (" + why + ")" + (disk_full.empty() ? "" : ": " + disk_full) +
+                           (line.empty() ? "" : ": " + line) + "; log: " + log.string()));
   }
 
   void PollProgress() {

@@ -26,7 +26,8 @@ using nlohmann::json;
 namespace fs = std::filesystem;
 
 // FAKE_BLENDER_MODE: ok | fail_first (each unit fails its first attempt) | fail_unit1 (unit 1
-// always fails) | crash_first (SIGKILLs itself on the first attempt) | no_done | hang.
+// always fails) | enospc_unit1 (unit 1 fails as Blender does on a full disk) | crash_first
+// (SIGKILLs itself on the first attempt) | no_done | hang.
 constexpr const char* kFakeBlender = R"PY(#!/usr/bin/python3
 import json, os, signal, sys, time
 args = sys.argv[sys.argv.index("--") + 1:]
@@ -43,6 +44,10 @@ if mode == "hang":
     time.sleep(600)
 if mode == "crash_first" and first:
     os.kill(os.getpid(), signal.SIGKILL)
+if mode == "enospc_unit1" and unit == 1:
+    print("Error: writing r000010.exr.tmp: No space left on device")
+    print("handdb-render: r000010.exr.tmp: Blender wrote an unreadable EXR header", file=sys.stderr)
+    sys.exit(1)
 if (mode == "fail_first" and first) or (mode == "fail_unit1" and unit == 1):
     print("handdb-render: simulated failure in unit %d" % unit, file=sys.stderr)
     sys.exit(1)
@@ -188,6 +193,44 @@ TEST_F(RenderDriverTest, GivesUpWithTheUnitAndItsLog) {
   r = RenderPlan(dir_ / "plan.json", dir_ / "run", options_);
   ASSERT_FALSE(r.ok());
   EXPECT_NE(r.status().message().find("no DONE marker"), std::string::npos) << r.status().message();
+}
+
+// Issue 14 item 8: a full disk was reported as the worker's "unreadable EXR header", the real
+// cause only in the log. The message now says the disk is full, from the log's line or from the
+// filesystem's free space.
+TEST_F(RenderDriverTest, AFullDiskIsNamedAsTheCause) {
+  ::setenv("FAKE_BLENDER_MODE", "enospc_unit1", 1);
+  options_.jobs = 1;
+  options_.max_retries = 0;
+  auto r = RenderPlan(dir_ / "plan.json", dir_ / "run", options_);
+  ASSERT_FALSE(r.ok());
+  const std::string& m = r.status().message();
+  EXPECT_NE(m.find("unit 1 failed after 1 attempt (exit code 1): the disk is full (the log says: "
+                   "Error: writing r000010.exr.tmp: No space left on device): handdb-render: "),
+            std::string::npos)
+      << m;
+  EXPECT_EQ(m.find('\n'), std::string::npos);
+  // A failure with plenty of space left says nothing about the disk.
+  ::setenv("FAKE_BLENDER_MODE", "fail_unit1", 1);
+  fs::remove_all(dir_ / "run");
+  r = RenderPlan(dir_ / "plan.json", dir_ / "run", options_);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().message().find("disk is full"), std::string::npos) << r.status().message();
+
+  // On a really full filesystem (a 256 KiB tmpfs; needs mount rights) without the log line.
+  const fs::path full = dir_ / "full";
+  fs::create_directories(full);
+  if (std::system(
+          ("mount -t tmpfs -o size=256k tmpfs " + full.string() + " 2>/dev/null").c_str()) != 0) {
+    GTEST_SKIP() << "cannot mount a tmpfs here";
+  }
+  r = RenderPlan(dir_ / "plan.json", full / "run", options_);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find("failed after 1 attempt (exit code 1): the disk is full (" +
+                                      (full / "run").string() + ": "),
+            std::string::npos)
+      << r.status().message();
+  std::system(("umount " + full.string()).c_str());
 }
 
 TEST_F(RenderDriverTest, CancelKillsWorkersQuickly) {
