@@ -48,6 +48,59 @@ TEST(Manifest, RoundTrip) {
   fs::remove_all(dir);
 }
 
+// Issue 14 item 10: what a reader returns comes from one manifest. A read during which the
+// manifest is replaced (as a convert's swap does, by rename) runs again; a read during which it
+// stays runs once; a manifest replaced on every attempt gives up after kManifestReadAttempts.
+TEST(Manifest, ReadWithStableManifestRunsAgainAfterASwap) {
+  auto dir = TempDir("stable");
+  Manifest m = Sample();
+  ASSERT_TRUE(WriteManifest(dir, m).ok());
+  int calls = 0;
+  auto rolls = ReadWithStableManifest(dir, [&]() -> Result<uint32_t> {
+    auto read = ReadManifest(dir);
+    if (!read.ok()) return read.status();
+    if (++calls == 1) {  // the swap lands while this read runs
+      Manifest next = m;
+      next.rolls = 24;
+      next.UpdateTotals();
+      EXPECT_TRUE(WriteManifest(dir, next).ok());
+    }
+    return read->rolls;
+  });
+  EXPECT_EQ(calls, 2);
+  ASSERT_TRUE(rolls.ok());
+  EXPECT_EQ(*rolls, 24u);  // the second read's manifest, not the first's
+
+  calls = 0;
+  EXPECT_EQ(ReadWithStableManifest(dir, [&] { return ++calls; }), 1);
+  // No manifest at all is stable too (the read reports kNotFound itself).
+  fs::remove(dir / "manifest.json");
+  EXPECT_EQ(StampManifest(dir), ManifestStamp{});
+  EXPECT_EQ(ReadWithStableManifest(dir, [&] { return ++calls; }), 2);
+
+  calls = 0;
+  ReadWithStableManifest(dir, [&] {
+    EXPECT_TRUE(WriteManifest(dir, m).ok());  // replaced on every attempt
+    return ++calls;
+  });
+  EXPECT_EQ(calls, kManifestReadAttempts);
+  fs::remove_all(dir);
+}
+
+TEST(Manifest, StagingFileNames) {
+  EXPECT_TRUE(IsShardStagingFileName("shard-00007.next.hdb"));
+  EXPECT_FALSE(IsShardStagingFileName("shard-00007.hdb"));
+  EXPECT_FALSE(IsShardStagingFileName("shard-00007.next.hdb.tmp-x"));
+  EXPECT_EQ(ShardFinalFileName("shard-00007.next.hdb"), "shard-00007.hdb");
+  EXPECT_EQ(ShardFinalFileName("shard-00007.hdb"), "shard-00007.hdb");
+  // The schema accepts a staging name in shards[] (the intermediate manifest of a rewrite).
+  Manifest m = Sample();
+  m.shards[1].file = "shard-00001.next.hdb";
+  EXPECT_TRUE(ValidateJson(ManifestToJson(m), "manifest.schema.json", "m").ok());
+  m.shards[1].file = "shard-00001.old.hdb";
+  EXPECT_FALSE(ValidateJson(ManifestToJson(m), "manifest.schema.json", "m").ok());
+}
+
 TEST(Manifest, SchemaAcceptsWhatWeWrite) {
   EXPECT_FALSE(EmbeddedSchema("manifest.schema.json").empty());
   EXPECT_TRUE(ValidateJson(ManifestToJson(Sample()), "manifest.schema.json", "m").ok());
