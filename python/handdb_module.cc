@@ -276,12 +276,9 @@ class PyDatabase {
   const Database& db() const { return *db_; }
   const fs::path& path() const { return path_; }
   bool verify() const { return verify_; }
-  // Read on first use (Database::Open has checked it; a data loader that only reads views does
-  // not parse it twice).
-  const Manifest& manifest() const {
-    if (!manifest_) manifest_ = Unwrap(ReadManifest(path_));
-    return *manifest_;
-  }
+  // The manifest the shards were opened with (Database keeps it): re-reading manifest.json could
+  // see a newer one while `handdb convert` rewrites the database (docs/format.md section 8).
+  const Manifest& manifest() const { return db_->manifest(); }
 
   view_id_t Index(py::ssize_t i) const {
     const auto n = static_cast<py::ssize_t>(db_->num_views());
@@ -428,7 +425,6 @@ class PyDatabase {
  private:
   fs::path path_;
   bool verify_ = false;
-  mutable std::optional<Manifest> manifest_;
   std::shared_ptr<const Database> db_;
   mutable std::unique_ptr<Searcher> searcher_;
 };
