@@ -53,8 +53,9 @@ class TopK {
     if (s.distance > threshold_.load(std::memory_order_relaxed)) return;
     std::lock_guard<std::mutex> lock(mu_);
     if (items_.size() == k_ && !Before(s, items_.back())) return;
+    // A pair is scored once (ScoreRollBest marks what it scored); kept as a guard.
     for (const Scored& it : items_) {
-      if (it.view == s.view && it.roll == s.roll) return;  // scored twice (step 1 and step 2)
+      if (it.view == s.view && it.roll == s.roll) return;
     }
     items_.insert(std::upper_bound(items_.begin(), items_.end(), s, Before), s);
     if (items_.size() > k_) items_.pop_back();
@@ -555,7 +556,9 @@ class QueryRun {
   }
 
   // Scores this roll's most promising pairs now so later rolls can stop early.
-  void ScoreRollBest(roll_id_t r, const Bound* out, int worker) {
+  // A pair scored here is marked kNoBound so that Refine does not score it again (its D_c is
+  // in the top k already, or was above the threshold, which only falls).
+  void ScoreRollBest(roll_id_t r, Bound* out, int worker) {
     const size_t m = std::min<size_t>(num_views_, top_.threshold() == kInf ? k_ : 2);
     std::vector<uint32_t> best;
     best.reserve(m + 1);
@@ -582,6 +585,7 @@ class QueryRun {
       } else {
         abandoned_.fetch_add(1, std::memory_order_relaxed);
       }
+      out[v] = kNoBound;
     }
   }
 
