@@ -12,7 +12,7 @@ import shutil
 
 import pytest
 
-from conftest import REPO, import_handdb
+from handdb_testing import REPO, import_handdb
 
 DOCS = ["README.md", "docs/python.md"]
 

@@ -12,7 +12,7 @@ import shutil
 import numpy as np
 import pytest
 
-from conftest import handdb_json, import_handdb, run_handdb
+from handdb_testing import handdb_json, import_handdb, run_handdb
 
 cv2 = pytest.importorskip("cv2")
 
@@ -274,7 +274,7 @@ def test_search_releases_the_gil(db):
 def test_photo_search_equals_query_json(handdb, db, db_dir, flags, options):
     """A real photo (tests/data/photos) through the skin-colour path, with the command's photo
     flags given as keywords: the same matches as `handdb query --json`."""
-    from conftest import REPO
+    from handdb_testing import REPO
     photo = os.path.join(REPO, "tests/data/photos/asl-digits/asl-5", sorted(
         os.listdir(os.path.join(REPO, "tests/data/photos/asl-digits/asl-5")))[0])
     cli = handdb_json("query", db_dir, photo, "--json", "--top", 5, *flags)
