@@ -62,6 +62,21 @@ void ExpectSameResults(const std::vector<Match>& a, const std::vector<Match>& b)
   }
 }
 
+// Searches `q` with `pruned` and by brute force (the same options otherwise), expects identical
+// results and returns the pruned search's.
+std::vector<Match> SearchBothWays(const Searcher& searcher,
+                                  const std::vector<Point2f>& q,
+                                  const SearchOptions& pruned) {
+  SearchOptions brute = pruned;
+  brute.brute_force = true;
+  auto a = searcher.Search(q, pruned);
+  auto b = searcher.Search(q, brute);
+  EXPECT_TRUE(a.ok() && b.ok());
+  if (!a.ok() || !b.ok()) return {};
+  ExpectSameResults(*a, *b);
+  return *a;
+}
+
 std::vector<Point2f> Mirrored(std::vector<Point2f> pts) {
   for (Point2f& p : pts) p.x = -p.x;
   return pts;
@@ -236,14 +251,9 @@ TEST(Searcher, PrunedEqualsBruteForceForOddAndTinyRollCounts) {
     for (int i = 0; i < 12; ++i) {
       const auto q = Transform(
           RolledView(*db, view(rng), roll(rng)), 0.3f * u(rng), 4 * u(rng), 4 * u(rng), 0.8, i);
-      SearchOptions pruned = Options(1 + i % 6, 1 + i % 2);
-      SearchOptions brute = pruned;
-      brute.brute_force = true;
-      auto a = searcher.Search(q, pruned);
-      auto b = searcher.Search(q, brute);
-      ASSERT_TRUE(a.ok() && b.ok());
-      ExpectSameResults(*a, *b);
-      for (const Match& m : *a) EXPECT_LE(m.lower_bound, m.distance + 1e-9) << rolls;
+      const auto a = SearchBothWays(searcher, q, Options(1 + i % 6, 1 + i % 2));
+      ASSERT_FALSE(a.empty());
+      for (const Match& m : a) EXPECT_LE(m.lower_bound, m.distance + 1e-9) << rolls;
     }
   }
 }
@@ -393,13 +403,9 @@ TEST(Searcher, EitherHandPrunedEqualsBruteForce) {
     if (i % 2) q = Mirrored(q);
     SearchOptions pruned = Options(1 + i % 6, 1 + i % 2);
     pruned.hand = i % 3 == 2 ? Hand::kLeft : Hand::kEither;
-    SearchOptions brute = pruned;
-    brute.brute_force = true;
-    auto a = searcher.Search(q, pruned);
-    auto b = searcher.Search(q, brute);
-    ASSERT_TRUE(a.ok() && b.ok());
-    ExpectSameResults(*a, *b);
-    if ((*a)[0].hand == Hand::kLeft) ++left_won;
+    const auto a = SearchBothWays(searcher, q, pruned);
+    ASSERT_FALSE(a.empty());
+    if (a[0].hand == Hand::kLeft) ++left_won;
   }
   EXPECT_GT(left_won, 4);  // both hands won somewhere, so the merge was exercised
   EXPECT_LT(left_won, 20);
