@@ -81,6 +81,7 @@ int RunTestset(int argc, char** argv) {
   std::string config_path;
   std::string out;
   bool clutter = false;
+  bool forearm = false;
   bool no_photos = false;
   bool quiet = false;
   bool as_json = false;
@@ -92,6 +93,10 @@ int RunTestset(int argc, char** argv) {
       ->required();
   app.add_option("--out", out, "test-set directory")->required();
   app.add_flag("--clutter", clutter, "photos on a procedurally textured background");
+  app.add_flag("--forearm",
+               forearm,
+               "photos show a skin-coloured forearm from the wrist out of the frame, as real "
+               "photos do (the label renders, the ground truth, stay the hand alone)");
   app.add_flag("--no-photos", no_photos, "label renders only (clean input)");
   app.add_option("-j,--jobs", options.jobs, "parallel Blender processes")
       ->check(CLI::Range(1, 256))
@@ -104,7 +109,7 @@ int RunTestset(int argc, char** argv) {
 
   auto config = ReadJsonFile(config_path, "testset_config.schema.json");
   if (!config.ok()) return Fail("testset", config.status());
-  auto plan = MakeTestSetPlan(*config, config_path, clutter);
+  auto plan = MakeTestSetPlan(*config, config_path, clutter, forearm);
   if (!plan.ok()) return Fail("testset", plan.status());
   std::error_code ec;
   fs::create_directories(out, ec);
@@ -114,11 +119,13 @@ int RunTestset(int argc, char** argv) {
     auto existing = ReadJsonFile(plan_path, "");
     if (!existing.ok()) return Fail("testset", existing.status());
     if (*existing != *plan) {
-      return Fail("testset",
-                  Status(StatusCode::kInvalidArgument,
-                         plan_path.string() +
-                             ": holds a different test-set plan (other config or --clutter); use "
-                             "a new --out directory"));
+      return Fail(
+          "testset",
+          Status(
+              StatusCode::kInvalidArgument,
+              plan_path.string() +
+                  ": holds a different test-set plan (other config, --clutter or --forearm); use "
+                  "a new --out directory"));
     }
   } else {
     Status s = WriteJsonFileAtomic(plan_path, *plan);
@@ -143,6 +150,7 @@ int RunTestset(int argc, char** argv) {
               {"units_skipped", rendered->units_skipped},
               {"photos", !no_photos},
               {"clutter", plan->at("photo").at("clutter")},
+              {"forearm", plan->at("photo").value("forearm", false)},
               {"render_seconds", rendered->seconds}};
     std::printf("%s\n", j.dump(2).c_str());
   } else if (!quiet) {

@@ -118,6 +118,7 @@ Result<TestSet> ReadTestSet(const fs::path& dir_or_file) {
     set.axes.forward_axis = Vec3From(doc->at("forward_axis"));
     set.axes.palm_normal = Vec3From(doc->at("palm_normal"));
     set.clutter = doc->at("clutter").get<bool>();
+    set.forearm = doc->value("forearm", false);
     const nlohmann::json& items = doc->at("items");
     for (size_t i = 0; i < items.size(); ++i) {
       const nlohmann::json& j = items[i];

@@ -50,6 +50,7 @@ struct TestSet {
   std::string hand_model_sha256;
   HandAxes axes;
   bool clutter = false;
+  bool forearm = false;  // the photos show a forearm (test-set photo.forearm)
   std::vector<TestView> views;
 };
 

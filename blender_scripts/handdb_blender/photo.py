@@ -5,6 +5,9 @@ material becomes one skin-toned Principled BSDF, a key and a fill light follow t
 grey world gives ambient light, and a background card parented to the camera fills the view
 behind the hand: a plain colour, or (clutter) a seeded procedural texture of Voronoi cells, noise
 and stripes. Cycles renders the colour image with a few samples to an 8-bit sRGB PNG.
+
+With `forearm` the studio adds a skin-coloured forearm (forearm.py) to the photos; the label
+renders made before the studio exists never see it.
 """
 
 from __future__ import annotations
@@ -13,12 +16,12 @@ import math
 from typing import Dict, Sequence
 
 import bpy
+import numpy as np
 
-from . import testset
+from . import forearm, testset
 from .scene import CAMERA_DISTANCE
 
 BACKGROUND_DEPTH = 0.45  # hand-frame units behind the look-at point (the hand spans ~0.25)
-
 
 def _emission_material(name: str):
     mat = bpy.data.materials.new(name)
@@ -50,6 +53,8 @@ class PhotoStudio:
         me = hand_scene.mesh.data
         for i in range(len(me.materials)):
             me.materials[i] = mat
+        if photo.get("forearm", False):
+            self._add_forearm(mat)
 
         # Ambient world.
         world = bpy.data.worlds.new("handdb_world")
@@ -88,6 +93,31 @@ class PhotoStudio:
         card.data.materials.append(bmat)
 
         self._setup_render(scene, int(photo["samples"]))
+
+    def _add_forearm(self, material) -> None:
+        hs = self.hs
+        model = hs.model
+        arm = hs.arm
+        # Rest mesh vertices in the hand frame (the armature's object space).
+        me = hs.mesh.data
+        co = np.empty(len(me.vertices) * 3)
+        me.vertices.foreach_get("co", co)
+        co = co.reshape(-1, 3)
+        to_hand = np.array(arm.matrix_world.inverted() @ hs.mesh.matrix_world)
+        co = co @ to_hand[:3, :3].T + to_hand[:3, 3]
+        wrist = np.array(arm.data.bones["wrist"].head_local)
+        centre, a, b = forearm.wrist_section(co, wrist, model["forward_axis"], model["palm_normal"])
+        verts, faces = forearm.forearm_vertices(centre, a, b, model["forward_axis"], model["palm_normal"])
+        mesh = bpy.data.meshes.new("handdb_forearm")
+        mesh.from_pydata(verts, [], faces)
+        for poly in mesh.polygons:
+            poly.use_smooth = True
+        mesh.update()
+        obj = bpy.data.objects.new("handdb_forearm", mesh)
+        hs.scene.collection.objects.link(obj)
+        obj.parent = arm
+        obj.matrix_parent_inverse.identity()
+        mesh.materials.append(material)
 
     def _sun(self, name: str):
         data = bpy.data.lights.new(name, type="SUN")

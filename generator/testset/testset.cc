@@ -62,7 +62,8 @@ std::vector<uint32_t> TestSetPlan::UnitItems(uint32_t unit) const {
 
 Result<nlohmann::json> MakeTestSetPlan(const nlohmann::json& config,
                                        const fs::path& config_path,
-                                       bool clutter) {
+                                       bool clutter,
+                                       bool forearm) {
   const std::string what = config_path.string();
   HANDDB_RETURN_IF_ERROR(ValidateJson(config, kConfigSchema, what));
 
@@ -150,6 +151,9 @@ Result<nlohmann::json> MakeTestSetPlan(const nlohmann::json& config,
       {"background_rgb", photo_cfg.value("background_rgb", PhotoSettings().background_rgb)},
       {"clutter", clutter || photo_cfg.value("clutter", false)},
   };
+  // Written only when on, so plans of test sets made before the option stay byte-identical (a
+  // rerun compares the plan on disk with the new one).
+  if (forearm || photo_cfg.value("forearm", false)) photo["forearm"] = true;
 
   // Items: the first num_basic are basic shapes, picked by a seeded shuffle of the library that
   // is repeated as often as needed (each shape about equally often); then the PCA samples. Every
@@ -247,6 +251,7 @@ Result<TestSetPlan> ParseTestSetPlan(const nlohmann::json& doc, const std::strin
   plan.photo.skin_rgb = Vec3FromJson(photo.at("skin_rgb"));
   plan.photo.background_rgb = Vec3FromJson(photo.at("background_rgb"));
   plan.photo.clutter = photo.at("clutter").get<bool>();
+  plan.photo.forearm = photo.value("forearm", false);  // absent in plans written before it
   for (const auto& j : doc.at("items")) {
     TestSetItem item;
     item.id = j.at("id").get<uint32_t>();

@@ -39,6 +39,10 @@ struct PhotoSettings {
   std::array<double, 3> skin_rgb{0.80, 0.52, 0.40};        // sRGB 0..1 base colour of the skin
   std::array<double, 3> background_rgb{0.12, 0.14, 0.18};  // sRGB 0..1 of the plain background
   bool clutter = false;                                    // procedural textured background instead
+  // A skin-coloured forearm (an elliptic cone from the wrist along -forward_axis, out of the
+  // frame) in the photos only, as in real photos of hands; the label renders (the ground truth)
+  // stay the hand alone. Measures the query's wrist cut (docs/evaluation.md).
+  bool forearm = false;
 };
 
 struct TestSetItem {
@@ -75,10 +79,12 @@ struct TestSetPlan {
 };
 
 // Builds the plan document from a parsed config (schemas/testset_config.schema.json).
-// `clutter` forces photo.clutter on (the CLI's --clutter). Errors name `config_path`.
+// `clutter` and `forearm` force photo.clutter / photo.forearm on (the CLI's --clutter and
+// --forearm). Errors name `config_path`.
 Result<nlohmann::json> MakeTestSetPlan(const nlohmann::json& config,
                                        const std::filesystem::path& config_path,
-                                       bool clutter);
+                                       bool clutter,
+                                       bool forearm = false);
 
 // Schema check + consistency (ids dense, units consecutive, directions unit length, ...).
 Result<TestSetPlan> ParseTestSetPlan(const nlohmann::json& doc, const std::string& what);

@@ -152,6 +152,30 @@ TEST(TestSetPlan, SeedChangesEverythingAndClutterFlagIsRecorded) {
   EXPECT_EQ(same_direction, 0);
 }
 
+TEST(TestSetPlan, ForearmIsWrittenOnlyWhenOn) {
+  // Off: the plan has no "forearm" key, so plans of test sets made before the option are
+  // byte-identical to what the new code writes (a rerun compares them).
+  auto off = MakeTestSetPlan(DemoConfig(), DemoConfigPath(), false);
+  ASSERT_TRUE(off.ok());
+  EXPECT_FALSE(off->at("photo").contains("forearm"));
+  auto poff = ParseTestSetPlan(*off, "off");
+  ASSERT_TRUE(poff.ok());
+  EXPECT_FALSE(poff->photo.forearm);
+  // On from the CLI flag or from the config.
+  auto flag = MakeTestSetPlan(DemoConfig(), DemoConfigPath(), false, true);
+  nlohmann::json config = DemoConfig();
+  config["photo"]["forearm"] = true;
+  auto cfg = MakeTestSetPlan(config, DemoConfigPath(), false);
+  ASSERT_TRUE(flag.ok() && cfg.ok());
+  for (const nlohmann::json* doc : {&*flag, &*cfg}) {
+    EXPECT_TRUE(doc->at("photo").at("forearm").get<bool>());
+    auto parsed = ParseTestSetPlan(*doc, "on");
+    ASSERT_TRUE(parsed.ok()) << parsed.status().message();
+    EXPECT_TRUE(parsed->photo.forearm);
+    EXPECT_FALSE(parsed->photo.clutter);
+  }
+}
+
 TEST(TestSetPlan, RejectsBadConfigsAndPlans) {
   nlohmann::json config = DemoConfig();
   config["count"] = 0;

@@ -127,6 +127,7 @@ Status WriteTestSetGroundTruth(const fs::path& dir, int num_threads, bool progre
       {"handdb_version", HANDDB_VERSION},
       {"items", items},
   };
+  if (plan->photo.forearm) truth["forearm"] = true;
   HANDDB_RETURN_IF_ERROR(
       ValidateJson(truth, "testset.schema.json", (dir / "testset.json").string()));
   return WriteJsonFileAtomic(dir / "testset.json", truth);
