@@ -12,8 +12,7 @@
 #include "base/thread_pool.h"
 #include "cli/cli_util.h"
 #include "cli/commands.h"
-#include "edges/view_conversion.h"
-#include "format/manifest.h"
+#include "cli/photo_input_flags.h"
 #include "format/roll.h"
 #include "handdb_version.h"
 #include "query/input/image_edges.h"
@@ -27,27 +26,6 @@ namespace fs = std::filesystem;
 using json = nlohmann::json;
 
 constexpr double kDeg = 180.0 / M_PI;
-
-// "a,b,c,..." -> exactly n integers.
-bool ParseInts(const std::string& text, size_t n, std::vector<int>* out) {
-  out->clear();
-  size_t pos = 0;
-  while (pos <= text.size()) {
-    const size_t comma = text.find(',', pos);
-    const std::string item =
-        text.substr(pos, comma == std::string::npos ? std::string::npos : comma - pos);
-    try {
-      size_t used = 0;
-      out->push_back(std::stoi(item, &used));
-      if (used != item.size()) return false;
-    } catch (const std::exception&) {
-      return false;
-    }
-    if (comma == std::string::npos) break;
-    pos = comma + 1;
-  }
-  return out->size() == n;
-}
 
 double Deg0To360(double rad) {
   double d = std::fmod(rad * kDeg, 360.0);
@@ -142,13 +120,12 @@ void PrintTable(const std::vector<Match>& matches,
 
 // The flags of `handdb query`, bound to the option structs they set.
 struct QueryFlags {
-  std::string db_dir, image, sheet, mask, roi, skin, canny;
-  std::string input = "auto";
-  std::string hand = "either";  // the query default; the library's SearchOptions keeps kRight
+  std::string db_dir, image, sheet;
+  HandFlag hand;
   std::string kdtree = std::string(KdTreeBackendName(SearchOptions{}.kdtree));
   bool as_json = false, verify = false, quiet = false;
   SearchOptions search;
-  ImageEdgeOptions edges;
+  PhotoInputFlags picture;
   void Add(CLI::App& app);
   // Completes `edges` and `search` from the text flags; false (message printed) on bad usage.
   bool Finish();
@@ -164,12 +141,7 @@ void QueryFlags::Add(CLI::App& app) {
   app.add_option("--sheet", sheet, "write a contact sheet PNG: input, its edges, the top matches");
   app.add_option("--threads", search.num_threads, "worker threads (-1: all cores)")
       ->capture_default_str();
-  app.add_option("--hand",
-                 hand,
-                 "which hand IMAGE shows: right (the database's), left (mirrored before the "
-                 "search) or either (both searched, one merged top-k)")
-      ->check(CLI::IsMember({"right", "left", "either"}))
-      ->capture_default_str();
+  hand.Add(app, "IMAGE");
   app.add_flag("--bruteforce",
                search.brute_force,
                "exact D_c for every (view, roll), no pruning (the reference)");
@@ -184,27 +156,7 @@ void QueryFlags::Add(CLI::App& app) {
       [this] { search.coarse_bound = false; },
       "prune with the view -> query bound alone, without the coarse query -> view bound (for "
       "comparison: the results are identical)");
-  app.add_option("--input",
-                 input,
-                 "kind of IMAGE (auto: .exr -> labels, binary image -> edges, else photo)")
-      ->check(CLI::IsMember({"auto", "photo", "edges", "labels"}))
-      ->capture_default_str();
-  app.add_option("--mask", mask, "photo: hand mask image, non-zero = hand (replaces skin colour)");
-  app.add_option("--roi", roi, "photo: x,y,w,h rectangle that contains the hand");
-  app.add_option("--skin",
-                 skin,
-                 "photo: skin box Ymin,Ymax,Crmin,Crmax,Cbmin,Cbmax (YCrCb, 0..255; default "
-                 "40,255,133,173,77,127)");
-  app.add_option("--canny", canny, "photo: Canny thresholds low,high (default 40,120)");
-  app.add_option("--contour-clearance",
-                 edges.contour_clearance_px,
-                 "photo: drop Canny edges within this many px of the silhouette contour (0: keep)")
-      ->check(CLI::Range(0, 20))
-      ->capture_default_str();
-  app.add_flag_callback(
-      "--edges-outside",
-      [this] { edges.interior_edges_only = false; },
-      "photo: also keep Canny edges up to 4 px outside the hand region (before issue 16)");
+  picture.Add(app, PhotoInputFlags::Which{});
   app.add_flag("--verify", verify, "hash every shard section before searching");
   app.add_flag("--quiet,-q",
                quiet,
@@ -218,45 +170,7 @@ bool QueryFlags::Finish() {
     std::fprintf(stderr, "handdb query: --threads must be -1 or >= 1\n");
     return false;
   }
-  edges.kind = *ParseQueryInputKind(input);
-  edges.mask = mask;
-  if (!roi.empty()) {
-    auto r = ParsePixelRect(roi);
-    if (!r.ok()) {
-      std::fprintf(stderr, "handdb query: --roi: %s\n", r.status().message().c_str());
-      return false;
-    }
-    edges.roi = *r;
-  }
-  std::vector<int> v;
-  if (!skin.empty()) {
-    if (!ParseInts(skin, 6, &v)) {
-      std::fprintf(stderr,
-                   "handdb query: --skin needs six integers Ymin,Ymax,Crmin,Crmax,Cbmin,Cbmax\n");
-      return false;
-    }
-    for (int i = 0; i < 6; i += 2) {
-      if (v[i] < 0 || v[i] > v[i + 1] || v[i + 1] > 255) {
-        std::fprintf(stderr,
-                     "handdb query: --skin %s: each of Y, Cr, Cb needs 0 <= min <= max <= 255\n",
-                     skin.c_str());
-        return false;
-      }
-    }
-    edges.skin = {v[0], v[1], v[2], v[3], v[4], v[5]};
-  }
-  if (!canny.empty()) {
-    if (!ParseInts(canny, 2, &v)) {
-      std::fprintf(stderr, "handdb query: --canny needs two integers low,high\n");
-      return false;
-    }
-    if (v[0] < 0 || v[0] > v[1]) {
-      std::fprintf(stderr, "handdb query: --canny %s: needs 0 <= low <= high\n", canny.c_str());
-      return false;
-    }
-    edges.canny_low = v[0];
-    edges.canny_high = v[1];
-  }
+  if (!picture.Finish("query")) return false;
   // One line naming the flag for what the flags can get wrong (issue 14 item 8: the option
   // checks below print source paths); they stay as the backstop for the rest.
   bool dt_cell_ok = false;
@@ -267,12 +181,8 @@ bool QueryFlags::Finish() {
                  static_cast<double>(search.dt_cell_px));
     return false;
   }
-  if (!edges.Check()) {
-    std::fprintf(stderr, "handdb query: invalid photo options (see above)\n");
-    return false;
-  }
   search.kdtree = *ParseKdTreeBackend(kdtree);
-  search.hand = *ParseHand(hand);
+  search.hand = hand.Get();
   if (!search.Check()) {
     std::fprintf(stderr, "handdb query: invalid search options (see above)\n");
     return false;
@@ -342,7 +252,7 @@ json ResultJson(const QueryFlags& flags,
            {{"top_k", search.top_k},
             {"threads", ResolveNumThreads(search.num_threads)},
             {"brute_force", search.brute_force},
-            {"hand", flags.hand},
+            {"hand", flags.hand.name},
             {"kdtree", flags.kdtree},
             {"dt_cell_px", search.dt_cell_px},
             {"coarse_bound", search.coarse_bound}}},
@@ -378,7 +288,6 @@ int RunQuery(int argc, char** argv) {
   if (int rc = ParseArgs(app, argc, argv); rc >= 0) return rc;
   if (!flags.Finish()) return kExitUsage;
   const std::string& db_dir = flags.db_dir;
-  ImageEdgeOptions& edge_options = flags.edges;
 
   // Open the database first: a broken database is reported before any image work.
   auto db = Database::Open(db_dir, flags.verify);
@@ -389,14 +298,9 @@ int RunQuery(int argc, char** argv) {
   const Searcher searcher(shared_db);
 
   // A label EXR is converted with the edge options the database was made with.
-  // From the manifest Open read (a convert may have replaced manifest.json since).
-  auto recorded = DatabaseViewConversionFromMetadata(
-      nlohmann::json::parse(shared_db->manifest_metadata_json()),
-      (std::filesystem::path(db_dir) / kManifestFileName).string());
-  if (!recorded.ok()) return Fail("query", recorded.status());
-  edge_options.label_edges = recorded->edges;
-  edge_options.label_joint_pairs = recorded->joint_pairs;
-  auto query = LoadQueryEdges(flags.image, edge_options);
+  const Status recorded = flags.picture.UseDatabaseConversion(*shared_db, db_dir);
+  if (!recorded.ok()) return Fail("query", recorded);
+  auto query = LoadQueryEdges(flags.image, flags.picture.edges);
   if (!query.ok()) return Fail("query", query.status());
   SearchStats stats;
   auto matches = searcher.Search(query->points_px(), flags.search, &stats);

@@ -1,0 +1,163 @@
+#include "cli/photo_input_flags.h"
+
+#include <cstdio>
+#include <exception>
+
+#include "edges/view_conversion.h"
+#include "format/manifest.h"
+
+namespace handdb::cli {
+namespace {
+
+// "a,b,c,..." -> exactly n integers.
+bool ParseInts(const std::string& text, size_t n, std::vector<int>* out) {
+  out->clear();
+  size_t pos = 0;
+  while (pos <= text.size()) {
+    const size_t comma = text.find(',', pos);
+    const std::string item =
+        text.substr(pos, comma == std::string::npos ? std::string::npos : comma - pos);
+    try {
+      size_t used = 0;
+      out->push_back(std::stoi(item, &used));
+      if (used != item.size()) return false;
+    } catch (const std::exception&) {
+      return false;
+    }
+    if (comma == std::string::npos) break;
+    pos = comma + 1;
+  }
+  return out->size() == n;
+}
+
+}  // namespace
+
+void PhotoInputFlags::Add(CLI::App& app, Which which) {
+  if (which.input) {
+    app.add_option("--input",
+                   input,
+                   "kind of picture (auto: .exr -> labels, binary image -> edges, else photo)")
+        ->check(CLI::IsMember({"auto", "photo", "edges", "labels"}))
+        ->capture_default_str();
+  }
+  if (which.mask) {
+    app.add_option(
+        "--mask", mask, "photo: hand mask image, non-zero = hand (replaces skin colour)");
+  }
+  app.add_option("--roi", roi, "photo: x,y,w,h rectangle that contains the hand");
+  app.add_option("--skin",
+                 skin,
+                 "photo: skin box Ymin,Ymax,Crmin,Crmax,Cbmin,Cbmax (YCrCb, 0..255; default "
+                 "40,255,133,173,77,127)");
+  app.add_option("--canny", canny, "photo: Canny thresholds low,high (default 40,120)");
+  app.add_option("--contour-clearance",
+                 edges.contour_clearance_px,
+                 "photo: drop Canny edges within this many px of the silhouette contour (0: keep)")
+      ->check(CLI::Range(0, 20))
+      ->capture_default_str();
+  app.add_flag_callback(
+      "--edges-outside",
+      [this] { edges.interior_edges_only = false; },
+      "photo: also keep Canny edges up to 4 px outside the hand region (before issue 16)");
+}
+
+bool PhotoInputFlags::Finish(const std::string& cmd) {
+  const char* c = cmd.c_str();
+  auto kind = ParseQueryInputKind(input);
+  if (!kind.ok()) {
+    std::fprintf(stderr,
+                 "handdb %s: --input %s: a picture is read as auto, photo, edges or labels\n",
+                 c,
+                 input.c_str());
+    return false;
+  }
+  edges.kind = *kind;
+  edges.mask = mask;
+  if (!roi.empty()) {
+    auto r = ParsePixelRect(roi);
+    if (!r.ok()) {
+      std::fprintf(stderr, "handdb %s: --roi: %s\n", c, r.status().message().c_str());
+      return false;
+    }
+    edges.roi = *r;
+  }
+  std::vector<int> v;
+  if (!skin.empty()) {
+    if (!ParseInts(skin, 6, &v)) {
+      std::fprintf(
+          stderr, "handdb %s: --skin needs six integers Ymin,Ymax,Crmin,Crmax,Cbmin,Cbmax\n", c);
+      return false;
+    }
+    for (int i = 0; i < 6; i += 2) {
+      if (v[i] < 0 || v[i] > v[i + 1] || v[i + 1] > 255) {
+        std::fprintf(stderr,
+                     "handdb %s: --skin %s: each of Y, Cr, Cb needs 0 <= min <= max <= 255\n",
+                     c,
+                     skin.c_str());
+        return false;
+      }
+    }
+    edges.skin = {v[0], v[1], v[2], v[3], v[4], v[5]};
+  }
+  if (!canny.empty()) {
+    if (!ParseInts(canny, 2, &v)) {
+      std::fprintf(stderr, "handdb %s: --canny needs two integers low,high\n", c);
+      return false;
+    }
+    if (v[0] < 0 || v[0] > v[1]) {
+      std::fprintf(stderr, "handdb %s: --canny %s: needs 0 <= low <= high\n", c, canny.c_str());
+      return false;
+    }
+    edges.canny_low = v[0];
+    edges.canny_high = v[1];
+  }
+  if (!edges.Check()) {
+    std::fprintf(stderr, "handdb %s: invalid photo options (see above)\n", c);
+    return false;
+  }
+  return true;
+}
+
+Status PhotoInputFlags::UseDatabaseConversion(const Database& db,
+                                              const std::filesystem::path& db_dir) {
+  auto recorded = DatabaseViewConversionFromMetadata(
+      nlohmann::json::parse(db.manifest_metadata_json()), (db_dir / kManifestFileName).string());
+  if (!recorded.ok()) return recorded.status();
+  edges.label_edges = recorded->edges;
+  edges.label_joint_pairs = recorded->joint_pairs;
+  return Status::Ok();
+}
+
+std::vector<std::string> PhotoInputFlags::Args() const {
+  std::vector<std::string> args = {
+      "--input", input, "--contour-clearance", std::to_string(edges.contour_clearance_px)};
+  if (!roi.empty()) args.insert(args.end(), {"--roi", roi});
+  if (!skin.empty()) args.insert(args.end(), {"--skin", skin});
+  if (!canny.empty()) args.insert(args.end(), {"--canny", canny});
+  if (!edges.interior_edges_only) args.push_back("--edges-outside");
+  return args;
+}
+
+nlohmann::json PhotoInputFlags::ToJson() const {
+  const SkinModel& s = edges.skin;
+  const PixelRect& r = edges.roi;
+  return {
+      {"input", std::string(QueryInputKindName(edges.kind))},
+      {"roi", r.empty() ? nlohmann::json(nullptr) : nlohmann::json{r.x, r.y, r.width, r.height}},
+      {"skin", {s.y_min, s.y_max, s.cr_min, s.cr_max, s.cb_min, s.cb_max}},
+      {"canny", {edges.canny_low, edges.canny_high}},
+      {"contour_clearance_px", edges.contour_clearance_px},
+      {"interior_edges_only", edges.interior_edges_only}};
+}
+
+void HandFlag::Add(CLI::App& app, const std::string& what) {
+  app.add_option("--hand",
+                 name,
+                 "which hand " + what +
+                     " shows: right (the database's), left (mirrored before the search) or "
+                     "either (both searched, one merged top-k)")
+      ->check(CLI::IsMember({"right", "left", "either"}))
+      ->capture_default_str();
+}
+
+}  // namespace handdb::cli

@@ -1,0 +1,54 @@
+// The flags that say how a picture becomes a query and which hand it shows, bound once and shared
+// by `handdb query` and `handdb evaluate --photos` (and the Slurm tasks of the latter), so each
+// flag has one spelling, one default and one check (STYLE.md: bind a flag to the field).
+#pragma once
+
+#include <CLI/CLI.hpp>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "base/status.h"
+#include "query/database.h"
+#include "query/input/image_edges.h"
+#include "query/searcher.h"
+
+namespace handdb::cli {
+
+// --input, --mask, --roi, --skin, --canny, --contour-clearance, --edges-outside, bound to
+// ImageEdgeOptions.
+struct PhotoInputFlags {
+  std::string input = std::string(QueryInputKindName(QueryInputKind::kAuto));
+  std::string mask, roi, skin, canny;
+  ImageEdgeOptions edges;
+
+  // Which flags a command takes: --input (the kind of picture) only where no other --input
+  // exists, --mask only where there is one picture (a mask belongs to one photo).
+  struct Which {
+    bool input = true;
+    bool mask = true;
+  };
+  void Add(CLI::App& app, Which which);
+  // Completes `edges` from the text flags; false (one line "handdb <cmd>: ..." on stderr) on bad
+  // usage.
+  bool Finish(const std::string& cmd);
+  // Label EXRs become queries exactly like the database's views: the edge options its manifest
+  // records (from the manifest `db` was opened with; a convert may have replaced the file since).
+  Status UseDatabaseConversion(const Database& db, const std::filesystem::path& db_dir);
+  // The flags that reproduce `edges` in another process (a Slurm task), without --mask.
+  std::vector<std::string> Args() const;
+  // The resolved options that change a query (not the mask), for fingerprints and reports.
+  nlohmann::json ToJson() const;
+};
+
+// --hand right|left|either. The default is `handdb query`'s (either: the query and its mirror
+// image are both searched); the library's SearchOptions keeps kRight.
+struct HandFlag {
+  std::string name = std::string(HandName(Hand::kEither));
+  // `what` names the picture in the help text ("IMAGE", "each photo").
+  void Add(CLI::App& app, const std::string& what);
+  Hand Get() const { return *ParseHand(name); }
+};
+
+}  // namespace handdb::cli
