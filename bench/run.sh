@@ -124,8 +124,10 @@ if want evaluate; then
 fi
 
 if want photos; then
-  run eval_photos "$handdb" evaluate "$work/db-paper" --photos "$photos" --threads "$jobs" \
-    --json "$out/eval_photos.json" --out "$work/plots/photos"
+  # --hand right: the development photos are right hands and every number so far was measured so
+  # (the default, either, searches each photo's mirror image too).
+  run eval_photos "$handdb" evaluate "$work/db-paper" --photos "$photos" --hand right \
+    --threads "$jobs" --json "$out/eval_photos.json" --out "$work/plots/photos"
 fi
 
 if want pca_large_generate; then

@@ -2,22 +2,30 @@
 // `handdb evaluate --slurm` (`handdb unit evaluate|evaluate-merge`,
 // cli/evaluate_slurm_commands.cc): the options that define an evaluation, the query-input function,
 // the database/test-set checks. Sharing them is what makes a Slurm evaluation score exactly like a
-// local one.
+// local one. Also the photo evaluation's flags (`handdb evaluate DB --photos DIR`,
+// cli/evaluate_photos_commands.cc).
 #pragma once
 
 #include <CLI/CLI.hpp>
 #include <filesystem>
+#include <memory>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
+#include "cli/photo_input_flags.h"
 #include "cli/slurm_cli.h"
 #include "evaluate/evaluate.h"
+#include "evaluate/photos.h"
 #include "query/database.h"
+#include "query/searcher.h"
 
 namespace handdb::cli {
 
 // The evaluation options of `handdb evaluate` (correctness, search depth, test-view selection,
-// input, threads), parsed once and passed on to Slurm tasks verbatim (Args()).
+// input, threads), parsed once and passed on to Slurm tasks verbatim (Args()). --input also
+// takes the kinds of picture of --photos (auto, edges, labels; cli/photo_input_flags.h), which
+// Finish refuses for a test set.
 struct EvaluateFlags {
   std::string input = "clean";
   std::string distance = "rms";
@@ -79,20 +87,51 @@ class UnitEvaluateCommands {
   EvaluateFlags flags_;
 };
 
-// `handdb evaluate DB --photos DIR` (cli/evaluate_photos_commands.cc, evaluate/photos.h).
-struct PhotoEvaluateRequest {
-  std::string db;
+// ---- Real photos: `handdb evaluate DB --photos DIR` (cli/evaluate_photos_commands.cc) ----------
+
+// The options that define a photo evaluation, parsed once: the photo directory and its listing,
+// the annotations, the hand, how a picture becomes a query.
+struct PhotoEvaluateFlags {
   std::string dir;  // --photos
+  bool skip_unknown = false;
+  std::string keypoints;  // --keypoints FILE
+  HandFlag hand;
+  PhotoInputFlags picture;
+  PhotoEvaluationOptions options;  // completed by Finish
+
+  // --photos, --skip-unknown, --keypoints, --hand and the photo-path flags (no --mask: a mask is
+  // one photo's; --input only when `with_input`: `handdb evaluate` has one of its own).
+  void Add(CLI::App& app, bool with_input);
+  // Completes `options` and the picture options; false (one line printed) on bad usage.
+  bool Finish(const std::string& cmd, int threads, bool quiet);
+};
+
+// A photo evaluation opened: the searcher, the listed photos with their annotations, and how each
+// photo becomes a query (read as `handdb query` reads a picture, label EXRs with the database's
+// recorded edge options).
+struct OpenedPhotoEvaluation {
+  std::unique_ptr<Searcher> searcher;
+  PhotoSet photos;
+  PhotoQueryFn query_fn;
+};
+// Errors name the file: the database, the photo directory, the --keypoints file.
+Result<OpenedPhotoEvaluation> OpenPhotoEvaluation(const std::string& db,
+                                                  const PhotoEvaluateFlags& flags);
+
+struct PhotoEvaluateRequest {
+  std::string db;  // as typed (see EvaluateSlurmRequest)
+  PhotoEvaluateFlags flags;
   std::string json_out;
   std::string out_dir;  // --out: confusion.png, successes.png, failures.png
-  bool skip_unknown = false;
   bool quiet = false;
-  int threads = -1;
 };
-// --photos, --out and --skip-unknown, added to `handdb evaluate`'s app.
+// --photos, --out and the photo flags of PhotoEvaluateFlags, added to `handdb evaluate`'s app.
 void AddPhotoEvaluateFlags(CLI::App& app, PhotoEvaluateRequest* request);
-// false (message printed) when a TESTSET, --slurm or a test-set-only flag comes with --photos.
-bool CheckPhotoEvaluateUsage(const CLI::App& app, const std::string& testset, bool slurm);
+// With --photos: false (message printed) when a TESTSET or a test-set-only flag comes with it.
+bool CheckPhotoEvaluateUsage(const CLI::App& app, const std::string& testset);
+// With a TESTSET: false (message printed) when a --photos-only flag comes with it.
+bool CheckTestSetEvaluateUsage(const CLI::App& app);
+// The local run; returns the exit code.
 int RunEvaluatePhotos(const PhotoEvaluateRequest& request);
 
 }  // namespace handdb::cli

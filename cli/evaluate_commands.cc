@@ -168,8 +168,11 @@ int RunTestset(int argc, char** argv) {
 }
 
 void EvaluateFlags::Add(CLI::App& app) {
-  app.add_option("--input", input, "query from the clean label render or the photo")
-      ->check(CLI::IsMember({"clean", "photo"}))
+  app.add_option("--input",
+                 input,
+                 "a test view's query: its clean label render or its photo; with --photos the kind "
+                 "of picture (auto, photo, edges or labels; default auto, as handdb query)")
+      ->check(CLI::IsMember({"clean", "photo", "auto", "edges", "labels"}))
       ->capture_default_str();
   app.add_option("--threads", options.num_threads, "search threads (-1: all cores)")
       ->capture_default_str();
@@ -207,6 +210,14 @@ void EvaluateFlags::Add(CLI::App& app) {
 }
 
 bool EvaluateFlags::Finish(const std::string& cmd, bool quiet) {
+  if (input != "clean" && input != "photo") {
+    std::fprintf(stderr,
+                 "handdb %s: --input %s: a test view is queried from its clean label render or "
+                 "its photo (--input clean|photo)\n",
+                 cmd.c_str(),
+                 input.c_str());
+    return false;
+  }
   options.correctness.joint_distance = *ParseJointDistanceKind(distance);
   options.correctness.roll_compare =
       roll_compare == "aligned" ? RollCompare::kAligned : RollCompare::kLabel;
@@ -323,7 +334,9 @@ int RunEvaluate(int argc, char** argv) {
       "--slurm the test views are split over a Slurm job array and the parts merged into the same "
       "report (docs/cluster.md). With --photos DIR instead of TESTSET: shape accuracy on real "
       "photos in DIR/<shape name>/*.jpg|png (top-1/5/10 against a chance baseline, per-shape "
-      "table, confusion matrix, contact sheets).",
+      "table, confusion matrix, contact sheets), searched as --hand right, left or either, with "
+      "the photo flags of handdb query; --keypoints FILE adds the 2D keypoint error on annotated "
+      "photos.",
       "handdb evaluate");
   // Bound to the request of a Slurm run; a local run reads the same fields.
   EvaluateSlurmRequest request;
@@ -338,8 +351,10 @@ int RunEvaluate(int argc, char** argv) {
   app.add_option("testset", request.testset, "test-set directory (or its testset.json)");
   PhotoEvaluateRequest photos;
   AddPhotoEvaluateFlags(app, &photos);
-  app.add_option(
-      "--json", request.json_out, "write the full report (schemas/evaluation.schema.json)");
+  app.add_option("--json",
+                 request.json_out,
+                 "write the full report (schemas/evaluation.schema.json; with --photos "
+                 "photo_evaluation.schema.json)");
   app.add_option(
       "--plots", request.plots_dir, "write PNG plots and example sheets into this directory");
   flags.Add(app);
@@ -356,18 +371,26 @@ int RunEvaluate(int argc, char** argv) {
                  "TESTSET/slurm-evaluations/<fingerprint>)")
       ->group(group);
   if (int rc = ParseArgs(app, argc, argv); rc >= 0) return rc;
-  if (!photos.dir.empty()) {
+  if (!photos.flags.dir.empty()) {
+    if (!CheckPhotoEvaluateUsage(app, request.testset)) return kExitUsage;
     photos.db = request.db;
     photos.json_out = request.json_out;
     photos.quiet = request.quiet;
-    photos.threads = flags.options.num_threads;
-    if (!CheckPhotoEvaluateUsage(app, request.testset, slurm.enabled)) return kExitUsage;
+    // --input is this command's own option: a test view's input, or with --photos the kind of
+    // picture (default auto, not clean).
+    if (app.get_option("--input")->count() > 0) photos.flags.picture.input = flags.input;
+    if (!photos.flags.Finish("evaluate", flags.options.num_threads, quiet)) return kExitUsage;
+    if (slurm.enabled) {
+      std::fprintf(stderr, "handdb evaluate: --photos runs locally only (no --slurm)\n");
+      return kExitUsage;
+    }
     return RunEvaluatePhotos(photos);
   }
   if (testset_path.empty()) {
     std::fprintf(stderr, "handdb evaluate: give a TESTSET or --photos DIR (see --help)\n");
     return kExitUsage;
   }
+  if (!CheckTestSetEvaluateUsage(app)) return kExitUsage;
   if (!flags.Finish("evaluate", quiet)) return kExitUsage;
   if (!slurm.enabled && (request.tasks != 0 || !request.work.empty())) {
     std::fprintf(stderr, "handdb evaluate: --tasks and --work need --slurm\n");

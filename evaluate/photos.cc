@@ -3,8 +3,9 @@
 #include <algorithm>
 #include <cctype>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
-#include <mutex>
+#include <limits>
 #include <set>
 #include <sstream>
 
@@ -39,6 +40,46 @@ double Seconds(std::chrono::steady_clock::time_point t0) {
 std::string Top1Label(const PhotoOutcome& o) {
   if (!o.error.empty() || o.match_shapes.empty()) return kNoHandLabel;
   return o.match_shapes[0];
+}
+
+json NumberOrNull(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
+
+double NumberOrNaN(const json& j) {
+  return j.is_null() ? std::numeric_limits<double>::quiet_NaN() : j.get<double>();
+}
+
+json DistancesToJson(const std::array<double, kNumKeypoints>& d) {
+  json a = json::array();
+  for (double v : d) a.push_back(NumberOrNull(v));
+  return a;
+}
+
+std::array<double, kNumKeypoints> DistancesFromJson(const json& a) {
+  std::array<double, kNumKeypoints> d{};
+  for (int k = 0; k < kNumKeypoints; ++k) d[k] = NumberOrNaN(a.at(k));
+  return d;
+}
+
+// A match's 21 keypoints in the query picture's pixels: its label is already in the query's
+// normalised frame (rolled, and mirrored back for a left hand), so the query's inverse
+// normalisation places it, exactly as `handdb query --json` writes keypoints_image_px.
+std::vector<Point2f> ImageKeypoints(const QueryEdges& query, const ViewLabel& label) {
+  std::vector<Point2f> px;
+  px.reserve(kNumKeypoints);
+  for (const auto& k : label.keypoints) px.push_back(query.ImageFromNormalised({k[0], k[1]}));
+  return px;
+}
+
+json SummaryJson(const PhotoKeypointSummary& s) {
+  json pck = json::array();
+  for (size_t t = 0; t < kPckThresholds.size(); ++t) {
+    pck.push_back({{"threshold", kPckThresholds[t]}, {"rate", s.pck[t]}});
+  }
+  return {{"photos", s.error.count},
+          {"mean", NumberOrNull(s.error.mean)},
+          {"median", NumberOrNull(s.error.median)},
+          {"p90", NumberOrNull(s.error.p90)},
+          {"pck", pck}};
 }
 
 }  // namespace
@@ -79,7 +120,8 @@ Result<PhotoSet> ListPhotoFolders(const fs::path& dir,
     }
     for (const auto& entry : fs::directory_iterator(folder, ec)) {
       if (!entry.is_regular_file() || !IsPhotoFile(entry.path())) continue;
-      set.photos.push_back({entry.path(), name + "/" + entry.path().filename().string(), name});
+      set.photos.push_back(
+          {entry.path(), name + "/" + entry.path().filename().string(), name, std::nullopt});
     }
     if (ec) return Status(StatusCode::kIoError, folder.string() + ": " + ec.message());
   }
@@ -93,6 +135,115 @@ Result<PhotoSet> ListPhotoFolders(const fs::path& dir,
   return set;
 }
 
+Status AttachPhotoKeypoints(const PhotoKeypointFile& file, PhotoSet* set) {
+  std::map<std::string, size_t> index;
+  for (size_t i = 0; i < set->photos.size(); ++i) index[set->photos[i].relative] = i;
+  const std::set<std::string> skipped(set->skipped_folders.begin(), set->skipped_folders.end());
+  for (const auto& [key, keypoints] : file.images) {
+    if (auto it = index.find(key); it != index.end()) {
+      set->photos[it->second].keypoints = keypoints;
+      continue;
+    }
+    const fs::path path = set->dir / key;
+    std::error_code ec;
+    const bool is_file = fs::is_regular_file(path, ec);
+    if (is_file && skipped.count(key.substr(0, key.find('/'))) > 0) continue;
+    const std::string where = file.path.string() + ": images[\"" + key + "\"]: ";
+    if (!is_file) {
+      return Status(StatusCode::kInvalidArgument,
+                    where + "no such image in " + set->dir.string() +
+                        " (keys are photo paths relative to it: <shape folder>/<file>)");
+    }
+    return Status(StatusCode::kInvalidArgument,
+                  where + "not one of the photos evaluated (" + set->dir.string() +
+                      "/<shape folder>/<image file>)");
+  }
+  set->keypoints_file = file.path;
+  return Status::Ok();
+}
+
+double PhotoKeypointResult::top1_error() const { return MeanKeypointError(top1_px, hand_size_px); }
+
+double PhotoKeypointResult::best10_error() const {
+  return MeanKeypointError(best10_px, hand_size_px);
+}
+
+json PhotoOutcome::ToJson() const {
+  json hands = json::array();
+  for (Hand h : match_hands) hands.push_back(std::string(HandName(h)));
+  json j = {{"photo", photo},
+            {"expected_shape", expected_shape},
+            {"rank", ShapeRank(*this)},
+            {"match_shapes", match_shapes},
+            {"match_distances", match_distances},
+            {"match_hands", hands},
+            {"annotated_keypoints", annotated_keypoints},
+            {"input_seconds", input_seconds},
+            {"search_seconds", search_seconds}};
+  if (!error.empty()) j["error"] = error;
+  if (top1_view != kInvalidViewId) {
+    json kps = json::array();
+    for (const Point2f& p : top1_keypoints_px) kps.push_back({p.x, p.y});
+    j["top1"] = {{"view_id", top1_view},
+                 {"roll", top1_roll},
+                 {"hand", match_hands.empty() ? "right" : std::string(HandName(match_hands[0]))},
+                 {"keypoints_image_px", kps}};
+  }
+  if (keypoints) {
+    j["keypoints"] = {{"hand_size_px", keypoints->hand_size_px},
+                      {"top1_error", NumberOrNull(keypoints->top1_error())},
+                      {"best10_error", NumberOrNull(keypoints->best10_error())},
+                      {"best10_rank", keypoints->best10_rank},
+                      {"top1_distances_px", DistancesToJson(keypoints->top1_px)},
+                      {"best10_distances_px", DistancesToJson(keypoints->best10_px)}};
+  }
+  return j;
+}
+
+Result<PhotoOutcome> PhotoOutcome::FromJson(const json& j, const std::string& where) {
+  try {
+    PhotoOutcome o;
+    o.photo = j.at("photo").get<std::string>();
+    o.expected_shape = j.at("expected_shape").get<std::string>();
+    if (j.contains("error")) o.error = j.at("error").get<std::string>();
+    o.match_shapes = j.at("match_shapes").get<std::vector<std::string>>();
+    o.match_distances = j.at("match_distances").get<std::vector<double>>();
+    for (const json& h : j.at("match_hands")) {
+      auto hand = ParseHand(h.get<std::string>());
+      if (!hand.ok()) return Status(StatusCode::kSchemaViolation, where + ": " + h.dump());
+      o.match_hands.push_back(*hand);
+    }
+    o.annotated_keypoints = j.at("annotated_keypoints").get<int>();
+    o.input_seconds = j.at("input_seconds").get<double>();
+    o.search_seconds = j.at("search_seconds").get<double>();
+    if (j.contains("top1")) {
+      const json& t = j.at("top1");
+      o.top1_view = t.at("view_id").get<view_id_t>();
+      o.top1_roll = t.at("roll").get<roll_id_t>();
+      for (const json& p : t.at("keypoints_image_px")) {
+        o.top1_keypoints_px.push_back({p.at(0).get<float>(), p.at(1).get<float>()});
+      }
+    }
+    if (j.contains("keypoints")) {
+      const json& k = j.at("keypoints");
+      PhotoKeypointResult r;
+      r.hand_size_px = k.at("hand_size_px").get<double>();
+      r.best10_rank = k.at("best10_rank").get<int>();
+      r.top1_px = DistancesFromJson(k.at("top1_distances_px"));
+      r.best10_px = DistancesFromJson(k.at("best10_distances_px"));
+      o.keypoints = r;
+    }
+    if (o.match_distances.size() != o.match_shapes.size() ||
+        o.match_hands.size() != o.match_shapes.size()) {
+      return Status(StatusCode::kSchemaViolation,
+                    where + ": match_shapes, match_distances and match_hands differ in length");
+    }
+    return o;
+  } catch (const json::exception& e) {
+    return Status(StatusCode::kSchemaViolation, where + ": " + e.what());
+  }
+}
+
 int ShapeRank(const PhotoOutcome& outcome) {
   if (!outcome.error.empty()) return 0;
   for (size_t i = 0; i < outcome.match_shapes.size(); ++i) {
@@ -103,12 +254,62 @@ int ShapeRank(const PhotoOutcome& outcome) {
 
 bool PhotoEvaluationOptions::Check() const {
   CHECK_OPTION(num_threads == -1 || num_threads >= 1);
+  CHECK_OPTION(hand == Hand::kRight || hand == Hand::kLeft || hand == Hand::kEither);
   return true;
 }
 
+namespace {
+
+// The 2D keypoint summaries of the annotated photos (evaluate/photo_keypoints.h).
+void FinishKeypointSummaries(PhotoReport* report) {
+  PhotoReport& r = *report;
+  r.annotated_photos = 0;
+  r.annotated_failed = 0;
+  const size_t nt = kPckThresholds.size();
+  std::vector<double> top1, best10;
+  std::vector<int64_t> top1_within(nt, 0), best10_within(nt, 0);
+  int64_t visible = 0;
+  auto count_within = [&](const std::array<double, kNumKeypoints>& d,
+                          double hand_size,
+                          std::vector<int64_t>* within) {
+    for (double v : d) {
+      for (size_t t = 0; t < nt; ++t) {
+        if (std::isfinite(v) && v <= kPckThresholds[t] * hand_size) ++(*within)[t];
+      }
+    }
+  };
+  for (const PhotoOutcome& o : r.outcomes) {
+    if (o.annotated_keypoints <= 0) continue;
+    ++r.annotated_photos;
+    visible += o.annotated_keypoints;
+    if (!o.keypoints) {
+      ++r.annotated_failed;
+      continue;
+    }
+    top1.push_back(o.keypoints->top1_error());
+    best10.push_back(o.keypoints->best10_error());
+    count_within(o.keypoints->top1_px, o.keypoints->hand_size_px, &top1_within);
+    count_within(o.keypoints->best10_px, o.keypoints->hand_size_px, &best10_within);
+  }
+  r.top1_keypoints.error = Summarise(top1);
+  r.best10_keypoints.error = Summarise(best10);
+  r.top1_keypoints.pck.assign(nt, 0);
+  r.best10_keypoints.pck.assign(nt, 0);
+  for (size_t t = 0; t < nt && visible > 0; ++t) {
+    r.top1_keypoints.pck[t] = static_cast<double>(top1_within[t]) / static_cast<double>(visible);
+    r.best10_keypoints.pck[t] =
+        static_cast<double>(best10_within[t]) / static_cast<double>(visible);
+  }
+}
+
+}  // namespace
+
 void FinishPhotoReport(PhotoReport* report) {
   PhotoReport& r = *report;
-  for (int k : r.ks) THROW_CHECK_GE(k, 1);
+  for (int k : r.ks) {
+    THROW_CHECK_GE(k, 1);
+    THROW_CHECK_LE(k, r.top_k);
+  }
   std::sort(r.outcomes.begin(), r.outcomes.end(), [](const PhotoOutcome& a, const PhotoOutcome& b) {
     return a.photo < b.photo;
   });
@@ -117,6 +318,8 @@ void FinishPhotoReport(PhotoReport* report) {
   r.accuracy.assign(nk, 0);
   r.chance.assign(nk, 0);
   r.failed_inputs = 0;
+  r.top1_left = 0;
+  r.top1_right = 0;
   r.input_seconds = 0;
   r.search_seconds = 0;
   std::map<std::string, PhotoShapeRow> rows;
@@ -142,6 +345,9 @@ void FinishPhotoReport(PhotoReport* report) {
     if (top1 != o.expected_shape) ++wrong[o.expected_shape][top1];
     top1_others.insert(top1);
     if (!o.error.empty()) ++r.failed_inputs;
+    if (o.error.empty() && !o.match_hands.empty()) {
+      ++(o.match_hands[0] == Hand::kLeft ? r.top1_left : r.top1_right);
+    }
     r.input_seconds += o.input_seconds;
     r.search_seconds += o.search_seconds;
   }
@@ -176,19 +382,16 @@ void FinishPhotoReport(PhotoReport* report) {
   for (const PhotoOutcome& o : r.outcomes) {
     ++r.confusion[row_index.at(o.expected_shape)][col_index.at(Top1Label(o))];
   }
+  FinishKeypointSummaries(&r);
   const double searched = n - static_cast<double>(r.failed_inputs);
   r.queries_per_second = r.search_seconds > 0 ? searched / r.search_seconds : 0;
   const double e2e = r.search_seconds + r.input_seconds;
   r.end_to_end_queries_per_second = e2e > 0 ? n / e2e : 0;
 }
 
-Result<PhotoReport> EvaluatePhotos(const Searcher& searcher,
-                                   const PhotoSet& photos,
-                                   const PhotoPointsFn& points_fn,
-                                   const PhotoEvaluationOptions& options) {
-  if (!options.Check()) return Status(StatusCode::kInvalidArgument, "invalid photo options");
-  const auto t0 = std::chrono::steady_clock::now();
-  const Database& db = searcher.database();
+PhotoReport StartPhotoReport(const Database& db,
+                             const PhotoSet& photos,
+                             const PhotoEvaluationOptions& options) {
   PhotoReport report;
   report.database = db.path().string();
   report.database_views = db.num_views();
@@ -200,31 +403,42 @@ Result<PhotoReport> EvaluatePhotos(const Searcher& searcher,
   }
   report.photos_dir = photos.dir.string();
   report.skipped_folders = photos.skipped_folders;
-  const int top_k = *std::max_element(report.ks.begin(), report.ks.end());
-  const int threads = ResolveNumThreads(options.num_threads);
-  report.threads = threads;
-  report.outcomes.resize(photos.photos.size());
-  Progress progress("photos", photos.photos.size(), options.progress, "photos");
+  report.hand = options.hand;
+  report.keypoints_file = photos.keypoints_file.string();
+  report.threads = ResolveNumThreads(options.num_threads);
+  return report;
+}
+
+Result<std::vector<PhotoOutcome>> ScorePhotos(const Searcher& searcher,
+                                              const PhotoSet& photos,
+                                              const PhotoQueryFn& query_fn,
+                                              const PhotoEvaluationOptions& options,
+                                              std::span<const uint32_t> positions) {
+  if (!options.Check()) return Status(StatusCode::kInvalidArgument, "invalid photo options");
+  for (uint32_t i : positions) THROW_CHECK_LT(i, photos.photos.size());
   SearchOptions search;
-  search.top_k = top_k;
+  search.top_k = kPhotoMatches;
+  search.hand = options.hand;
   search.num_threads = 1;  // photos run in parallel: no synchronisation inside a search
-  Status error;
-  std::mutex mu;
-  ParallelFor(photos.photos.size(), threads, [&](size_t i, int) {
-    const PhotoItem& item = photos.photos[i];
-    PhotoOutcome& o = report.outcomes[i];
+  std::vector<PhotoOutcome> outcomes(positions.size());
+  Progress progress("photos", positions.size(), options.progress, "photos");
+  ParallelFor(positions.size(), ResolveNumThreads(options.num_threads), [&](size_t n, int) {
+    const PhotoItem& item = photos.photos[positions[n]];
+    PhotoOutcome& o = outcomes[n];
     o.photo = item.relative;
     o.expected_shape = item.expected_shape;
+    if (item.keypoints) o.annotated_keypoints = item.keypoints->NumVisible();
     auto t = std::chrono::steady_clock::now();
-    auto points = points_fn(item);
+    auto query = query_fn(item);
     o.input_seconds = Seconds(t);
-    if (!points.ok()) {
-      o.error = points.status().message();
+    if (!query.ok()) {
+      o.error = query.status().message();
       progress.Add();
       return true;
     }
+    std::vector<Point2f> points = query->points_px();
     t = std::chrono::steady_clock::now();
-    auto matches = searcher.Search(*points, search);
+    auto matches = searcher.Search(points, search);
     o.search_seconds = Seconds(t);
     if (!matches.ok()) {
       // A query that the search rejects (e.g. empty) is a failed input like "no hand".
@@ -235,16 +449,52 @@ Result<PhotoReport> EvaluatePhotos(const Searcher& searcher,
     for (const Match& m : *matches) {
       o.match_shapes.push_back(m.shape_name);
       o.match_distances.push_back(m.distance);
+      o.match_hands.push_back(m.hand);
     }
     if (!matches->empty()) {
-      o.top1_view = (*matches)[0].view_id;
-      o.top1_roll_angle = (*matches)[0].roll_angle;
+      const Match& best = matches->front();
+      o.top1_view = best.view_id;
+      o.top1_roll = best.roll;
+      o.top1_keypoints_px = ImageKeypoints(*query, best.label);
+      if (item.keypoints) {
+        PhotoKeypointResult r;
+        r.hand_size_px = item.keypoints->hand_size_px;
+        r.top1_px = KeypointDistancesPx(*item.keypoints, o.top1_keypoints_px);
+        double best_error = std::numeric_limits<double>::infinity();
+        const size_t n_best = std::min<size_t>(kPhotoMatches, matches->size());
+        for (size_t k = 0; k < n_best; ++k) {
+          const auto d =
+              KeypointDistancesPx(*item.keypoints, ImageKeypoints(*query, (*matches)[k].label));
+          const double e = MeanKeypointError(d, r.hand_size_px);
+          if (e < best_error) {  // ties keep the better-ranked match
+            best_error = e;
+            r.best10_px = d;
+            r.best10_rank = static_cast<int>(k) + 1;
+          }
+        }
+        o.keypoints = r;
+      }
     }
-    o.query_points = std::move(points).value();
+    o.query_points = std::move(points);
     progress.Add();
     return true;
   });
   progress.Finish();
+  return outcomes;
+}
+
+Result<PhotoReport> EvaluatePhotos(const Searcher& searcher,
+                                   const PhotoSet& photos,
+                                   const PhotoQueryFn& query_fn,
+                                   const PhotoEvaluationOptions& options) {
+  if (!options.Check()) return Status(StatusCode::kInvalidArgument, "invalid photo options");
+  const auto t0 = std::chrono::steady_clock::now();
+  PhotoReport report = StartPhotoReport(searcher.database(), photos, options);
+  std::vector<uint32_t> all(photos.photos.size());
+  for (uint32_t i = 0; i < all.size(); ++i) all[i] = i;
+  auto outcomes = ScorePhotos(searcher, photos, query_fn, options, all);
+  if (!outcomes.ok()) return outcomes.status();
+  report.outcomes = std::move(*outcomes);
   FinishPhotoReport(&report);
   report.wall_seconds = Seconds(t0);
   return report;
@@ -268,21 +518,27 @@ json PhotoReportToJson(const PhotoReport& r) {
                       {"top_wrong_count", row.top_wrong_count}});
   }
   json photos = json::array();
-  for (const PhotoOutcome& o : r.outcomes) {
-    json p = {{"photo", o.photo},
-              {"expected_shape", o.expected_shape},
-              {"rank", ShapeRank(o)},
-              {"match_shapes", o.match_shapes},
-              {"match_distances", o.match_distances},
-              {"input_seconds", o.input_seconds},
-              {"search_seconds", o.search_seconds}};
-    if (!o.error.empty()) p["error"] = o.error;
-    photos.push_back(std::move(p));
-  }
+  for (const PhotoOutcome& o : r.outcomes) photos.push_back(o.ToJson());
   json per_shape = json::object();
   for (const auto& [shape, count] : r.virtual_views_per_shape) per_shape[shape] = count;
+  json keypoints = nullptr;
+  if (!r.keypoints_file.empty()) {
+    keypoints = {{"file", r.keypoints_file},
+                 {"annotated_photos", r.annotated_photos},
+                 {"annotated_without_query", r.annotated_failed},
+                 {"hand_size", kHandSizeRule},
+                 {"error_rule",
+                  "mean 2D distance over the visible annotated keypoints / hand size, the "
+                  "match's keypoints in the photo's pixels (mirrored back for a left hand); "
+                  "mean and median over annotated photos with a usable query"},
+                 {"pck_rule",
+                  "share of all visible annotated keypoints within threshold x hand size; the "
+                  "keypoints of annotated photos without a usable query count as missed"},
+                 {"top1", SummaryJson(r.top1_keypoints)},
+                 {"best_of_top10", SummaryJson(r.best10_keypoints)}};
+  }
   return {{"format", "handdb-photo-evaluation"},
-          {"version", 1},
+          {"version", 2},
           {"database",
            {{"path", r.database},
             {"views", r.database_views},
@@ -291,14 +547,20 @@ json PhotoReportToJson(const PhotoReport& r) {
             {"virtual_views_per_shape", per_shape}}},
           {"photos_dir", r.photos_dir},
           {"skipped_folders", r.skipped_folders},
+          {"search",
+           {{"hand", std::string(HandName(r.hand))},
+            {"top_k", r.top_k},
+            {"query_options", r.query_options}}},
           {"photo_count", r.outcomes.size()},
           {"failed_inputs", r.failed_inputs},
+          {"top1_hands", {{"right", r.top1_right}, {"left", r.top1_left}}},
           {"chance_rule",
            "mean over photos of 1 - C(n-m,k)/C(n,k): n virtual views, m of the expected shape"},
           {"accuracy", accuracy},
           {"shapes", shapes},
           {"confusion",
            {{"rows", r.confusion_rows}, {"cols", r.confusion_cols}, {"counts", r.confusion}}},
+          {"keypoints", keypoints},
           {"timing",
            {{"threads", r.threads},
             {"wall_seconds", r.wall_seconds},
@@ -322,6 +584,19 @@ std::string PhotoReportToText(const PhotoReport& r) {
     for (const std::string& s : r.skipped_folders) os << " " << s;
     os << "\n";
   }
+  os << "search    exact top " << r.top_k << ", --hand " << HandName(r.hand);
+  switch (r.hand) {
+    case Hand::kRight:
+      os << " (photos searched as right hands, the database's)";
+      break;
+    case Hand::kLeft:
+      os << " (photos mirrored: searched as left hands)";
+      break;
+    case Hand::kEither:
+      os << " (each photo and its mirror image)";
+      break;
+  }
+  os << "; top-1 match a right hand " << r.top1_right << ", a left hand " << r.top1_left << "\n";
   os << "\nshape accuracy (the expected shape among the shapes of the top k matches)\n";
   os << "          ";
   for (int k : r.ks) os << Fmt("   top-%-3.0f", k);
@@ -348,6 +623,33 @@ std::string PhotoReportToText(const PhotoReport& r) {
       os << "  " << row.top_wrong << " (" << row.top_wrong_count << ")";
     }
     os << "\n";
+  }
+  if (!r.keypoints_file.empty()) {
+    os << "\n2D keypoints (" << r.keypoints_file << "): " << r.annotated_photos << " of "
+       << r.outcomes.size() << " photos annotated\n"
+       << "  error = mean distance over the visible annotated keypoints / hand size, hand size =\n"
+       << "  " << kHandSizeRule << "\n";
+    std::snprintf(line, sizeof line, "  %-16s %6s %7s %7s", "", "photos", "mean", "median");
+    os << line;
+    for (double t : kPckThresholds) os << Fmt("  PCK@%-4g", t);
+    os << "\n";
+    auto row = [&](const char* name, const PhotoKeypointSummary& s) {
+      std::snprintf(
+          line, sizeof line, "  %-16s %6lld", name, static_cast<long long>(s.error.count));
+      os << line;
+      for (double v : {s.error.mean, s.error.median}) {
+        os << (std::isfinite(v) ? Fmt(" %7.3f", v) : std::string("       -"));
+      }
+      for (double p : s.pck) os << Fmt("  %7.1f%%", 100.0 * p);
+      os << "\n";
+    };
+    row("top-1", r.top1_keypoints);
+    row("best of top 10", r.best10_keypoints);
+    if (r.annotated_failed > 0) {
+      os << "  " << r.annotated_failed
+         << " annotated photos without a usable query: in PCK as missed keypoints, not in the "
+            "mean and median\n";
+    }
   }
   os << "\n"
      << Fmt("speed     %.2f queries/s", r.queries_per_second)
@@ -377,14 +679,15 @@ Status WriteConfusionPng(const fs::path& path, const PhotoReport& report) {
 Status WritePhotoReportImages(const PhotoReport& report,
                               const Searcher& searcher,
                               const PhotoSet& photos,
-                              const fs::path& dir) {
+                              const fs::path& dir,
+                              const PhotoQueryFn& query_fn) {
   std::error_code ec;
   fs::create_directories(dir, ec);
   if (ec) return Status(StatusCode::kIoError, dir.string() + ": " + ec.message());
   Status s = WriteConfusionPng(dir / "confusion.png", report);
   if (!s.ok()) return s;
-  std::map<std::string, fs::path> path_of;
-  for (const PhotoItem& item : photos.photos) path_of[item.relative] = item.path;
+  std::map<std::string, const PhotoItem*> item_of;
+  for (const PhotoItem& item : photos.photos) item_of[item.relative] = &item;
   const Database& db = searcher.database();
   // A handful of photos per sheet, one per shape in turn so that every shape shows up.
   constexpr size_t kTiles = 8;
@@ -411,17 +714,30 @@ Status WritePhotoReportImages(const PhotoReport& report,
     for (const PhotoOutcome* o : pick(success)) {
       ExampleTile t;
       t.caption = o->photo;
-      t.image = path_of.count(o->photo) ? path_of.at(o->photo) : fs::path();
+      const auto item = item_of.find(o->photo);
+      if (item != item_of.end()) t.image = item->second->path;
       if (!o->error.empty()) {
         t.caption2 = "no query: " + o->error.substr(o->error.find_last_of(':') == std::string::npos
                                                         ? 0
                                                         : o->error.find_last_of(':') + 2);
       } else {
-        t.caption2 = "top-1 " + Top1Label(*o) + Fmt("  D=%.2f", o->match_distances[0]) +
-                     "  shape rank " + (ShapeRank(*o) ? std::to_string(ShapeRank(*o)) : ">10");
+        const bool left = !o->match_hands.empty() && o->match_hands[0] == Hand::kLeft;
+        t.caption2 = "top-1 " + Top1Label(*o) + (left ? " (left)" : "") +
+                     Fmt("  D=%.2f", o->match_distances[0]) + "  shape rank " +
+                     (ShapeRank(*o) ? std::to_string(ShapeRank(*o)) : ">10");
         t.query_points = o->query_points;
+        if (t.query_points.empty() && query_fn && item != item_of.end()) {
+          // A report merged from Slurm parts: the query again (deterministic).
+          auto query = query_fn(*item->second);
+          if (query.ok()) t.query_points = query->points_px();
+        }
         if (o->top1_view != kInvalidViewId) {
-          RollPoints(db.points(o->top1_view), o->top1_roll_angle, &t.match_points);
+          RollPoints(
+              db.points(o->top1_view), RollAngle(o->top1_roll, db.num_rolls()), &t.match_points);
+          // A left-hand match is the mirrored view: drawn in the photo's frame.
+          if (left) {
+            for (Point2f& p : t.match_points) p.x = -p.x;
+          }
         }
       }
       tiles.push_back(std::move(t));

@@ -1,14 +1,18 @@
 // `handdb evaluate DB --photos DIR` end to end (issue 16): a synthetic database (ShardWriter +
 // WriteManifest, shapes "alpha" and "beta", as tests/query_cli_test.cc makes it) and photo-like
 // pictures of some of its views sorted into shape folders, one of them filed under the wrong shape
-// and one without a hand; the text, --json (schema-checked) and --out outputs, and the errors.
+// and one without a hand; the text, --json (schema-checked) and --out outputs, and the errors;
+// --hand on a mirrored photo, --keypoints, the photo-path flags.
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -98,14 +102,16 @@ class EvaluatePhotosCli : public ::testing::Test {
   }
 
   // View v rolled by r as a photo: a skin-coloured convex hull on a blue background with the edge
-  // strokes drawn darker, 1.5 source px per normalised px.
+  // strokes drawn darker, kPx source px per normalised px, the normalised origin at pixel
+  // (kX0, kY0).
+  static constexpr double kPx = 1.5, kX0 = 220, kY0 = 210;
   static cv::Mat Photo(uint32_t v, uint32_t r) {
     std::vector<Point2f> rolled;
     RollPoints(testing::SyntheticEdgeSet(v, 300), RollAngle(r, kRolls), &rolled);
     cv::Mat edges = cv::Mat::zeros(420, 440, CV_8U);
     for (const auto& p : rolled) {
-      edges.at<uint8_t>(static_cast<int>(std::lround(210 + 1.5 * p.y)),
-                        static_cast<int>(std::lround(220 + 1.5 * p.x))) = 255;
+      edges.at<uint8_t>(static_cast<int>(std::lround(kY0 + kPx * p.y)),
+                        static_cast<int>(std::lround(kX0 + kPx * p.x))) = 255;
     }
     std::vector<cv::Point> all, hull;
     cv::findNonZero(edges, all);
@@ -116,6 +122,33 @@ class EvaluatePhotosCli : public ::testing::Test {
     cv::dilate(edges, thick, cv::Mat::ones(3, 3, CV_8U));
     img.setTo(cv::Scalar(70, 95, 150), thick);
     return img;
+  }
+
+  // Where Photo(v, r) shows view v's keypoints: the image frame of keypoints_image_px (pixel
+  // centres at + 0.5), mirrored about the picture's vertical centre line for a flipped photo.
+  static nlohmann::json TrueKeypoints(uint32_t v, uint32_t r, bool flipped) {
+    const ViewLabel label =
+        RollLabel(testing::SyntheticViewLabel(v, kViews / 2), RollAngle(r, kRolls));
+    nlohmann::json kps = nlohmann::json::array();
+    for (const auto& k : label.keypoints) {
+      const double x = kX0 + kPx * k[0] + 0.5;
+      kps.push_back({flipped ? 440 - x : x, kY0 + kPx * k[1] + 0.5});
+    }
+    return kps;
+  }
+  static double BoxDiagonal(const nlohmann::json& kps) {
+    double x0 = 1e9, x1 = -1e9, y0 = 1e9, y1 = -1e9;
+    for (const auto& k : kps) {
+      x0 = std::min(x0, k[0].get<double>());
+      x1 = std::max(x1, k[0].get<double>());
+      y0 = std::min(y0, k[1].get<double>());
+      y1 = std::max(y1, k[1].get<double>());
+    }
+    return std::hypot(x1 - x0, y1 - y0);
+  }
+  static nlohmann::json ReadJson(const fs::path& path) {
+    std::ifstream f(path);
+    return nlohmann::json::parse(f);
   }
 
   static std::string Db() { return (*dir_ / "db").string(); }
@@ -154,6 +187,12 @@ TEST_F(EvaluatePhotosCli, ScoresShapesWritesJsonAndImages) {
   EXPECT_EQ(doc["confusion"]["counts"][1], (nlohmann::json{0, 1, 1}));
   EXPECT_EQ(doc["shapes"][0]["top_wrong"], "beta");
   EXPECT_EQ(doc["shapes"][1]["top_wrong"], "no hand");
+  // `handdb query`'s default: each photo and its mirror image searched; these are right hands.
+  EXPECT_EQ(doc["search"]["hand"], "either");
+  EXPECT_EQ(doc["search"]["query_options"]["input"], "auto");
+  EXPECT_EQ(doc["top1_hands"], (nlohmann::json{{"right", 3}, {"left", 0}}));
+  EXPECT_EQ(by_name["alpha/v03.png"]["top1"]["hand"], "right");
+  EXPECT_TRUE(doc["keypoints"].is_null());
 
   EXPECT_NE(r.out.find("top-1"), std::string::npos);
   EXPECT_NE(r.out.find("chance"), std::string::npos);
@@ -219,13 +258,176 @@ TEST_F(EvaluatePhotosCli, ReadsEdgeImagesLikeQuery) {
 }
 
 TEST_F(EvaluatePhotosCli, BadUsage) {
-  EXPECT_EQ(Handdb(Db()).code, 2);                                               // neither
-  EXPECT_EQ(Handdb(Db() + " " + Photos() + " --photos " + Photos()).code, 2);    // both
-  EXPECT_EQ(Handdb(Db() + " --photos " + Photos() + " --input photo").code, 2);  // test-set flag
+  EXPECT_EQ(Handdb(Db()).code, 2);                                             // neither
+  EXPECT_EQ(Handdb(Db() + " " + Photos() + " --photos " + Photos()).code, 2);  // both
+  EXPECT_EQ(Handdb(Db() + " --photos " + Photos() + " --d 20").code, 2);       // test-set flag
   EXPECT_EQ(Handdb(Db() + " --photos " + Photos() + " --threads 0").code, 2);
   CliRun r = Handdb(Db() + " --photos " + (*dir_ / "nothing").string());
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.err.find("nothing"), std::string::npos);
+}
+
+// A flipped photo shows a left hand: --hand either finds it (mirrored back: its top-1 keypoints lie
+// where the flipped photo shows them), --hand right does not.
+TEST_F(EvaluatePhotosCli, EitherHandFindsAMirroredPhotoAsALeftHand) {
+  const fs::path photos = *dir_ / "photos-left";
+  fs::create_directories(photos / "alpha");
+  cv::Mat flipped;
+  cv::flip(Photo(9, 4), flipped, 1);
+  ASSERT_TRUE(cv::imwrite((photos / "alpha" / "left.png").string(), flipped));
+  ASSERT_TRUE(cv::imwrite((photos / "alpha" / "right.png").string(), Photo(9, 4)));
+  const fs::path either = *dir_ / "left-either.json";
+  CliRun r = Handdb(Db() + " --photos " + photos.string() + " -q --json " + either.string());
+  ASSERT_EQ(r.code, 0) << r.err;
+  auto doc = ReadJson(either);
+  ASSERT_EQ(doc["photos"][0]["photo"], "alpha/left.png");
+  const nlohmann::json left = doc["photos"][0];  // a copy: doc is read again below
+  EXPECT_EQ(left["rank"], 1) << left.dump();
+  EXPECT_EQ(left["top1"]["view_id"], 9);
+  EXPECT_EQ(left["top1"]["roll"], 4);
+  EXPECT_EQ(left["top1"]["hand"], "left");
+  EXPECT_EQ(left["match_hands"][0], "left");
+  EXPECT_EQ(doc["photos"][1]["top1"]["hand"], "right");
+  EXPECT_EQ(doc["top1_hands"], (nlohmann::json{{"right", 1}, {"left", 1}}));
+  // Keypoints in the photo's pixels, mirrored back: within a few px of where the photo shows them
+  // (the photo's normalisation is re-derived from its silhouette, so not exactly).
+  const auto truth = TrueKeypoints(9, 4, /*flipped=*/true);
+  const auto& kps = left["top1"]["keypoints_image_px"];
+  for (int k = 0; k < kNumKeypoints; ++k) {
+    EXPECT_NEAR(kps[k][0].get<double>(), truth[k][0].get<double>(), 6) << k;
+    EXPECT_NEAR(kps[k][1].get<double>(), truth[k][1].get<double>(), 6) << k;
+  }
+
+  const fs::path right = *dir_ / "left-right.json";
+  r = Handdb(Db() + " --photos " + photos.string() + " --hand right -q --json " + right.string());
+  ASSERT_EQ(r.code, 0) << r.err;
+  doc = ReadJson(right);
+  EXPECT_EQ(doc["search"]["hand"], "right");
+  EXPECT_EQ(doc["top1_hands"]["left"], 0);
+  EXPECT_GT(doc["photos"][0]["match_distances"][0].get<double>(),
+            3 * left["match_distances"][0].get<double>());
+
+  r = Handdb(Db() + " --photos " + photos.string() + " --hand left -q");
+  EXPECT_EQ(r.code, 0) << r.err;
+  r = Handdb(Db() + " --photos " + photos.string() + " --hand up -q");
+  EXPECT_EQ(r.code, 2);
+}
+
+TEST_F(EvaluatePhotosCli, KeypointsFileGivesTheTwoDimensionalError) {
+  // alpha/v03.png annotated where it shows the keypoints, beta/v20.jpg 30 px to the right of
+  // them, with the wrist marked not visible; alpha/v17.png and beta/blue.png not annotated.
+  nlohmann::json exact = TrueKeypoints(3, 2, false);
+  nlohmann::json shifted = TrueKeypoints(20, 0, false);
+  for (auto& k : shifted) k[0] = k[0].get<double>() + 30;
+  shifted[0].push_back(false);
+  const fs::path kp = *dir_ / "keypoints.json";
+  std::ofstream(kp) << nlohmann::json{{"format", "handdb-photo-keypoints"},
+                                      {"version", 1},
+                                      {"images",
+                                       {{"alpha/v03.png", exact}, {"beta/v20.jpg", shifted}}}}
+                           .dump();
+  const fs::path json_path = *dir_ / "keypoints-report.json";
+  CliRun r = Handdb(Db() + " --photos " + Photos() + " --keypoints " + kp.string() + " --json " +
+                    json_path.string());
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto doc = ReadJson(json_path);
+  const Status valid = ValidateJson(doc, "photo_evaluation.schema.json", json_path.string());
+  EXPECT_TRUE(valid.ok()) << valid.message();
+  const auto& k = doc["keypoints"];
+  EXPECT_EQ(k["file"], kp.string());
+  EXPECT_EQ(k["annotated_photos"], 2);
+  EXPECT_EQ(k["top1"]["photos"], 2);
+  std::map<std::string, nlohmann::json> by_name;
+  for (const auto& p : doc["photos"]) by_name[p["photo"]] = p;
+  EXPECT_EQ(by_name["alpha/v03.png"]["annotated_keypoints"], 21);
+  EXPECT_EQ(by_name["beta/v20.jpg"]["annotated_keypoints"], 20);
+  EXPECT_EQ(by_name["alpha/v17.png"]["annotated_keypoints"], 0);
+  EXPECT_FALSE(by_name["alpha/v17.png"].contains("keypoints"));
+  const double exact_error = by_name["alpha/v03.png"]["keypoints"]["top1_error"].get<double>();
+  EXPECT_LT(exact_error, 0.02);
+  // 30 px over the hand size (the diagonal of the 20 visible keypoints' box), give or take the
+  // few px the photo's re-derived normalisation is off.
+  shifted.erase(shifted.begin());
+  const double expected = 30 / BoxDiagonal(shifted);
+  const auto& kb = by_name["beta/v20.jpg"]["keypoints"];
+  EXPECT_NEAR(kb["hand_size_px"].get<double>(), BoxDiagonal(shifted), 1e-3);
+  EXPECT_NEAR(kb["top1_error"].get<double>(), expected, 0.02);
+  EXPECT_TRUE(kb["top1_distances_px"][0].is_null());
+  EXPECT_LE(kb["best10_error"].get<double>(), kb["top1_error"].get<double>());
+  EXPECT_NE(r.out.find("2D keypoints (" + kp.string() + "): 2 of 4 photos annotated"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("PCK@0.05"), std::string::npos) << r.out;
+}
+
+TEST_F(EvaluatePhotosCli, BadKeypointFilesAreOneLineErrors) {
+  auto expect_error = [](const std::string& text, const std::string& what) {
+    const fs::path kp = *dir_ / "bad-keypoints.json";
+    std::ofstream(kp) << text;
+    CliRun r = Handdb(Db() + " --photos " + Photos() + " -q --keypoints " + kp.string());
+    EXPECT_EQ(r.code, 1) << what;
+    EXPECT_EQ(r.err.rfind("handdb evaluate: " + kp.string() + ": ", 0), 0u) << r.err;
+    EXPECT_NE(r.err.find(what), std::string::npos) << r.err;
+    EXPECT_EQ(r.err.find('\n'), r.err.size() - 1) << r.err;
+  };
+  nlohmann::json kps = TrueKeypoints(3, 2, false);
+  auto doc = [&](const std::string& key, const nlohmann::json& value) {
+    return nlohmann::json{
+        {"format", "handdb-photo-keypoints"}, {"version", 1}, {"images", {{key, value}}}}
+        .dump();
+  };
+  expect_error(doc("alpha/v99.png", kps), "images[\"alpha/v99.png\"]: no such image in");
+  expect_error(doc("v03.png", kps), "images[\"v03.png\"]: no such image in");
+  nlohmann::json short_list = kps;
+  short_list.erase(short_list.begin());
+  expect_error(doc("alpha/v03.png", short_list), "minItems is 21");
+  expect_error("{\"format\": ", "line 1");
+  CliRun r = Handdb(Db() + " --photos " + Photos() + " -q --keypoints " +
+                    (*dir_ / "no-such.json").string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("no-such.json"), std::string::npos) << r.err;
+}
+
+// The photo-path flags are `handdb query`'s, bound to the same options and checked alike.
+TEST_F(EvaluatePhotosCli, PhotoFlagsReachThePhotoPath) {
+  // A skin box no pixel fits: no photo has a hand any more.
+  const fs::path json_path = *dir_ / "no-skin.json";
+  CliRun r = Handdb(Db() + " --photos " + Photos() + " -q --skin 0,0,0,0,0,0 --canny 30,90 " +
+                    "--contour-clearance 1 --edges-outside --json " + json_path.string());
+  ASSERT_EQ(r.code, 0) << r.err;
+  auto doc = ReadJson(json_path);
+  EXPECT_EQ(doc["failed_inputs"], 4);
+  const auto& q = doc["search"]["query_options"];
+  EXPECT_EQ(q["skin"], (nlohmann::json{0, 0, 0, 0, 0, 0}));
+  EXPECT_EQ(q["canny"], (nlohmann::json{30, 90}));
+  EXPECT_EQ(q["contour_clearance_px"], 1);
+  EXPECT_EQ(q["interior_edges_only"], false);
+  // --roi keeps the hand out: the same.
+  r = Handdb(Db() + " --photos " + Photos() + " -q --roi 0,0,20,20 --json " + json_path.string());
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_EQ(ReadJson(json_path)["failed_inputs"], 4);
+
+  for (const std::string& bad : {std::string("--skin 1,2,3"),
+                                 std::string("--skin 0,300,0,1,0,1"),
+                                 std::string("--canny 9,1"),
+                                 std::string("--roi 1,2"),
+                                 std::string("--input clean")}) {
+    r = Handdb(Db() + " --photos " + Photos() + " -q " + bad);
+    EXPECT_EQ(r.code, 2) << bad;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << bad << ": " << r.err;
+  }
+  EXPECT_EQ(Handdb(Db() + " --photos " + Photos() + " -q --contour-clearance 99").code, 2);
+  // ... and belong to --photos: with a TESTSET they are refused before it is read.
+  for (const std::string& flag : {std::string("--hand left"),
+                                  std::string("--skin 0,255,0,255,0,255"),
+                                  std::string("--keypoints k.json"),
+                                  std::string("--out o")}) {
+    r = Handdb(Db() + " " + (*dir_ / "no-testset").string() + " " + flag);
+    EXPECT_EQ(r.code, 2) << flag;
+    EXPECT_NE(r.err.find("applies to --photos"), std::string::npos) << r.err;
+  }
+  r = Handdb(Db() + " " + (*dir_ / "no-testset").string() + " --input edges");
+  EXPECT_EQ(r.code, 2);
 }
 
 }  // namespace
