@@ -8,6 +8,7 @@
 
 #include <CLI/CLI.hpp>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -65,6 +66,38 @@ struct EvaluateSlurmRequest {
 // tasks for the parts that are missing plus the merge job; with --wait, waits and prints the
 // report as a local run does. Returns the exit code.
 int RunEvaluateOnSlurm(const EvaluateSlurmRequest& request, const SlurmFlags& flags);
+
+// What `handdb evaluate --slurm` submits, for a test set and for photos alike: the files and the
+// task and merge command lines, how many items (test views, photos) over how many tasks, and
+// which parts are complete.
+struct SlurmEvaluation {
+  SlurmEvaluateLayout layout;
+  std::string items_noun;  // "test views", "photos"
+  uint32_t num_items = 0;
+  uint32_t tasks = 0;
+  std::string merge_command;  // "unit evaluate-merge": its one-line errors in the merge log
+  // Parts 0..tasks-1: complete or not; an error for a part of another evaluation (CompleteParts).
+  std::function<Result<std::vector<bool>>()> complete_parts;
+};
+// Submits the tasks whose part is missing plus the merge job (--dry-run: writes the scripts and
+// prints the sbatch lines); refuses while jobs of an earlier submission run; with --wait, waits,
+// names each failed task with its log, and prints the merged report. Returns the exit code.
+int SubmitSlurmEvaluation(const SlurmEvaluation& evaluation, const SlurmFlags& flags, bool quiet);
+// Parts 0..num_tasks-1 from `read_part` (the part's ReadPart status): complete (ok) or work for its
+// task (any error but kInvalidArgument); a part of another evaluation (kInvalidArgument) is the
+// error returned.
+Result<std::vector<bool>> CompleteParts(uint32_t num_tasks,
+                                        const std::function<Status(uint32_t)>& read_part);
+// The layout of an evaluation in `work` (made absolute) whose jobs run `task_args` and
+// `merge_args` (the words after `handdb`) with this executable, from the current directory.
+Result<SlurmEvaluateLayout> MakeSlurmEvaluateLayout(const std::filesystem::path& work,
+                                                    std::vector<std::string> task_args,
+                                                    std::vector<std::string> merge_args);
+// The default --tasks: one per 16 items, at most 1000.
+uint32_t DefaultEvaluationTasks(uint32_t items);
+// Seconds since the Unix epoch: a part's started_at and finished_at, whose span over all parts is
+// a Slurm run's wall time.
+double UnixNow();
 
 // `handdb unit evaluate` and `handdb unit evaluate-merge`, added to `handdb unit`'s app.
 class UnitEvaluateCommands {

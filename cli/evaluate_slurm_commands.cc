@@ -25,12 +25,8 @@ namespace {
 namespace fs = std::filesystem;
 using json = nlohmann::json;
 
-constexpr uint32_t kViewsPerTask = 16;  // default split: tasks of a few seconds to minutes
+constexpr uint32_t kItemsPerTask = 16;  // default split: tasks of a few seconds to minutes
 constexpr uint32_t kMaxDefaultTasks = 1000;
-
-double UnixNow() {
-  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
-}
 
 // One line per task of `sub` without a complete part: "task 3: <reason>; log: <path>".
 std::vector<std::string> TaskFailures(const SlurmEvaluateLayout& layout,
@@ -45,8 +41,9 @@ std::vector<std::string> TaskFailures(const SlurmEvaluateLayout& layout,
   return lines;
 }
 
-// The merge job's own one-line error, if its log has one.
-std::string MergeError(const SlurmEvaluateLayout& layout) {
+// The merge job's own one-line error ("handdb <merge_command>: ..."), if its log has one.
+std::string MergeError(const SlurmEvaluateLayout& layout, const std::string& merge_command) {
+  const std::string prefix = "handdb " + merge_command + ": ";
   const std::string log = ReadTrimmed(layout.Files().final_log());
   std::string found;
   size_t pos = 0;
@@ -54,36 +51,26 @@ std::string MergeError(const SlurmEvaluateLayout& layout) {
     size_t end = log.find('\n', pos);
     if (end == std::string::npos) end = log.size();
     const std::string line = log.substr(pos, end - pos);
-    if (line.rfind("handdb unit evaluate-merge: ", 0) == 0) found = line;
+    if (line.rfind(prefix, 0) == 0) found = line;
     pos = end + 1;
   }
   return found;
 }
 
-// Parts 0..N-1 of WORK: complete (true) or to be computed (false); a part of another evaluation
-// is an error naming the file.
-Result<std::vector<bool>> CompleteParts(const fs::path& work,
-                                        const EvaluationFingerprint& fp,
-                                        const std::vector<uint32_t>& selected,
-                                        uint32_t num_tasks,
-                                        size_t num_criteria) {
-  std::vector<bool> complete(num_tasks, false);
-  for (uint32_t t = 0; t < num_tasks; ++t) {
+// The test-set parts of WORK (CompleteParts).
+Result<std::vector<bool>> CompleteTestSetParts(const fs::path& work,
+                                               const EvaluationFingerprint& fp,
+                                               const std::vector<uint32_t>& selected,
+                                               uint32_t num_tasks,
+                                               size_t num_criteria) {
+  return CompleteParts(num_tasks, [&](uint32_t t) {
     PartExpectation expect;
     expect.fingerprint = fp;
     expect.task = t;
     expect.slice = TaskSlice(selected, t, num_tasks);
     expect.num_criteria = num_criteria;
-    auto part = ReadPart(PartPath(work, t), expect);
-    // A part of another evaluation is refused (it would be overwritten); anything else that is
-    // not a complete part (absent, unreadable, truncated) is work for the part's task.
-    if (part.ok()) {
-      complete[t] = true;
-    } else if (part.status().code() == StatusCode::kInvalidArgument) {
-      return part.status();
-    }
-  }
-  return complete;
+    return ReadPart(PartPath(work, t), expect).status();
+  });
 }
 
 // The files of an evaluation split into `tasks` parts and the words its jobs run: the same
@@ -92,51 +79,36 @@ Result<SlurmEvaluateLayout> MakeEvaluateLayout(const EvaluateSlurmRequest& reque
                                                const TestSet& testset,
                                                const EvaluationFingerprint& fp,
                                                uint32_t tasks) {
-  SlurmEvaluateLayout layout;
-  auto exe = SelfExecutable();
-  if (!exe.ok()) return exe.status();
-  layout.handdb = *exe;
-  std::error_code ec;
-  layout.submit_dir = fs::current_path(ec);
-  if (ec) return Status(StatusCode::kIoError, "current directory: " + ec.message());
   auto work =
       Absolute(request.work.empty() ? testset.dir / "slurm-evaluations" / fp.value : request.work);
   if (!work.ok()) return work.status();
-  layout.work_dir = *work;
-  std::vector<std::string> common = {request.db,
-                                     request.testset,
-                                     "--tasks",
-                                     std::to_string(tasks),
-                                     "--work",
-                                     layout.work_dir.string()};
+  std::vector<std::string> common = {
+      request.db, request.testset, "--tasks", std::to_string(tasks), "--work", work->string()};
   const auto eval_args = request.flags.Args();
   common.insert(common.end(), eval_args.begin(), eval_args.end());
-  layout.task_args = {"unit", "evaluate"};
-  layout.task_args.insert(layout.task_args.end(), common.begin(), common.end());
-  layout.merge_args = {"unit", "evaluate-merge"};
-  layout.merge_args.insert(layout.merge_args.end(), common.begin(), common.end());
-  if (!request.json_out.empty()) {
-    layout.merge_args.insert(layout.merge_args.end(), {"--json", request.json_out});
-  }
+  std::vector<std::string> task_args = {"unit", "evaluate"};
+  task_args.insert(task_args.end(), common.begin(), common.end());
+  std::vector<std::string> merge_args = {"unit", "evaluate-merge"};
+  merge_args.insert(merge_args.end(), common.begin(), common.end());
+  if (!request.json_out.empty()) merge_args.insert(merge_args.end(), {"--json", request.json_out});
   if (!request.plots_dir.empty()) {
-    layout.merge_args.insert(layout.merge_args.end(), {"--plots", request.plots_dir});
+    merge_args.insert(merge_args.end(), {"--plots", request.plots_dir});
   }
-
-  return layout;
+  return MakeSlurmEvaluateLayout(*work, std::move(task_args), std::move(merge_args));
 }
 
 // --wait: polls until every job has ended (finished tasks as progress), then reports the failed
-// tasks or prints the merged report. `complete_parts` tells which parts are complete.
-int WaitAndReport(const EvaluateSlurmRequest& request,
-                  const SlurmEvaluateLayout& layout,
+// tasks or prints the merged report.
+int WaitAndReport(const SlurmEvaluation& e,
                   const SlurmFlags& flags,
+                  bool quiet,
                   const SlurmSubmission& sub,
-                  const std::vector<uint32_t>& pending,
-                  const std::function<Result<std::vector<bool>>()>& complete_parts) {
+                  const std::vector<uint32_t>& pending) {
   const char* cmd = "evaluate";
-  auto states = WaitForJobs(sub, pending.size(), flags.poll_seconds, !request.quiet);
+  const SlurmEvaluateLayout& layout = e.layout;
+  auto states = WaitForJobs(sub, pending.size(), flags.poll_seconds, !quiet);
   if (!states.ok()) return Fail(cmd, states.status());
-  auto after = complete_parts();
+  auto after = e.complete_parts();
   if (!after.ok()) return Fail(cmd, after.status());
   const auto failures = TaskFailures(layout, sub, *after, *states);
   for (const auto& line : failures) std::fprintf(stderr, "handdb %s: %s\n", cmd, line.c_str());
@@ -150,59 +122,66 @@ int WaitAndReport(const EvaluateSlurmRequest& request,
   auto report = ReadFileToString(layout.report_text());
   if (!report.ok()) {
     const std::string final_state = FinalJobState(sub, *states);
-    const std::string why = MergeError(layout);
+    const std::string why = MergeError(layout, e.merge_command);
     return Fail(cmd,
                 Status(StatusCode::kExternalToolFailed,
                        "merge job " + sub.final_job_id + " ended " + final_state +
                            " without a report" + (why.empty() ? "" : " (" + why + ")") +
                            "; log: " + layout.Files().final_log().string()));
   }
-  if (!request.quiet) std::printf("%s", report->c_str());
+  if (!quiet) std::printf("%s", report->c_str());
   return kExitOk;
 }
 
 }  // namespace
 
-int RunEvaluateOnSlurm(const EvaluateSlurmRequest& request, const SlurmFlags& flags) {
+Result<std::vector<bool>> CompleteParts(uint32_t num_tasks,
+                                        const std::function<Status(uint32_t)>& read_part) {
+  std::vector<bool> complete(num_tasks, false);
+  for (uint32_t t = 0; t < num_tasks; ++t) {
+    const Status s = read_part(t);
+    // A part of another evaluation is refused (it would be overwritten); anything else that is
+    // not a complete part (absent, unreadable, truncated) is work for the part's task.
+    if (s.ok()) {
+      complete[t] = true;
+    } else if (s.code() == StatusCode::kInvalidArgument) {
+      return s;
+    }
+  }
+  return complete;
+}
+
+Result<SlurmEvaluateLayout> MakeSlurmEvaluateLayout(const fs::path& work,
+                                                    std::vector<std::string> task_args,
+                                                    std::vector<std::string> merge_args) {
+  SlurmEvaluateLayout layout;
+  auto exe = SelfExecutable();
+  if (!exe.ok()) return exe.status();
+  layout.handdb = *exe;
+  std::error_code ec;
+  layout.submit_dir = fs::current_path(ec);
+  if (ec) return Status(StatusCode::kIoError, "current directory: " + ec.message());
+  auto abs = Absolute(work);
+  if (!abs.ok()) return abs.status();
+  layout.work_dir = *abs;
+  layout.task_args = std::move(task_args);
+  layout.merge_args = std::move(merge_args);
+  return layout;
+}
+
+double UnixNow() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+uint32_t DefaultEvaluationTasks(uint32_t items) {
+  return std::min(kMaxDefaultTasks, (items + kItemsPerTask - 1) / kItemsPerTask);
+}
+
+int SubmitSlurmEvaluation(const SlurmEvaluation& e, const SlurmFlags& flags, bool quiet) {
   const char* cmd = "evaluate";
   auto options = OptionsFromFlags(flags);
   if (!options.ok()) return Fail(cmd, options.status());
-  const EvaluationOptions& eval = request.flags.options;
-  const QueryInput input = request.flags.query_input();
-
-  auto testset = ReadTestSet(request.testset);
-  if (!testset.ok()) return Fail(cmd, testset.status());
-  {
-    // Fail on the login node, not in every task, when the database does not open.
-    auto db = Database::Open(request.db);
-    if (!db.ok()) return Fail(cmd, db.status());
-  }
-  WarnIfTestSetMatchesDatabase(request.db, *testset);
-  const std::vector<uint32_t> selected = SelectTestViews(*testset, eval);
-  if (selected.empty()) {
-    return Fail(cmd,
-                Status(StatusCode::kInvalidArgument,
-                       testset->file.string() + ": no test views to evaluate"));
-  }
-  const uint32_t num_selected = static_cast<uint32_t>(selected.size());
-  uint32_t tasks = request.tasks;
-  if (tasks == 0) {
-    tasks = std::min(kMaxDefaultTasks, (num_selected + kViewsPerTask - 1) / kViewsPerTask);
-  }
-  if (tasks > num_selected) {
-    std::fprintf(stderr,
-                 "handdb %s: --tasks %u: more tasks than the %u selected test views\n",
-                 cmd,
-                 tasks,
-                 num_selected);
-    return kExitUsage;
-  }
-  auto fp = ComputeEvaluationFingerprint(request.db, *testset, input, eval, tasks);
-  if (!fp.ok()) return Fail(cmd, fp.status());
-
-  auto made = MakeEvaluateLayout(request, *testset, *fp, tasks);
-  if (!made.ok()) return Fail(cmd, made.status());
-  const SlurmEvaluateLayout& layout = *made;
+  const SlurmEvaluateLayout& layout = e.layout;
 
   // An earlier submission still running must end first (two tasks on one part do the work twice).
   PreviousSubmission previous;
@@ -213,11 +192,10 @@ int RunEvaluateOnSlurm(const EvaluateSlurmRequest& request, const SlurmFlags& fl
     previous = std::move(*prev);
   }
 
-  const size_t num_criteria = MakeCriteria(eval).size();
-  auto complete = CompleteParts(layout.work_dir, *fp, selected, tasks, num_criteria);
+  auto complete = e.complete_parts();
   if (!complete.ok()) return Fail(cmd, complete.status());
   const auto pending =
-      PendingUnits(tasks, [&](uint32_t t) { return static_cast<bool>((*complete)[t]); });
+      PendingUnits(e.tasks, [&](uint32_t t) { return static_cast<bool>((*complete)[t]); });
   if (previous.exists) {
     for (const auto& line : TaskFailures(layout, previous.sub, *complete, previous.states)) {
       std::fprintf(stderr, "handdb %s: earlier Slurm run: %s\n", cmd, line.c_str());
@@ -251,10 +229,11 @@ int RunEvaluateOnSlurm(const EvaluateSlurmRequest& request, const SlurmFlags& fl
   const std::string tasks_text = pending.empty() ? "none" : FormatArrayRanges(pending);
   if (flags.dry_run) {
     std::printf(
-        "dry run: %u test views in %u tasks, %zu to run (%s); work directory %s; scripts:\n"
+        "dry run: %u %s in %u tasks, %zu to run (%s); work directory %s; scripts:\n"
         "  %s\n  %s\nwould run:\n",
-        num_selected,
-        tasks,
+        e.num_items,
+        e.items_noun.c_str(),
+        e.tasks,
         pending.size(),
         tasks_text.c_str(),
         layout.work_dir.c_str(),
@@ -263,13 +242,13 @@ int RunEvaluateOnSlurm(const EvaluateSlurmRequest& request, const SlurmFlags& fl
     for (const auto& c : sub->sbatch_commands) std::printf("  %s\n", FormatCommand(c).c_str());
     return kExitOk;
   }
-  if (!request.quiet) {
+  if (!quiet) {
     std::fprintf(stderr,
                  "handdb %s: submitted %zu of %u tasks (%s) as array job%s %s, merge job %s; "
                  "work directory %s\n",
                  cmd,
                  pending.size(),
-                 tasks,
+                 e.tasks,
                  tasks_text.c_str(),
                  sub->array_job_ids.size() == 1 ? "" : "s",
                  JoinIds(sub->array_job_ids).c_str(),
@@ -285,10 +264,55 @@ int RunEvaluateOnSlurm(const EvaluateSlurmRequest& request, const SlurmFlags& fl
         layout.report_text().c_str());
     return kExitOk;
   }
+  return WaitAndReport(e, flags, quiet, *sub, pending);
+}
 
-  return WaitAndReport(request, layout, flags, *sub, pending, [&] {
-    return CompleteParts(layout.work_dir, *fp, selected, tasks, num_criteria);
-  });
+int RunEvaluateOnSlurm(const EvaluateSlurmRequest& request, const SlurmFlags& flags) {
+  const char* cmd = "evaluate";
+  if (auto options = OptionsFromFlags(flags); !options.ok()) return Fail(cmd, options.status());
+  const EvaluationOptions& eval = request.flags.options;
+  const QueryInput input = request.flags.query_input();
+
+  auto testset = ReadTestSet(request.testset);
+  if (!testset.ok()) return Fail(cmd, testset.status());
+  {
+    // Fail on the login node, not in every task, when the database does not open.
+    auto db = Database::Open(request.db);
+    if (!db.ok()) return Fail(cmd, db.status());
+  }
+  WarnIfTestSetMatchesDatabase(request.db, *testset);
+  const std::vector<uint32_t> selected = SelectTestViews(*testset, eval);
+  if (selected.empty()) {
+    return Fail(cmd,
+                Status(StatusCode::kInvalidArgument,
+                       testset->file.string() + ": no test views to evaluate"));
+  }
+  const uint32_t num_selected = static_cast<uint32_t>(selected.size());
+  const uint32_t tasks = request.tasks == 0 ? DefaultEvaluationTasks(num_selected) : request.tasks;
+  if (tasks > num_selected) {
+    std::fprintf(stderr,
+                 "handdb %s: --tasks %u: more tasks than the %u selected test views\n",
+                 cmd,
+                 tasks,
+                 num_selected);
+    return kExitUsage;
+  }
+  auto fp = ComputeEvaluationFingerprint(request.db, *testset, input, eval, tasks);
+  if (!fp.ok()) return Fail(cmd, fp.status());
+  auto layout = MakeEvaluateLayout(request, *testset, *fp, tasks);
+  if (!layout.ok()) return Fail(cmd, layout.status());
+
+  SlurmEvaluation e;
+  e.layout = std::move(*layout);
+  e.items_noun = "test views";
+  e.num_items = num_selected;
+  e.tasks = tasks;
+  e.merge_command = "unit evaluate-merge";
+  const size_t num_criteria = MakeCriteria(eval).size();
+  e.complete_parts = [work = e.layout.work_dir, fp = *fp, selected, tasks, num_criteria] {
+    return CompleteTestSetParts(work, fp, selected, tasks, num_criteria);
+  };
+  return SubmitSlurmEvaluation(e, flags, request.quiet);
 }
 
 UnitEvaluateCommands::UnitEvaluateCommands(CLI::App& unit_app) {

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <limits>
 
 #include "base/json_schema.h"
@@ -96,6 +97,66 @@ std::string FirstDifference(const json& part, const json& expected) {
     if (!expected.contains(key)) return key + ": not an option of this evaluation";
   }
   return "";
+}
+
+// One input of a fingerprint that a part must share with this evaluation, and how to say that it
+// does not: describe(got, want) completes "<file>: a part of another evaluation: ...".
+struct InputCheck {
+  std::string key;
+  std::function<std::string(const json& got, const json& want)> describe;
+};
+
+// "made from another database (manifest xxh3 <got>, this one's is <want>)" for `prefix` =
+// "made from another database (manifest xxh3 ".
+std::function<std::string(const json&, const json&)> ChecksumDiffers(std::string prefix) {
+  return [prefix](const json& got, const json& want) {
+    auto text = [](const json& j) {
+      const std::string v = j.is_string() ? j.get<std::string>() : j.dump();
+      return v.empty() ? std::string("none") : v;
+    };
+    return prefix + text(got) + ", this one's is " + text(want) + ")";
+  };
+}
+
+// The inputs of a part's fingerprint against this evaluation's: the `checks` first, then the
+// options, the task count and the fingerprint value; one line naming `file` and what differs.
+Status CheckPartInputs(const std::string& file,
+                       const EvaluationFingerprint& part,
+                       uint32_t part_tasks,
+                       const EvaluationFingerprint& expected,
+                       const std::vector<InputCheck>& checks) {
+  const json& got = part.inputs;
+  const json& want = expected.inputs;
+  auto mismatch = [&](const std::string& what) {
+    return Status(StatusCode::kInvalidArgument,
+                  file + ": a part of another evaluation: " + what +
+                      "; delete it (or use another --work directory) and run again");
+  };
+  for (const InputCheck& c : checks) {
+    const json missing = "?";
+    const json& g = got.contains(c.key) ? got.at(c.key) : missing;
+    if (g != want.at(c.key)) return mismatch(c.describe(g, want.at(c.key)));
+  }
+  if (!got.contains("options") || got.at("options") != want.at("options")) {
+    return mismatch("made with other evaluation options (" +
+                    FirstDifference(got.value("options", json::object()), want.at("options")) +
+                    ")");
+  }
+  if (got.value("tasks", json()) != want.at("tasks") ||
+      part_tasks != want.at("tasks").get<uint32_t>()) {
+    return mismatch("made for a split into " + std::to_string(part_tasks) + " tasks, not " +
+                    want.at("tasks").dump());
+  }
+  if (part.value != expected.value) {
+    return mismatch("fingerprint " + part.value + ", expected " + expected.value);
+  }
+  return Status::Ok();
+}
+
+Status MissingPart(const fs::path& path, uint32_t task, uint32_t num_tasks) {
+  return Status(StatusCode::kNotFound,
+                path.string() + ": missing (task " + std::to_string(task) + " of " +
+                    std::to_string(num_tasks) + " has not written its part)");
 }
 
 }  // namespace
@@ -209,40 +270,15 @@ Result<EvaluationPart> ReadPart(const fs::path& path, const PartExpectation& exp
   if (!doc.ok()) return doc.status();
   auto part = PartFromJson(*doc, path.string());
   if (!part.ok()) return part.status();
-  const json& got = part->fingerprint.inputs;
-  const json& want = expect.fingerprint.inputs;
   const std::string file = path.string();
-  auto mismatch = [&](const std::string& what) {
-    return Status(StatusCode::kInvalidArgument,
-                  file + ": a part of another evaluation: " + what +
-                      "; delete it (or use another --work directory) and run again");
-  };
-  if (got.value("database_manifest_xxh3", "") != want.at("database_manifest_xxh3")) {
-    return mismatch("made from another database (manifest xxh3 " +
-                    got.value("database_manifest_xxh3", "?") + ", this one's is " +
-                    want.at("database_manifest_xxh3").get<std::string>() + ")");
-  }
-  if (got.value("testset_xxh3", "") != want.at("testset_xxh3")) {
-    return mismatch("made from another test set (testset.json xxh3 " +
-                    got.value("testset_xxh3", "?") + ", this one's is " +
-                    want.at("testset_xxh3").get<std::string>() + ")");
-  }
-  if (got.at("input") != want.at("input")) {
-    return mismatch("made with --input " + got.at("input").get<std::string>() + ", not " +
-                    want.at("input").get<std::string>());
-  }
-  if (got.at("options") != want.at("options")) {
-    return mismatch("made with other evaluation options (" +
-                    FirstDifference(got.at("options"), want.at("options")) + ")");
-  }
-  if (got.at("tasks") != want.at("tasks") || part->num_tasks != want.at("tasks").get<uint32_t>()) {
-    return mismatch("made for a split into " + std::to_string(part->num_tasks) + " tasks, not " +
-                    want.at("tasks").dump());
-  }
-  if (part->fingerprint.value != expect.fingerprint.value) {
-    return mismatch("fingerprint " + part->fingerprint.value + ", expected " +
-                    expect.fingerprint.value);
-  }
+  const std::vector<InputCheck> checks = {
+      {"database_manifest_xxh3", ChecksumDiffers("made from another database (manifest xxh3 ")},
+      {"testset_xxh3", ChecksumDiffers("made from another test set (testset.json xxh3 ")},
+      {"input", [](const json& got, const json& want) {
+         return "made with --input " + got.get<std::string>() + ", not " + want.get<std::string>();
+       }}};
+  HANDDB_RETURN_IF_ERROR(
+      CheckPartInputs(file, part->fingerprint, part->num_tasks, expect.fingerprint, checks));
   if (part->task != expect.task) {
     return Status(StatusCode::kInvalidArgument,
                   file + ": holds task " + std::to_string(part->task) + ", expected task " +
@@ -291,11 +327,7 @@ Status MergeParts(const fs::path& work_dir,
     const fs::path path = PartPath(work_dir, task);
     auto part = ReadPart(path, expect);
     if (!part.ok()) {
-      if (part.status().code() == StatusCode::kNotFound) {
-        return Status(StatusCode::kNotFound,
-                      path.string() + ": missing (task " + std::to_string(task) + " of " +
-                          std::to_string(num_tasks) + " has not written its part)");
-      }
+      if (part.status().code() == StatusCode::kNotFound) return MissingPart(path, task, num_tasks);
       return part.status();
     }
     first_start = std::min(first_start, part->started_at);
