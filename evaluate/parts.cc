@@ -341,4 +341,179 @@ Status MergeParts(const fs::path& work_dir,
   return Status::Ok();
 }
 
+// ---- Photo evaluations ------------------------------------------------------------------------
+
+json PhotoScoringOptionsToJson(const PhotoEvaluationOptions& options, const json& query_options) {
+  return {{"hand", std::string(HandName(options.hand))},
+          {"top_k", kPhotoMatches},
+          {"query", query_options}};
+}
+
+Result<std::string> PhotoListChecksum(const PhotoSet& photos) {
+  std::string list;
+  for (const PhotoItem& p : photos.photos) {
+    std::error_code ec;
+    const uintmax_t size = fs::file_size(p.path, ec);
+    if (ec) return Status(StatusCode::kIoError, p.path.string() + ": " + ec.message());
+    list += p.relative + "\t" + std::to_string(size) + "\n";
+  }
+  return shard::ChecksumHex(shard::Checksum(list.data(), list.size()));
+}
+
+EvaluationFingerprint MakePhotoEvaluationFingerprint(const std::string& database_manifest_xxh3,
+                                                     const std::string& photos_xxh3,
+                                                     const std::string& keypoints_xxh3,
+                                                     const json& scoring_options,
+                                                     uint32_t num_tasks) {
+  EvaluationFingerprint f;
+  f.inputs = {{"database_manifest_xxh3", database_manifest_xxh3},
+              {"photos_xxh3", photos_xxh3},
+              {"keypoints_xxh3", keypoints_xxh3},
+              {"options", scoring_options},
+              {"tasks", num_tasks}};
+  const std::string text = f.inputs.dump();
+  f.value = shard::ChecksumHex(shard::Checksum(text.data(), text.size()));
+  return f;
+}
+
+Result<EvaluationFingerprint> ComputePhotoEvaluationFingerprint(const fs::path& db_dir,
+                                                                const PhotoSet& photos,
+                                                                const json& scoring_options,
+                                                                uint32_t num_tasks) {
+  auto manifest = shard::FileChecksum((db_dir / "manifest.json").string());
+  if (!manifest.ok()) return manifest.status();
+  auto list = PhotoListChecksum(photos);
+  if (!list.ok()) return list.status();
+  std::string keypoints;
+  if (!photos.keypoints_file.empty()) {
+    auto k = shard::FileChecksum(photos.keypoints_file.string());
+    if (!k.ok()) return k.status();
+    keypoints = shard::ChecksumHex(*k);
+  }
+  return MakePhotoEvaluationFingerprint(
+      shard::ChecksumHex(*manifest), *list, keypoints, scoring_options, num_tasks);
+}
+
+std::vector<uint32_t> PhotoTaskSlice(const PhotoSet& photos, uint32_t task, uint32_t num_tasks) {
+  std::vector<uint32_t> all(photos.photos.size());
+  for (uint32_t i = 0; i < all.size(); ++i) all[i] = i;
+  return TaskSlice(all, task, num_tasks);
+}
+
+json PhotoPartToJson(const PhotoEvaluationPart& part) {
+  json photos = json::array();
+  for (const PhotoOutcome& o : part.photos) photos.push_back(o.ToJson());
+  return {{"format", "handdb-photo-evaluation-part"},
+          {"version", 1},
+          {"fingerprint", part.fingerprint.value},
+          {"inputs", part.fingerprint.inputs},
+          {"task", part.task},
+          {"tasks", part.num_tasks},
+          {"threads", part.threads},
+          {"started_at", part.started_at},
+          {"finished_at", part.finished_at},
+          {"photos", photos}};
+}
+
+Result<PhotoEvaluationPart> PhotoPartFromJson(const json& doc, const std::string& where) {
+  try {
+    PhotoEvaluationPart part;
+    part.fingerprint.value = doc.at("fingerprint").get<std::string>();
+    part.fingerprint.inputs = doc.at("inputs");
+    part.task = doc.at("task").get<uint32_t>();
+    part.num_tasks = doc.at("tasks").get<uint32_t>();
+    part.threads = doc.at("threads").get<int>();
+    part.started_at = doc.at("started_at").get<double>();
+    part.finished_at = doc.at("finished_at").get<double>();
+    const json& photos = doc.at("photos");
+    for (size_t k = 0; k < photos.size(); ++k) {
+      auto o = PhotoOutcome::FromJson(photos.at(k), where + ": photos[" + std::to_string(k) + "]");
+      if (!o.ok()) return o.status();
+      part.photos.push_back(std::move(*o));
+    }
+    return part;
+  } catch (const json::exception& e) {
+    return Status(StatusCode::kSchemaViolation, where + ": " + e.what());
+  }
+}
+
+Status WritePhotoPart(const fs::path& path, const PhotoEvaluationPart& part) {
+  const json doc = PhotoPartToJson(part);
+  HANDDB_RETURN_IF_ERROR(ValidateJson(doc, "photo_evaluation_part.schema.json", path.string()));
+  std::error_code ec;
+  fs::create_directories(path.parent_path(), ec);
+  if (ec) {
+    return Status(StatusCode::kIoError,
+                  path.parent_path().string() + ": cannot create: " + ec.message());
+  }
+  return WriteJsonFileAtomic(path, doc);
+}
+
+Result<PhotoEvaluationPart> ReadPhotoPart(const fs::path& path,
+                                          const PhotoPartExpectation& expect) {
+  auto doc = ReadJsonFile(path, "photo_evaluation_part.schema.json");
+  if (!doc.ok()) return doc.status();
+  auto part = PhotoPartFromJson(*doc, path.string());
+  if (!part.ok()) return part.status();
+  const std::string file = path.string();
+  const std::vector<InputCheck> checks = {
+      {"database_manifest_xxh3", ChecksumDiffers("made from another database (manifest xxh3 ")},
+      {"photos_xxh3", ChecksumDiffers("made from other photos (photo names and sizes xxh3 ")},
+      {"keypoints_xxh3", ChecksumDiffers("made with another --keypoints file (xxh3 ")}};
+  HANDDB_RETURN_IF_ERROR(
+      CheckPartInputs(file, part->fingerprint, part->num_tasks, expect.fingerprint, checks));
+  if (part->task != expect.task) {
+    return Status(StatusCode::kInvalidArgument,
+                  file + ": holds task " + std::to_string(part->task) + ", expected task " +
+                      std::to_string(expect.task));
+  }
+  if (part->photos.size() != expect.photos.size()) {
+    return Status(StatusCode::kInvalidArgument,
+                  file + ": " + std::to_string(part->photos.size()) + " photos, task " +
+                      std::to_string(expect.task) + " has " + std::to_string(expect.photos.size()));
+  }
+  for (size_t k = 0; k < part->photos.size(); ++k) {
+    if (part->photos[k].photo != expect.photos[k]) {
+      return Status(StatusCode::kInvalidArgument,
+                    file + ": photos[" + std::to_string(k) + "] is " + part->photos[k].photo +
+                        ", expected " + expect.photos[k]);
+    }
+  }
+  return part;
+}
+
+Status MergePhotoParts(const fs::path& work_dir,
+                       const EvaluationFingerprint& fingerprint,
+                       const PhotoSet& photos,
+                       PhotoReport* report) {
+  const uint32_t num_tasks = fingerprint.inputs.at("tasks").get<uint32_t>();
+  report->outcomes.clear();
+  report->outcomes.reserve(photos.photos.size());
+  double first_start = std::numeric_limits<double>::infinity();
+  double last_finish = -std::numeric_limits<double>::infinity();
+  int threads = 0;
+  for (uint32_t task = 0; task < num_tasks; ++task) {
+    PhotoPartExpectation expect;
+    expect.fingerprint = fingerprint;
+    expect.task = task;
+    for (uint32_t i : PhotoTaskSlice(photos, task, num_tasks)) {
+      expect.photos.push_back(photos.photos[i].relative);
+    }
+    const fs::path path = PartPath(work_dir, task);
+    auto part = ReadPhotoPart(path, expect);
+    if (!part.ok()) {
+      if (part.status().code() == StatusCode::kNotFound) return MissingPart(path, task, num_tasks);
+      return part.status();
+    }
+    first_start = std::min(first_start, part->started_at);
+    last_finish = std::max(last_finish, part->finished_at);
+    threads = std::max(threads, part->threads);
+    for (auto& o : part->photos) report->outcomes.push_back(std::move(o));
+  }
+  if (threads > 0) report->threads = threads;
+  FinishPhotoReport(report);
+  report->wall_seconds = num_tasks > 0 ? std::max(0.0, last_finish - first_start) : 0;
+  return Status::Ok();
+}
+
 }  // namespace handdb

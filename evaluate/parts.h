@@ -8,6 +8,10 @@
 // (which list every shard's checksum), the testset.json bytes, the options that change scores, and
 // the number of tasks. A part whose fingerprint, task or views do not fit is refused with one line
 // naming the file, never silently merged.
+//
+// A photo evaluation (`handdb evaluate DB --photos DIR --slurm`, evaluate/photos.h) is split the
+// same way: task i scores the photos at positions k with k % N == i (ScorePhotos), the merge
+// aggregates with FinishPhotoReport; its fingerprint covers the photo list instead of a test set.
 #pragma once
 
 #include <cstdint>
@@ -19,6 +23,7 @@
 
 #include "base/status.h"
 #include "evaluate/evaluate.h"
+#include "evaluate/photos.h"
 
 namespace handdb {
 
@@ -92,5 +97,68 @@ Status MergeParts(const std::filesystem::path& work_dir,
                   const EvaluationFingerprint& fingerprint,
                   std::span<const uint32_t> selected,
                   EvaluationReport* report);
+
+// ---- Photo evaluations ------------------------------------------------------------------------
+
+// The options that change a photo evaluation's outcomes: the hand, the matches searched per photo
+// and `query_options` (how a picture becomes a query: the CLI's photo-path flags, resolved).
+nlohmann::json PhotoScoringOptionsToJson(const PhotoEvaluationOptions& options,
+                                         const nlohmann::json& query_options);
+
+// XXH3-64 (hex) of the photo list: each photo's path relative to DIR and its size in bytes, in
+// order. Cheap (no photo is read), and it changes when a photo is added, removed, renamed or
+// replaced by a file of another size; kIoError naming a photo whose size cannot be read.
+Result<std::string> PhotoListChecksum(const PhotoSet& photos);
+
+EvaluationFingerprint MakePhotoEvaluationFingerprint(const std::string& database_manifest_xxh3,
+                                                     const std::string& photos_xxh3,
+                                                     const std::string& keypoints_xxh3,
+                                                     const nlohmann::json& scoring_options,
+                                                     uint32_t num_tasks);
+// The same from files: DB_DIR/manifest.json, the photos' sizes and photos.keypoints_file (its
+// bytes; "" without one).
+Result<EvaluationFingerprint> ComputePhotoEvaluationFingerprint(
+    const std::filesystem::path& db_dir,
+    const PhotoSet& photos,
+    const nlohmann::json& scoring_options,
+    uint32_t num_tasks);
+
+// Task `task` of `num_tasks` of a photo evaluation: positions k of photos.photos with
+// k % num_tasks == task (TaskSlice of every position).
+std::vector<uint32_t> PhotoTaskSlice(const PhotoSet& photos, uint32_t task, uint32_t num_tasks);
+
+struct PhotoEvaluationPart {
+  EvaluationFingerprint fingerprint;
+  uint32_t task = 0;
+  uint32_t num_tasks = 1;
+  int threads = 1;
+  double started_at = 0;  // Unix time, seconds
+  double finished_at = 0;
+  std::vector<PhotoOutcome> photos;  // query_points are not stored
+};
+
+nlohmann::json PhotoPartToJson(const PhotoEvaluationPart& part);
+// `where` names the source in errors. The JSON must already match the schema.
+Result<PhotoEvaluationPart> PhotoPartFromJson(const nlohmann::json& doc, const std::string& where);
+// Schema-checked (schemas/photo_evaluation_part.schema.json), atomic.
+Status WritePhotoPart(const std::filesystem::path& path, const PhotoEvaluationPart& part);
+
+struct PhotoPartExpectation {
+  EvaluationFingerprint fingerprint;
+  uint32_t task = 0;
+  std::vector<std::string> photos;  // the relative names of the task's slice, in order
+};
+// Reads and checks a part as ReadPart does: schema, fingerprint (naming what differs: database,
+// photos, keypoints file, options or task count), task number, exactly the photos of its slice.
+// kNotFound when the file does not exist.
+Result<PhotoEvaluationPart> ReadPhotoPart(const std::filesystem::path& path,
+                                          const PhotoPartExpectation& expect);
+
+// Reads and checks parts 0..num_tasks-1 of WORK, puts their outcomes into `report` (which
+// StartPhotoReport made) and calls FinishPhotoReport; threads and wall_seconds as MergeParts.
+Status MergePhotoParts(const std::filesystem::path& work_dir,
+                       const EvaluationFingerprint& fingerprint,
+                       const PhotoSet& photos,
+                       PhotoReport* report);
 
 }  // namespace handdb

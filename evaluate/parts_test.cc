@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <cmath>
+#include <fstream>
 #include <memory>
 
 #include "base/atomic_file.h"
@@ -232,6 +233,202 @@ TEST(EvalParts, MissingAndMismatchedPartsAreNamed) {
   ASSERT_FALSE(s.ok());
   EXPECT_EQ(s.message(), part1 + ": views[0] is test view 0, expected 1");
   fs::remove_all(work);
+}
+
+// ---- Photo evaluations ----
+
+// Seven photos of a synthetic database, one of them a left hand, one without a hand, two annotated.
+struct PhotoCase {
+  std::shared_ptr<const Database> db = testing::EvalDatabase();
+  Searcher searcher{db};
+  PhotoSet set;
+  PhotoQueryFn query_fn;
+  struct Shown {
+    view_id_t view;
+    roll_id_t roll;
+    bool mirrored;
+  };
+  std::map<std::string, Shown> shown = {{"shape0/a", {3, 0, false}},
+                                        {"shape0/b", {5, 2, true}},
+                                        {"shape1/c", {17, 5, false}},
+                                        {"shape1/d", {30, 7, false}},  // a shape3 view
+                                        {"shape2/e", {21, 1, false}},
+                                        {"shape2/nohand", {0, 0, false}},
+                                        {"shape3/f", {33, 11, true}}};
+
+  PhotoCase() {
+    set.dir = "/photos";
+    for (const auto& [name, s] : shown) {
+      PhotoItem item;
+      item.relative = name;
+      item.path = set.dir / name;
+      item.expected_shape = name.substr(0, name.find('/'));
+      set.photos.push_back(item);
+    }
+    for (size_t i : {1, 4}) {
+      PhotoKeypoints kp;
+      for (int k = 0; k < kNumKeypoints; ++k) {
+        kp.px[k] = {static_cast<float>(200 + 7 * k), static_cast<float>(150 + 5 * (k % 4))};
+        kp.visible[k] = k % 5 != 1;
+      }
+      kp.hand_size_px = HandSizePx(kp);
+      set.photos[i].keypoints = kp;
+    }
+    set.keypoints_file = "kp.json";
+    query_fn = [this](const PhotoItem& item) -> Result<QueryEdges> {
+      if (item.relative == "shape2/nohand") {
+        return Status(StatusCode::kNoHand, "/photos/shape2/nohand: no hand found");
+      }
+      const Shown& s = shown.at(item.relative);
+      return testing::PhotoQueryOf(*db, s.view, s.roll, s.mirrored, 250, 180, 0.8);
+    };
+  }
+};
+
+PhotoEvaluationOptions PhotoOptions() {
+  PhotoEvaluationOptions o;
+  o.hand = Hand::kEither;
+  o.num_threads = 2;
+  o.progress = false;
+  return o;
+}
+
+json PhotoWithoutRunSpecific(json doc) {
+  for (const char* k : {"search_seconds",
+                        "input_seconds",
+                        "wall_seconds",
+                        "queries_per_second",
+                        "end_to_end_queries_per_second"}) {
+    doc["timing"].erase(k);
+  }
+  for (auto& p : doc["photos"]) {
+    p.erase("input_seconds");
+    p.erase("search_seconds");
+  }
+  return doc;
+}
+
+// Runs task `task` of `num_tasks` as `handdb unit evaluate-photos` does and writes its part.
+void WritePhotoTaskPart(const PhotoCase& c,
+                        const EvaluationFingerprint& fp,
+                        uint32_t task,
+                        uint32_t num_tasks,
+                        const fs::path& work) {
+  auto photos = ScorePhotos(
+      c.searcher, c.set, c.query_fn, PhotoOptions(), PhotoTaskSlice(c.set, task, num_tasks));
+  ASSERT_TRUE(photos.ok()) << photos.status().ToString();
+  PhotoEvaluationPart part;
+  part.fingerprint = fp;
+  part.task = task;
+  part.num_tasks = num_tasks;
+  part.threads = 2;
+  part.started_at = 500.0 + task;
+  part.finished_at = 520.0 + task;
+  part.photos = std::move(*photos);
+  ASSERT_TRUE(WritePhotoPart(PartPath(work, task), part).ok());
+}
+
+EvaluationFingerprint PhotoFingerprint(uint32_t tasks,
+                                       const std::string& photos = "photos",
+                                       const std::string& keypoints = "kp",
+                                       Hand hand = Hand::kEither) {
+  PhotoEvaluationOptions o = PhotoOptions();
+  o.hand = hand;
+  return MakePhotoEvaluationFingerprint(
+      "db", photos, keypoints, PhotoScoringOptionsToJson(o, {{"input", "auto"}}), tasks);
+}
+
+// The guarantee for photos: a report merged from parts equals the report of one run.
+TEST(EvalParts, MergedPhotoPartsEqualOneRun) {
+  PhotoCase c;
+  auto local = EvaluatePhotos(c.searcher, c.set, c.query_fn, PhotoOptions());
+  ASSERT_TRUE(local.ok());
+  ASSERT_EQ(local->failed_inputs, 1);
+  ASSERT_EQ(local->top1_left, 2) << "the case must cover left hands";
+  ASSERT_EQ(local->annotated_photos, 2) << "and annotations";
+  const json local_json = PhotoReportToJson(*local);
+  for (uint32_t tasks : {1u, 2u, 3u, 7u}) {
+    SCOPED_TRACE("tasks " + std::to_string(tasks));
+    const fs::path work = TempDir("photo-merge");
+    const auto fp = PhotoFingerprint(tasks);
+    for (uint32_t t = tasks; t-- > 0;) WritePhotoTaskPart(c, fp, t, tasks, work);
+    PhotoReport merged = StartPhotoReport(c.searcher.database(), c.set, PhotoOptions());
+    Status s = MergePhotoParts(work, fp, c.set, &merged);
+    ASSERT_TRUE(s.ok()) << s.ToString();
+    const json merged_json = PhotoReportToJson(merged);
+    EXPECT_TRUE(ValidateJson(merged_json, "photo_evaluation.schema.json", "merged").ok());
+    EXPECT_EQ(PhotoWithoutRunSpecific(merged_json).dump(2),
+              PhotoWithoutRunSpecific(local_json).dump(2));
+    EXPECT_EQ(WithoutSpeedLine(PhotoReportToText(merged)),
+              WithoutSpeedLine(PhotoReportToText(*local)));
+    EXPECT_EQ(merged.wall_seconds, 20.0 + (tasks - 1));
+    fs::remove_all(work);
+  }
+}
+
+TEST(EvalParts, PhotoPartsOfAnotherEvaluationAreNamed) {
+  PhotoCase c;
+  const auto fp = PhotoFingerprint(3);
+  const fs::path work = TempDir("photo-bad");
+  for (uint32_t t = 0; t < 3; ++t) WritePhotoTaskPart(c, fp, t, 3, work);
+  auto merge = [&](const EvaluationFingerprint& f) {
+    PhotoReport r = StartPhotoReport(c.searcher.database(), c.set, PhotoOptions());
+    return MergePhotoParts(work, f, c.set, &r);
+  };
+  ASSERT_TRUE(merge(fp).ok());
+  const std::string part0 = PartPath(work, 0).string();
+  auto expect_error = [&](const EvaluationFingerprint& f, const std::string& what) {
+    const Status s = merge(f);
+    ASSERT_FALSE(s.ok()) << what;
+    EXPECT_EQ(s.message().rfind(part0 + ": a part of another evaluation: ", 0), 0u) << s.message();
+    EXPECT_NE(s.message().find(what), std::string::npos) << s.message();
+    EXPECT_EQ(s.message().find('\n'), std::string::npos) << "one line";
+  };
+  expect_error(PhotoFingerprint(3, "photos2"),
+               "made from other photos (photo names and sizes xxh3 photos, this one's is photos2)");
+  expect_error(PhotoFingerprint(3, "photos", ""),
+               "made with another --keypoints file (xxh3 kp, this one's is none)");
+  expect_error(PhotoFingerprint(3, "photos", "kp", Hand::kRight),
+               "made with other evaluation options (hand: \"either\" vs \"right\")");
+  expect_error(PhotoFingerprint(2), "made for a split into 3 tasks, not 2");
+
+  // A part holding another slice's photos, and a missing one.
+  const std::string part1 = PartPath(work, 1).string();
+  auto doc = ReadJsonFile(PartPath(work, 1), "");
+  ASSERT_TRUE(doc.ok());
+  (*doc)["photos"][0]["photo"] = "shape0/a";
+  ASSERT_TRUE(WriteJsonFileAtomic(PartPath(work, 1), *doc).ok());
+  Status s = merge(fp);
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.message(), part1 + ": photos[0] is shape0/a, expected shape0/b");
+  fs::remove(PartPath(work, 1));
+  s = merge(fp);
+  EXPECT_EQ(s.code(), StatusCode::kNotFound);
+  EXPECT_EQ(s.message(), part1 + ": missing (task 1 of 3 has not written its part)");
+  fs::remove_all(work);
+}
+
+TEST(EvalParts, PhotoListChecksumFollowsNamesAndSizes) {
+  const fs::path dir = TempDir("photo-list");
+  fs::create_directories(dir / "a");
+  PhotoSet set;
+  set.dir = dir;
+  for (const char* name : {"a/1.jpg", "a/2.jpg"}) {
+    std::ofstream(dir / name) << "12345";
+    set.photos.push_back({dir / name, name, "a", std::nullopt});
+  }
+  auto first = PhotoListChecksum(set);
+  ASSERT_TRUE(first.ok());
+  EXPECT_EQ(*PhotoListChecksum(set), *first);  // deterministic
+  std::ofstream(dir / "a/2.jpg") << "123456";  // another size
+  EXPECT_NE(*PhotoListChecksum(set), *first);
+  set.photos.pop_back();
+  EXPECT_NE(*PhotoListChecksum(set), *first);
+  set.photos.push_back({dir / "a/9.jpg", "a/9.jpg", "a", std::nullopt});
+  auto missing = PhotoListChecksum(set);
+  ASSERT_FALSE(missing.ok());
+  EXPECT_NE(missing.status().message().find("9.jpg"), std::string::npos);
+  fs::remove_all(dir);
 }
 
 }  // namespace

@@ -15,8 +15,9 @@
 //
 // Like evaluate/evaluate.h an evaluation is (1) the per-photo work, ScorePhotos, over any subset
 // of the photos, and (2) the aggregation, FinishPhotoReport, over the outcomes of all of them.
-// EvaluatePhotos does both in one process; the split is what a Slurm job array needs (as for test
-// sets). The aggregation is tested on hand-made outcomes.
+// EvaluatePhotos does both in one process; `handdb evaluate --photos DIR --slurm` runs (1) in
+// array tasks that write their outcomes to part files (evaluate/parts.h) and (2) in the merge job,
+// so both give the same report. The aggregation is tested on hand-made outcomes.
 #pragma once
 
 #include <array>
