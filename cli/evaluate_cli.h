@@ -1,9 +1,9 @@
 // What `handdb evaluate` shares with the Slurm array tasks and the merge job of
 // `handdb evaluate --slurm` (`handdb unit evaluate|evaluate-merge`,
 // cli/evaluate_slurm_commands.cc): the options that define an evaluation, the query-input function,
-// the database/test-set checks. Sharing them is what makes a Slurm evaluation score exactly like a
-// local one. Also the photo evaluation's flags (`handdb evaluate DB --photos DIR`,
-// cli/evaluate_photos_commands.cc).
+// the database/test-set checks, and the same for real photos (`handdb evaluate DB --photos DIR`,
+// `handdb unit evaluate-photos|evaluate-photos-merge`, cli/evaluate_photos_commands.cc). Sharing
+// them is what makes a Slurm evaluation score exactly like a local one.
 #pragma once
 
 #include <CLI/CLI.hpp>
@@ -122,8 +122,9 @@ class UnitEvaluateCommands {
 
 // ---- Real photos: `handdb evaluate DB --photos DIR` (cli/evaluate_photos_commands.cc) ----------
 
-// The options that define a photo evaluation, parsed once: the photo directory and its listing,
-// the annotations, the hand, how a picture becomes a query.
+// The options that define a photo evaluation, parsed once and passed on to Slurm tasks verbatim
+// (Args()): the photo directory and its listing, the annotations, the hand, how a picture becomes
+// a query.
 struct PhotoEvaluateFlags {
   std::string dir;  // --photos
   bool skip_unknown = false;
@@ -137,6 +138,10 @@ struct PhotoEvaluateFlags {
   void Add(CLI::App& app, bool with_input);
   // Completes `options` and the picture options; false (one line printed) on bad usage.
   bool Finish(const std::string& cmd, int threads, bool quiet);
+  // The flags that reproduce this evaluation's photos and scores (not --threads, --quiet).
+  std::vector<std::string> Args() const;
+  // The options that change outcomes (evaluate/parts.h, the Slurm fingerprint).
+  nlohmann::json ScoringJson() const;
 };
 
 // A photo evaluation opened: the searcher, the listed photos with their annotations, and how each
@@ -157,6 +162,8 @@ struct PhotoEvaluateRequest {
   std::string json_out;
   std::string out_dir;  // --out: confusion.png, successes.png, failures.png
   bool quiet = false;
+  uint32_t tasks = 0;          // --slurm: 0 = one task per 16 photos, at most 1000
+  std::filesystem::path work;  // --slurm: empty = ./slurm-evaluations/<fingerprint>
 };
 // --photos, --out and the photo flags of PhotoEvaluateFlags, added to `handdb evaluate`'s app.
 void AddPhotoEvaluateFlags(CLI::App& app, PhotoEvaluateRequest* request);
@@ -164,7 +171,30 @@ void AddPhotoEvaluateFlags(CLI::App& app, PhotoEvaluateRequest* request);
 bool CheckPhotoEvaluateUsage(const CLI::App& app, const std::string& testset);
 // With a TESTSET: false (message printed) when a --photos-only flag comes with it.
 bool CheckTestSetEvaluateUsage(const CLI::App& app);
-// The local run; returns the exit code.
+// The local run (one process) and the Slurm split; return the exit code.
 int RunEvaluatePhotos(const PhotoEvaluateRequest& request);
+int RunEvaluatePhotosOnSlurm(const PhotoEvaluateRequest& request, const SlurmFlags& flags);
+
+// `handdb unit evaluate-photos` and `handdb unit evaluate-photos-merge`, added to `handdb unit`'s
+// app: the array tasks and the merge job of `handdb evaluate DB --photos DIR --slurm`.
+class UnitEvaluatePhotosCommands {
+ public:
+  explicit UnitEvaluatePhotosCommands(CLI::App& unit_app);
+  bool parsed() const;
+  int Run();
+
+ private:
+  CLI::App* task_cmd_ = nullptr;
+  CLI::App* merge_cmd_ = nullptr;
+  std::string db_;
+  std::filesystem::path work_;
+  uint32_t tasks_ = 1;
+  uint32_t task_ = 0;
+  int threads_ = -1;
+  std::string json_out_;
+  std::string out_dir_;
+  bool quiet_ = false;
+  PhotoEvaluateFlags flags_;
+};
 
 }  // namespace handdb::cli

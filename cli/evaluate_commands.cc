@@ -336,7 +336,7 @@ int RunEvaluate(int argc, char** argv) {
       "photos in DIR/<shape name>/*.jpg|png (top-1/5/10 against a chance baseline, per-shape "
       "table, confusion matrix, contact sheets), searched as --hand right, left or either, with "
       "the photo flags of handdb query; --keypoints FILE adds the 2D keypoint error on annotated "
-      "photos.",
+      "photos; --slurm splits the photos over a job array the same way.",
       "handdb evaluate");
   // Bound to the request of a Slurm run; a local run reads the same fields.
   EvaluateSlurmRequest request;
@@ -361,14 +361,16 @@ int RunEvaluate(int argc, char** argv) {
   app.add_flag("-q,--quiet", request.quiet, "no progress, no text report");
   slurm.Add(app);
   const char* group = "Slurm (docs/cluster.md)";
-  app.add_option(
-         "--tasks", request.tasks, "array tasks (default: one per 16 test views, at most 1000)")
+  app.add_option("--tasks",
+                 request.tasks,
+                 "array tasks (default: one per 16 test views or photos, at most 1000)")
       ->check(CLI::Range(1, 100000))
       ->group(group);
   app.add_option("--work",
                  request.work,
                  "directory for parts, scripts and logs (default: "
-                 "TESTSET/slurm-evaluations/<fingerprint>)")
+                 "TESTSET/slurm-evaluations/<fingerprint>; with --photos "
+                 "./slurm-evaluations/<fingerprint>)")
       ->group(group);
   if (int rc = ParseArgs(app, argc, argv); rc >= 0) return rc;
   if (!photos.flags.dir.empty()) {
@@ -376,14 +378,17 @@ int RunEvaluate(int argc, char** argv) {
     photos.db = request.db;
     photos.json_out = request.json_out;
     photos.quiet = request.quiet;
+    photos.tasks = request.tasks;
+    photos.work = request.work;
     // --input is this command's own option: a test view's input, or with --photos the kind of
     // picture (default auto, not clean).
     if (app.get_option("--input")->count() > 0) photos.flags.picture.input = flags.input;
     if (!photos.flags.Finish("evaluate", flags.options.num_threads, quiet)) return kExitUsage;
-    if (slurm.enabled) {
-      std::fprintf(stderr, "handdb evaluate: --photos runs locally only (no --slurm)\n");
+    if (!slurm.enabled && (request.tasks != 0 || !request.work.empty())) {
+      std::fprintf(stderr, "handdb evaluate: --tasks and --work need --slurm\n");
       return kExitUsage;
     }
+    if (slurm.enabled) return RunEvaluatePhotosOnSlurm(photos, slurm);
     return RunEvaluatePhotos(photos);
   }
   if (testset_path.empty()) {

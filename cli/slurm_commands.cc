@@ -464,8 +464,9 @@ int RunUnitStatus(const UnitArgs& args) {
 int RunUnit(int argc, char** argv) {
   CLI::App app(
       "Per-unit work, as run by the Slurm array tasks of `handdb generate --slurm` (one task = one "
-      "render unit) and `handdb evaluate --slurm` (one task = one slice of the test views). Every "
-      "subcommand is idempotent: finished renders, complete shards and parts are kept.",
+      "render unit) and `handdb evaluate --slurm` (one task = one slice of the test views or of "
+      "the photos). Every subcommand is idempotent: finished renders, complete shards and parts "
+      "are kept.",
       "handdb unit");
   app.require_subcommand(1);
   UnitArgs args;
@@ -504,11 +505,14 @@ int RunUnit(int argc, char** argv) {
   args.convert.Add(*status);
   status->add_flag("--json", args.as_json, "print the status as JSON on stdout");
 
-  // unit evaluate | evaluate-merge: the tasks of `handdb evaluate --slurm`.
+  // unit evaluate | evaluate-merge: the tasks of `handdb evaluate --slurm`; unit evaluate-photos |
+  // evaluate-photos-merge: those of `handdb evaluate --photos DIR --slurm`.
   UnitEvaluateCommands evaluate_commands(app);
+  UnitEvaluatePhotosCommands evaluate_photos_commands(app);
 
   if (int rc = ParseArgs(app, argc, argv); rc >= 0) return rc;
   if (evaluate_commands.parsed()) return evaluate_commands.Run();
+  if (evaluate_photos_commands.parsed()) return evaluate_photos_commands.Run();
   if (args.threads <= 0) args.threads = TaskThreads();
   if (render->parsed()) return RunUnitRender(args);
   if (convert->parsed()) return RunUnitConvert(args);

@@ -2,7 +2,8 @@
 // WriteManifest, shapes "alpha" and "beta", as tests/query_cli_test.cc makes it) and photo-like
 // pictures of some of its views sorted into shape folders, one of them filed under the wrong shape
 // and one without a hand; the text, --json (schema-checked) and --out outputs, and the errors;
-// --hand on a mirrored photo, --keypoints, the photo-path flags.
+// --hand on a mirrored photo, --keypoints, the photo-path flags, and the Slurm split's task and
+// merge commands run by hand (the real Slurm is tests/slurm/evaluate_test.sh).
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
@@ -428,6 +429,89 @@ TEST_F(EvaluatePhotosCli, PhotoFlagsReachThePhotoPath) {
   }
   r = Handdb(Db() + " " + (*dir_ / "no-testset").string() + " --input edges");
   EXPECT_EQ(r.code, 2);
+}
+
+// The Slurm split without Slurm: the array tasks' and the merge job's commands, run by hand, give
+// the report of a local run (but its timing); the dry run writes scripts that run them.
+TEST_F(EvaluatePhotosCli, TaskPartsMergeIntoTheLocalReport) {
+  const fs::path work = *dir_ / "work";
+  const fs::path local_json = *dir_ / "split-local.json";
+  const std::string common =
+      " --photos " + Photos() + " --hand either --skin 40,255,133,173,77,127";
+  CliRun local = Handdb(Db() + common + " --threads 1 --json " + local_json.string() + " --out " +
+                        (*dir_ / "split-local").string());
+  ASSERT_EQ(local.code, 0) << local.err;
+  auto unit = [&](const std::string& args) {
+    const std::string cmd = std::string(HANDDB_BINARY) + " unit " + args + " >" +
+                            (*dir_ / "unit.out").string() + " 2>&1";
+    return std::system(cmd.c_str());
+  };
+  const std::string split = " --tasks 3 --work " + work.string() + " --input auto";
+  for (int t = 0; t < 3; ++t) {
+    ASSERT_EQ(unit("evaluate-photos " + Db() + common + split + " -q --task " + std::to_string(t)),
+              0);
+  }
+  // A task whose part is complete keeps it.
+  ASSERT_EQ(unit("evaluate-photos " + Db() + common + split + " -q --task 1"), 0);
+  std::ifstream kept(*dir_ / "unit.out");
+  EXPECT_NE(std::string(std::istreambuf_iterator<char>(kept), {}).find("already complete"),
+            std::string::npos);
+  const fs::path merged_json = *dir_ / "split-merged.json";
+  ASSERT_EQ(unit("evaluate-photos-merge " + Db() + common + split + " --json " +
+                 merged_json.string() + " --out " + (*dir_ / "split-merged").string()),
+            0);
+  auto strip = [](nlohmann::json doc) {
+    for (const char* k : {"search_seconds",
+                          "input_seconds",
+                          "wall_seconds",
+                          "queries_per_second",
+                          "end_to_end_queries_per_second"}) {
+      doc["timing"].erase(k);
+    }
+    for (auto& p : doc["photos"]) {
+      p.erase("input_seconds");
+      p.erase("search_seconds");
+    }
+    return doc.dump(1);
+  };
+  EXPECT_EQ(strip(ReadJson(merged_json)), strip(ReadJson(local_json)));
+  std::ifstream text(work / "report.txt");
+  std::string merged_text(std::istreambuf_iterator<char>(text), {});
+  auto without_speed = [](std::string t) {
+    const size_t at = t.find("\nspeed ");
+    return t.substr(0, at) + t.substr(t.find('\n', at + 1));
+  };
+  EXPECT_EQ(without_speed(merged_text), without_speed(local.out));
+  for (const char* png : {"confusion.png", "successes.png", "failures.png"}) {
+    EXPECT_FALSE(cv::imread((*dir_ / "split-merged" / png).string()).empty()) << png;
+  }
+  // Another hand makes parts of another evaluation: refused, one line naming the part.
+  EXPECT_NE(unit("evaluate-photos-merge " + Db() + " --photos " + Photos() + " --hand right" +
+                 split + " -q"),
+            0);
+  std::ifstream err(*dir_ / "unit.out");
+  const std::string refused(std::istreambuf_iterator<char>(err), {});
+  EXPECT_NE(refused.find("part-00000.json: a part of another evaluation: made with other "
+                         "evaluation options (hand: \"either\" vs \"right\")"),
+            std::string::npos)
+      << refused;
+
+  const fs::path no_annotations = *dir_ / "dry-keypoints.json";
+  std::ofstream(no_annotations)
+      << R"({"format": "handdb-photo-keypoints", "version": 1, "images": {}})";
+  CliRun dry = Handdb(Db() + common + " --keypoints " + no_annotations.string() +
+                      " --slurm --dry-run --tasks 2 --work " + (*dir_ / "dry").string());
+  ASSERT_EQ(dry.code, 0) << dry.err;
+  EXPECT_NE(dry.out.find("dry run: 4 photos in 2 tasks, 2 to run (0-1)"), std::string::npos)
+      << dry.out;
+  EXPECT_NE(dry.out.find("--dependency=afterok:"), std::string::npos) << dry.out;
+  std::ifstream script(*dir_ / "dry" / "evaluate-array.sbatch");
+  const std::string array(std::istreambuf_iterator<char>(script), {});
+  EXPECT_NE(array.find("'evaluate-photos'"), std::string::npos) << array;
+  EXPECT_NE(array.find("'--keypoints'"), std::string::npos) << array;
+  EXPECT_NE(array.find("'--hand' 'either'"), std::string::npos) << array;
+  EXPECT_EQ(Handdb(Db() + common + " --slurm --dry-run --tasks 5").code, 2);  // > 4 photos
+  EXPECT_EQ(Handdb(Db() + common + " --tasks 2").code, 2);                    // needs --slurm
 }
 
 }  // namespace

@@ -8,7 +8,10 @@
 #   2. a task that fails is reported with its task number and log path; the re-run submits only
 #      that task and gives the same report;
 #   3. the merge refuses a missing part and a part of another evaluation with one line naming
-#      the file; a dry run prints the array and the afterok merge job.
+#      the file; a dry run prints the array and the afterok merge job;
+#   4. `handdb evaluate DB --photos DIR --keypoints K --slurm` (3 tasks + merge) gives the report
+#      of a local --photos run: text (but the speed line), --json (but timing), --out images byte
+#      for byte; a re-run with every part complete submits only the merge job.
 # Usage: evaluate_test.sh HANDDB_EXE SOURCE_DIR   (exit 77 = skipped)
 set -euo pipefail
 # shellcheck source=tests/slurm/lib.sh
@@ -132,5 +135,68 @@ grep -q -- "--array=0-2%2" dry.txt || die "dry run: no --array=0-2%2"
 grep -q -- "--dependency=afterok:" dry.txt || die "dry run: no afterok dependency"
 grep -q -- "#SBATCH --partition=local" w4/evaluate-array.sbatch || die "dry run: no partition"
 [ ! -e w4/jobs.json ] || die "dry run submitted jobs"
+
+step "case 4: --photos on Slurm (3 tasks), compare with a local --photos run"
+# Real photos (tests/data/photos, with their licence) filed under the database's two shapes, and
+# annotations of two of them: only the agreement of the two runs matters here, not the scores.
+mkdir -p photos/flat photos/fist
+cp "$SRC"/tests/data/photos/asl-digits/asl-5/*.JPG photos/flat/
+cp "$SRC"/tests/data/photos/asl-digits/asl-0/*.JPG photos/fist/
+"$PY" - photos >kp.json <<'PY'
+import json, os, sys
+names = sorted(os.listdir(os.path.join(sys.argv[1], "flat")))[:2]
+kps = [[30 + 2 * k, 20 + 3 * (k % 5)] for k in range(21)]
+kps[4].append(False)
+print(json.dumps({"format": "handdb-photo-keypoints", "version": 1,
+                  "images": {"flat/" + n: kps for n in names}}))
+PY
+strip_photo_json() {
+  "$PY" - "$1" <<'PY'
+import json, sys
+doc = json.load(open(sys.argv[1]))
+for k in ("search_seconds", "input_seconds", "wall_seconds", "queries_per_second",
+          "end_to_end_queries_per_second"):
+    del doc["timing"][k]
+for p in doc["photos"]:
+    del p["search_seconds"], p["input_seconds"]
+print(json.dumps(doc, indent=1, sort_keys=True))
+PY
+}
+# $1 (text), $2 (JSON), $3 (--out dir) equal the local --photos run's.
+same_as_local_photos() {
+  diff <(grep -v '^speed ' local_photos.txt) <(grep -v '^speed ' "$1") || die "$1: text report differs"
+  diff <(strip_photo_json local_photos.json) <(strip_photo_json "$2") || die "$2: JSON report differs"
+  local f
+  for f in confusion.png successes.png failures.png; do
+    cmp "local_photos/$f" "$3/$f" || die "$3/$f differs from the local image"
+  done
+  echo "$1, $2, $3: same as the local --photos run"
+}
+"$HANDDB" evaluate db --photos photos --keypoints kp.json --threads 1 --json local_photos.json \
+  --out local_photos >local_photos.txt 2>/dev/null
+grep -q "^2D keypoints (kp.json): 2 of 6 photos annotated" local_photos.txt ||
+  die "local --photos run: no keypoint section"
+"$HANDDB" evaluate db --photos photos --keypoints kp.json --threads 1 --json s4.json --out s4_out \
+  --slurm --tasks 3 --wait --poll 0.5 >s4.txt 2>s4.err || { cat s4.err; die "case 4: evaluate --photos --slurm failed"; }
+grep -q "submitted 3 of 3 tasks (0-2)" s4.err || die "case 4: expected 3 tasks submitted"
+same_as_local_photos s4.txt s4.json s4_out
+w4="$(ls -d "$work"/slurm-evaluations/*)"
+[ "$(ls "$w4/parts")" = "$(printf 'part-00000.json\npart-00001.json\npart-00002.json')" ] ||
+  die "case 4: parts in $w4/parts"
+"$PY" - "$w4/parts" <<'PY' || die "case 4: part contents"
+import json, sys, os
+seen = []
+for t in range(3):
+    p = json.load(open(os.path.join(sys.argv[1], "part-%05d.json" % t)))
+    assert p["format"] == "handdb-photo-evaluation-part" and p["task"] == t and p["tasks"] == 3
+    assert len(p["photos"]) == 2, p["photos"]
+    seen += [x["photo"] for x in p["photos"]]
+assert len(set(seen)) == 6, seen
+PY
+rm -rf s4_out s4.json
+"$HANDDB" evaluate db --photos photos --keypoints kp.json --threads 1 --json s4.json --out s4_out \
+  --slurm --tasks 3 --wait --poll 0.5 >s4b.txt 2>s4b.err || { cat s4b.err; die "case 4: re-run failed"; }
+grep -q "submitted 0 of 3 tasks (none)" s4b.err || die "case 4: re-run should submit no task"
+same_as_local_photos s4b.txt s4.json s4_out
 
 step "all Slurm evaluation cases passed"
