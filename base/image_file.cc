@@ -125,7 +125,9 @@ std::optional<ImageSize> ReadImageSize(const std::filesystem::path& path) {
   return size;
 }
 
-Status CheckImageFileComplete(const std::filesystem::path& path) {
+Status CheckImageFileComplete(const std::filesystem::path& path,
+                              uint64_t max_pixels,
+                              uint64_t max_jpeg_pixels) {
   if (Status s = CheckRegularFile(path); !s.ok()) return s;
   const std::string name = path.string();
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
@@ -140,11 +142,13 @@ Status CheckImageFileComplete(const std::filesystem::path& path) {
   const std::optional<ImageSize> size = SizeFromHeader(fd);
   ::close(fd);
   // Issue 14 item 3: refused from the header, before a decoder allocates width x height.
-  if (size && size->width * size->height > kMaxImagePixels) {
+  const uint64_t limit =
+      size && std::string_view(size->format) == "JPEG" ? max_jpeg_pixels : max_pixels;
+  if (size && size->width * size->height > limit) {
     return Status(StatusCode::kBadImage,
                   name + ": " + std::to_string(size->width) + " x " + std::to_string(size->height) +
                       " pixels (" + size->format + " header), more than the " +
-                      std::to_string(kMaxImagePixels) + " (64 Mpx) allowed");
+                      std::to_string(limit) + " (" + std::to_string(limit >> 20) + " Mpx) allowed");
   }
   const std::string_view h(head);
   if (h.size() >= 3 && h.substr(0, 3) == std::string_view("\xFF\xD8\xFF", 3)) {

@@ -15,6 +15,9 @@ namespace handdb {
 // phone photo fits). A decoded image costs ~15 bytes per pixel through the query pipeline, so a
 // 20000 x 20000 PNG of 5 MB peaked at 6.1 GB (issue 14 item 3); at the limit it is ~1 GB.
 constexpr uint64_t kMaxImagePixels = uint64_t{1} << 26;
+// A JPEG can be decoded at 1/2, 1/4 or 1/8 of its size without ever holding the full image, so
+// callers that do that may accept JPEGs up to 64x kMaxImagePixels (a 65536 x 65536 picture).
+constexpr uint64_t kMaxJpegPixels = kMaxImagePixels * 64;
 
 // Width and height from an image file's header, without decoding: PNG (IHDR), JPEG (the first
 // SOFn marker), PNM (P1-P6) and BMP. nullopt for other formats or a header that does not parse.
@@ -32,6 +35,9 @@ std::optional<ImageSize> ReadImageSize(const std::filesystem::path& path);
 // refuses above its own 2^30 pixels).
 // kBadImage "<file>: truncated JPEG (no end-of-image marker)" / "... PNG (no IEND chunk)" /
 // "<file>: 20000 x 20000 pixels (PNG header), more than the 67108864 (64 Mpx) allowed".
-Status CheckImageFileComplete(const std::filesystem::path& path);
+// `max_jpeg_pixels` is the limit for JPEGs (a caller that decodes them reduced may allow more).
+Status CheckImageFileComplete(const std::filesystem::path& path,
+                              uint64_t max_pixels = kMaxImagePixels,
+                              uint64_t max_jpeg_pixels = kMaxImagePixels);
 
 }  // namespace handdb

@@ -59,6 +59,17 @@ void PhotoInputFlags::Add(CLI::App& app, Which which) {
       "--edges-outside",
       [this] { edges.interior_edges_only = false; },
       "photo: also keep Canny edges up to 4 px outside the hand region (before issue 16)");
+  app.add_option("--work-diameter",
+                 edges.work_diameter_px,
+                 "photo: resample the hand to this diameter in px before the mask clean-up and "
+                 "Canny (0: the picture's own pixels)")
+      ->check(CLI::Range(0.0, 4096.0))
+      ->capture_default_str();
+  app.add_flag_callback(
+      "--no-wrist-cut",
+      [this] { edges.cut_forearm = false; },
+      "photo: keep a forearm that leaves the picture (by default it is cut off at the wrist, "
+      "docs/query.md)");
 }
 
 bool PhotoInputFlags::Finish(const std::string& cmd) {
@@ -111,6 +122,13 @@ bool PhotoInputFlags::Finish(const std::string& cmd) {
     edges.canny_low = v[0];
     edges.canny_high = v[1];
   }
+  if (edges.work_diameter_px != 0 && edges.work_diameter_px < 16) {
+    std::fprintf(stderr,
+                 "handdb %s: --work-diameter %g: 0 (the picture's own pixels) or 16..4096 px\n",
+                 c,
+                 edges.work_diameter_px);
+    return false;
+  }
   if (!edges.Check()) {
     std::fprintf(stderr, "handdb %s: invalid photo options (see above)\n", c);
     return false;
@@ -135,6 +153,8 @@ std::vector<std::string> PhotoInputFlags::Args() const {
   if (!skin.empty()) args.insert(args.end(), {"--skin", skin});
   if (!canny.empty()) args.insert(args.end(), {"--canny", canny});
   if (!edges.interior_edges_only) args.push_back("--edges-outside");
+  args.insert(args.end(), {"--work-diameter", std::to_string(edges.work_diameter_px)});
+  if (!edges.cut_forearm) args.push_back("--no-wrist-cut");
   return args;
 }
 
@@ -147,7 +167,9 @@ nlohmann::json PhotoInputFlags::ToJson() const {
       {"skin", {s.y_min, s.y_max, s.cr_min, s.cr_max, s.cb_min, s.cb_max}},
       {"canny", {edges.canny_low, edges.canny_high}},
       {"contour_clearance_px", edges.contour_clearance_px},
-      {"interior_edges_only", edges.interior_edges_only}};
+      {"interior_edges_only", edges.interior_edges_only},
+      {"work_diameter_px", edges.work_diameter_px},
+      {"cut_forearm", edges.cut_forearm}};
 }
 
 void HandFlag::Add(CLI::App& app, const std::string& what) {

@@ -16,8 +16,8 @@
 
 namespace handdb::cli {
 
-// --input, --mask, --roi, --skin, --canny, --contour-clearance, --edges-outside, bound to
-// ImageEdgeOptions.
+// --input, --mask, --roi, --skin, --canny, --contour-clearance, --edges-outside,
+// --work-diameter, --no-wrist-cut, bound to ImageEdgeOptions.
 struct PhotoInputFlags {
   std::string input = std::string(QueryInputKindName(QueryInputKind::kAuto));
   std::string mask, roi, skin, canny;

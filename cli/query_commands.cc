@@ -69,13 +69,15 @@ void PrintTable(const std::vector<Match>& matches,
                 const QueryEdges& q,
                 const SearchStats& st,
                 const Database& db) {
-  std::printf("query: %zu edge points (%s, %dx%d, hand diameter %.1f px)%s\n",
-              q.points.size(),
-              std::string(QueryInputKindName(q.kind)).c_str(),
-              q.width,
-              q.height,
-              q.diameter_px,
-              q.touches_border ? "  [warning: the hand touches the image border]" : "");
+  std::printf(
+      "query: %zu edge points (%s, %dx%d, hand diameter %.1f px%s)%s\n",
+      q.points.size(),
+      std::string(QueryInputKindName(q.kind)).c_str(),
+      q.width,
+      q.height,
+      q.diameter_px,
+      q.forearm_cut ? ", forearm cut at the wrist" : "",
+      q.touches_border && !q.forearm_cut ? "  [warning: the hand touches the image border]" : "");
   std::printf(
       "database: %zu views x %u rolls = %llu virtual views; exact D_c for %llu (%.2f%%), "
       "%.1f ms\n\n",
@@ -233,21 +235,33 @@ json ResultJson(const QueryFlags& flags,
   int rank = 1;
   for (const Match& m : matches) matches_json.push_back(MatchJson(m, rank++, query));
   const SearchOptions& search = flags.search;
+  json query_json = {{"edge_points", query.points.size()},
+                     {"width", query.width},
+                     {"height", query.height},
+                     {"hand_pixels", query.hand_pixels},
+                     {"touches_border", query.touches_border},
+                     {"diameter_px", query.diameter_px},
+                     {"centre_px", {query.centre_x, query.centre_y}},
+                     {"scale", query.scale}};
+  if (query.kind == QueryInputKind::kPhoto) {
+    query_json["work_scale"] = query.work_scale;
+    query_json["forearm_cut"] = query.forearm_cut;
+    if (query.palm_radius_px > 0) {
+      query_json["palm"] = {{"centre_px", {query.palm_centre_x, query.palm_centre_y}},
+                            {"radius_px", query.palm_radius_px}};
+    }
+    if (query.forearm_cut) {
+      query_json["wrist_line_px"] = {{query.wrist_line[0], query.wrist_line[1]},
+                                     {query.wrist_line[2], query.wrist_line[3]}};
+    }
+  }
   return {{"format", "handdb-query-result"},
           {"version", 1},
           {"tool_version", HANDDB_VERSION},
           {"database", flags.db_dir},
           {"image", flags.image},
           {"input_kind", std::string(QueryInputKindName(query.kind))},
-          {"query",
-           {{"edge_points", query.points.size()},
-            {"width", query.width},
-            {"height", query.height},
-            {"hand_pixels", query.hand_pixels},
-            {"touches_border", query.touches_border},
-            {"diameter_px", query.diameter_px},
-            {"centre_px", {query.centre_x, query.centre_y}},
-            {"scale", query.scale}}},
+          {"query", query_json},
           {"options",
            {{"top_k", search.top_k},
             {"threads", ResolveNumThreads(search.num_threads)},

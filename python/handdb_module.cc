@@ -222,6 +222,10 @@ ImageEdgeOptions EdgeOptionsFromKwargs(const py::kwargs& kw) {
       o.contour_clearance_px = py::cast<int>(value);
     } else if (key == "edges_outside") {
       o.interior_edges_only = !py::cast<bool>(value);
+    } else if (key == "work_diameter") {
+      o.work_diameter_px = py::cast<double>(value);
+    } else if (key == "wrist_cut") {
+      o.cut_forearm = py::cast<bool>(value);
     } else {
       throw py::type_error("unexpected keyword argument '" + key + "'");
     }
@@ -229,7 +233,8 @@ ImageEdgeOptions EdgeOptionsFromKwargs(const py::kwargs& kw) {
   if (!o.Check()) {
     throw py::value_error(
         "invalid photo options (skin box within 0..255 and min <= max, 0 <= canny low <= high, "
-        "contour_clearance 0..20)");
+        "contour_clearance 0..20, "
+        "work_diameter 0 or 16..4096)");
   }
   return o;
 }
@@ -1029,7 +1034,8 @@ PYBIND11_MODULE(_handdb, m) {
       "A query image -> QueryEdges (normalised points), exactly as `handdb query` converts it.\n\n"
       "Options, named like the command's flags: input='auto'|'photo'|'edges'|'labels', "
       "mask=path, roi=(x, y, w, h), skin=(Ymin, Ymax, Crmin, Crmax, Cbmin, Cbmax), "
-      "canny=(low, high), contour_clearance=2, edges_outside=False. database (a Database or "
+      "canny=(low, high), contour_clearance=2, edges_outside=False, work_diameter=128, "
+      "wrist_cut=True. database (a Database or "
       "its path): label EXRs use the edge options it was converted with.");
 
   m.def("validate",

@@ -119,8 +119,10 @@ class EvaluatePhotosCli : public ::testing::Test {
     cv::convexHull(all, hull);
     cv::Mat img(edges.size(), CV_8UC3, cv::Scalar(150, 110, 80));
     cv::fillConvexPoly(img, hull, cv::Scalar(120, 150, 210));
+    // Strokes 7 px wide, 1/41 of the hand: thinner ones are under 2 px at the photo path's
+    // 128 px working size and Canny does not see them (as tests/query_cli_test.cc).
     cv::Mat thick;
-    cv::dilate(edges, thick, cv::Mat::ones(3, 3, CV_8U));
+    cv::dilate(edges, thick, cv::Mat::ones(7, 7, CV_8U));
     img.setTo(cv::Scalar(70, 95, 150), thick);
     return img;
   }
@@ -305,8 +307,10 @@ TEST_F(EvaluatePhotosCli, EitherHandFindsAMirroredPhotoAsALeftHand) {
   doc = ReadJson(right);
   EXPECT_EQ(doc["search"]["hand"], "right");
   EXPECT_EQ(doc["top1_hands"]["left"], 0);
+  // (Canny finds both sides of a stroke, so the left match is ~3.7 px, not ~0; the best right-hand
+  // view is ~7.)
   EXPECT_GT(doc["photos"][0]["match_distances"][0].get<double>(),
-            3 * left["match_distances"][0].get<double>());
+            1.5 * left["match_distances"][0].get<double>());
 
   r = Handdb(Db() + " --photos " + photos.string() + " --hand left -q");
   EXPECT_EQ(r.code, 0) << r.err;

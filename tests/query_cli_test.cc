@@ -107,9 +107,11 @@ class QueryCli : public ::testing::Test {
     cv::convexHull(all, hull);
     cv::Mat img(edges.size(), CV_8UC3, cv::Scalar(150, 110, 80));
     cv::fillConvexPoly(img, hull, cv::Scalar(120, 150, 210));
-    // Strokes 3 px wide, as a photographed crease or finger border would be.
+    // Strokes 7 px wide (1/41 of this ~290 px hand), as a photographed finger border would be.
+    // The photo path works at a 128 px hand (docs/query.md), where a stroke of 1/96 of the hand
+    // (3 px here) is under 1.5 px wide there and Canny no longer sees it.
     cv::Mat thick;
-    cv::dilate(edges, thick, cv::Mat::ones(3, 3, CV_8U));
+    cv::dilate(edges, thick, cv::Mat::ones(7, 7, CV_8U));
     img.setTo(cv::Scalar(70, 95, 150), thick);
     return img;
   }

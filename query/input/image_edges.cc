@@ -2,9 +2,12 @@
 
 #include <algorithm>
 #include <charconv>
+#include <cmath>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <optional>
 #include <string>
+#include <string_view>
 #include <system_error>
 #include <utility>
 
@@ -153,8 +156,218 @@ Result<QueryEdges> FromLabels(const std::filesystem::path& path, const ImageEdge
   return out;
 }
 
+cv::Mat Ellipse(double size) {
+  int k = std::max(1, static_cast<int>(std::lround(size)));
+  if (k % 2 == 0) ++k;
+  return cv::getStructuringElement(cv::MORPH_ELLIPSE, {k, k});
+}
+
+// A colour image whose three channels are equal everywhere has no skin colour to find.
+bool IsGrey(const cv::Mat& bgr) {
+  std::vector<cv::Mat> ch;
+  cv::split(bgr, ch);
+  return cv::countNonZero(ch[0] != ch[1]) == 0 && cv::countNonZero(ch[0] != ch[2]) == 0;
+}
+
+cv::Mat SkinMask(const cv::Mat& bgr, const SkinModel& s) {
+  cv::Mat ycrcb, out;
+  cv::cvtColor(bgr, ycrcb, cv::COLOR_BGR2YCrCb);
+  cv::inRange(
+      ycrcb, cv::Scalar(s.y_min, s.cr_min, s.cb_min), cv::Scalar(s.y_max, s.cr_max, s.cb_max), out);
+  return out;
+}
+
+// Speckle removed, small gaps closed: a 3x3 opening and a 5x5 closing at the reference hand
+// size, scaled by `s`.
+void CleanMask(cv::Mat* mask, double s) {
+  cv::morphologyEx(*mask, *mask, cv::MORPH_OPEN, Ellipse(3 * s));
+  cv::morphologyEx(*mask, *mask, cv::MORPH_CLOSE, Ellipse(5 * s));
+}
+
+struct Regions {
+  cv::Mat labels;
+  int largest = 0;  // label of the largest region (0: none)
+  int largest_area = 0;
+  int second_area = 0;
+  cv::Rect largest_box;
+};
+
+Regions LargestRegions(const cv::Mat& mask) {
+  Regions r;
+  cv::Mat stats, centroids;
+  const int n = cv::connectedComponentsWithStats(mask, r.labels, stats, centroids, 8, CV_32S);
+  for (int i = 1; i < n; ++i) {
+    const int area = stats.at<int>(i, cv::CC_STAT_AREA);
+    if (area > r.largest_area) {
+      r.second_area = r.largest_area;
+      r.largest_area = area;
+      r.largest = i;
+    } else {
+      r.second_area = std::max(r.second_area, area);
+    }
+  }
+  if (r.largest > 0) {
+    r.largest_box = cv::Rect(stats.at<int>(r.largest, cv::CC_STAT_LEFT),
+                             stats.at<int>(r.largest, cv::CC_STAT_TOP),
+                             stats.at<int>(r.largest, cv::CC_STAT_WIDTH),
+                             stats.at<int>(r.largest, cv::CC_STAT_HEIGHT));
+  }
+  return r;
+}
+
+// The largest distance between two pixel centres of the region (its convex hull's diameter).
+double RegionDiameter(const cv::Mat& region) {
+  std::vector<cv::Point> pts;
+  cv::findNonZero(region, pts);
+  if (pts.size() < 2) return 0;
+  std::vector<cv::Point> hull;
+  cv::convexHull(pts, hull);
+  double best = 0;
+  for (size_t i = 0; i < hull.size(); ++i) {
+    for (size_t j = i + 1; j < hull.size(); ++j) {
+      best =
+          std::max(best, std::hypot(double(hull[i].x - hull[j].x), double(hull[i].y - hull[j].y)));
+    }
+  }
+  return best;
+}
+
+struct BorderRun {
+  int length = 0;        // px along the border, bridged gaps included
+  cv::Point2d centroid;  // of the run's region pixels (pixel centres at +0.5)
+};
+
+// Runs of the region's pixels along the picture's border, walked once around it (top left to
+// right, right side down, bottom right to left, left side up); runs separated by fewer than
+// `gap` background pixels are one run (a dark band across a forearm, a strap).
+std::vector<BorderRun> BorderRuns(const cv::Mat& region, int gap) {
+  const int w = region.cols;
+  const int h = region.rows;
+  std::vector<cv::Point> ring;
+  for (int x = 0; x < w; ++x) ring.emplace_back(x, 0);
+  for (int y = 1; y < h; ++y) ring.emplace_back(w - 1, y);
+  for (int x = w - 2; x >= 0 && h > 1; --x) ring.emplace_back(x, h - 1);
+  for (int y = h - 2; y >= 1 && w > 1; --y) ring.emplace_back(0, y);
+  const int n = static_cast<int>(ring.size());
+  const auto on = [&](int i) { return region.at<uint8_t>(ring[i % n]) != 0; };
+  int start = -1;  // a background pixel to start from (none: the region surrounds the picture)
+  for (int i = 0; i < n; ++i) {
+    if (!on(i)) {
+      start = i;
+      break;
+    }
+  }
+  std::vector<BorderRun> runs;
+  BorderRun run;
+  int pixels = 0, bg = 0;
+  const auto close_run = [&] {
+    if (run.length > 0) {
+      run.centroid /= std::max(1, pixels);
+      runs.push_back(run);
+    }
+    run = {};
+    pixels = 0;
+  };
+  if (start < 0) {
+    for (int i = 0; i < n; ++i) run.centroid += cv::Point2d(ring[i].x + 0.5, ring[i].y + 0.5);
+    run.length = pixels = n;
+    close_run();
+    return runs;
+  }
+  for (int k = 1; k <= n; ++k) {
+    const int i = (start + k) % n;
+    if (on(i)) {
+      if (run.length > 0 && bg > 0 && bg < gap) {
+        run.length += bg;  // bridge a short gap
+      } else if (run.length > 0 && bg > 0) {
+        close_run();
+      }
+      bg = 0;
+      ++run.length;
+      ++pixels;
+      run.centroid += cv::Point2d(ring[i].x + 0.5, ring[i].y + 0.5);
+    } else if (run.length > 0) {
+      ++bg;
+    }
+  }
+  close_run();
+  return runs;
+}
+
+struct WristCut {
+  bool arm = false;  // an arm leaves the picture (a border run at least kArmRadii palm radii)
+  bool cut = false;  // and part of it was cut off
+  cv::Point2d palm_centre;  // working px (pixel centres at +0.5)
+  double palm_radius = 0;
+  cv::Point2d a, b;  // the cut line's ends across the region, working px
+};
+
+// A wrist is 1.2-2 palm radii wide (a fist has the largest radius); one finger is about half a
+// radius to one radius (fingers leaving the picture side by side are separate runs).
+constexpr double kArmRadii = 0.8;
+
+// The palm is the region's largest inscribed circle (distance-transform maximum; the picture's
+// border counts as background, so an arm running out of the picture does not look wide). The arm
+// is the region's widest run along the picture's border, if it is at least kArmRadii palm radii
+// long (fingers that leave the picture are narrower, and are not an arm); it leaves in the
+// direction from the palm centre to that run's centroid. Everything farther than `radii` palm
+// radii from the palm centre along that direction is the forearm and is removed. A region that
+// does not touch the border, or only with narrow runs, is left alone.
+WristCut CutForearm(cv::Mat* region, double radii) {
+  WristCut out;
+  cv::Mat padded;
+  cv::copyMakeBorder(*region, padded, 1, 1, 1, 1, cv::BORDER_CONSTANT, 0);
+  cv::Mat dt;
+  cv::distanceTransform(padded, dt, cv::DIST_L2, cv::DIST_MASK_PRECISE);
+  double max_dt = 0;
+  cv::Point at;
+  cv::minMaxLoc(dt, nullptr, &max_dt, nullptr, &at);
+  if (max_dt <= 0) return out;
+  out.palm_centre = {at.x - 1 + 0.5, at.y - 1 + 0.5};
+  out.palm_radius = max_dt;
+  const int w = region->cols;
+  const int h = region->rows;
+  const std::vector<BorderRun> runs = BorderRuns(*region, 1);
+  const auto widest =
+      std::max_element(runs.begin(), runs.end(), [](const BorderRun& a, const BorderRun& b) {
+        return a.length < b.length;
+      });
+  if (widest == runs.end() || widest->length < kArmRadii * out.palm_radius) return out;
+  out.arm = true;
+  cv::Point2d dir = widest->centroid - out.palm_centre;
+  const double len = std::hypot(dir.x, dir.y);
+  if (len < 1e-9) return out;
+  dir /= len;
+  const double limit = radii * out.palm_radius;
+  double lo = 1e30, hi = -1e30;  // extent of the cut line across the region
+  for (int y = 0; y < h; ++y) {
+    uint8_t* row = region->ptr<uint8_t>(y);
+    for (int x = 0; x < w; ++x) {
+      if (!row[x]) continue;
+      const double px = x + 0.5 - out.palm_centre.x, py = y + 0.5 - out.palm_centre.y;
+      if (px * dir.x + py * dir.y > limit) {
+        row[x] = 0;
+        out.cut = true;
+        const double across = -px * dir.y + py * dir.x;
+        lo = std::min(lo, across);
+        hi = std::max(hi, across);
+      }
+    }
+  }
+  if (out.cut) {
+    const cv::Point2d base = out.palm_centre + dir * limit;
+    const cv::Point2d perp(-dir.y, dir.x);
+    out.a = base + perp * lo;
+    out.b = base + perp * hi;
+  }
+  return out;
+}
+
+// `source` is the picture's size in its file: larger than `any` when a huge JPEG was decoded
+// reduced (a mask then has the file's size and is reduced the same way).
 Result<QueryEdges> FromPhoto(const std::filesystem::path& path,
                              const cv::Mat& any,
+                             cv::Size source,
                              const ImageEdgeOptions& options) {
   const std::string what = path.string();
   cv::Mat bgr;
@@ -168,38 +381,38 @@ Result<QueryEdges> FromPhoto(const std::filesystem::path& path,
   const int w = bgr.cols;
   const int h = bgr.rows;
 
-  // 1. Hand candidates: the mask, or skin colour.
+  // 1. Hand candidates at the picture's resolution: the mask, or skin colour.
   cv::Mat cand;
-  if (!options.mask.empty()) {
+  const bool use_mask = !options.mask.empty();
+  if (use_mask) {
     std::error_code ec;
     if (!std::filesystem::exists(options.mask, ec)) {
       return Status(StatusCode::kNotFound, options.mask.string() + ": no such mask file");
     }
-    const cv::Mat m = cv::imread(options.mask.string(), cv::IMREAD_GRAYSCALE);
+    cv::Mat m = cv::imread(options.mask.string(), cv::IMREAD_GRAYSCALE);
+    if (!m.empty() && m.size() == source && source != bgr.size()) {
+      cv::resize(m, m, bgr.size(), 0, 0, cv::INTER_AREA);
+    }
     if (m.empty()) {
       return Status(StatusCode::kBadImage, options.mask.string() + ": cannot read the mask image");
     }
     if (m.cols != w || m.rows != h) {
       return Status(StatusCode::kBadImage,
                     options.mask.string() + ": mask is " + std::to_string(m.cols) + "x" +
-                        std::to_string(m.rows) + ", the image " + std::to_string(w) + "x" +
-                        std::to_string(h));
+                        std::to_string(m.rows) + ", the image " + std::to_string(source.width) +
+                        "x" + std::to_string(source.height));
     }
     cand = m != 0;
   } else {
-    cv::Mat ycrcb;
-    cv::cvtColor(bgr, ycrcb, cv::COLOR_BGR2YCrCb);
-    const SkinModel& s = options.skin;
-    cv::inRange(ycrcb,
-                cv::Scalar(s.y_min, s.cr_min, s.cb_min),
-                cv::Scalar(s.y_max, s.cr_max, s.cb_max),
-                cand);
-    // Remove speckle, close small gaps.
-    const cv::Mat k3 = cv::getStructuringElement(cv::MORPH_ELLIPSE, {3, 3});
-    const cv::Mat k5 = cv::getStructuringElement(cv::MORPH_ELLIPSE, {5, 5});
-    cv::morphologyEx(cand, cand, cv::MORPH_OPEN, k3);
-    cv::morphologyEx(cand, cand, cv::MORPH_CLOSE, k5);
+    if (IsGrey(bgr)) {
+      return Status(StatusCode::kNoHand,
+                    what + ": a grey image (" + std::to_string(source.width) + "x" +
+                        std::to_string(source.height) +
+                        ") has no skin colour to find the hand by; give its region with --mask");
+    }
+    cand = SkinMask(bgr, options.skin);
   }
+  cv::Mat keep;  // the ROI: where the hand may be
   if (!options.roi.empty()) {
     const PixelRect& r = options.roi;
     if (r.x < 0 || r.y < 0 || r.x + r.width > w || r.y + r.height > h) {
@@ -209,70 +422,236 @@ Result<QueryEdges> FromPhoto(const std::filesystem::path& path,
                         " is not inside the " + std::to_string(w) + "x" + std::to_string(h) +
                         " image");
     }
-    cv::Mat keep = cv::Mat::zeros(h, w, CV_8U);
+    keep = cv::Mat::zeros(h, w, CV_8U);
     keep(cv::Rect(r.x, r.y, r.width, r.height)).setTo(255);
-    cand &= keep;
   }
 
-  // 2. The largest 8-connected region is the hand.
-  cv::Mat labels, stats, centroids;
-  const int n = cv::connectedComponentsWithStats(cand, labels, stats, centroids, 8, CV_32S);
-  int best = 0;
-  int best_area = 0;
-  for (int i = 1; i < n; ++i) {
-    const int area = stats.at<int>(i, cv::CC_STAT_AREA);
-    if (area > best_area) {
-      best_area = area;
-      best = i;
-    }
+  // 2. Find the hand: the largest 8-connected region, on a copy at most kFindSide px across (a
+  // 12 Mpx photo needs no more to be found, and the clean-up costs little there).
+  constexpr int kFindSide = 512;
+  const double find_scale = std::min(1.0, double(kFindSide) / std::max(w, h));
+  cv::Mat small = cand;
+  if (!keep.empty()) small = cand & keep;
+  if (find_scale < 1) {
+    cv::resize(small, small, cv::Size(), find_scale, find_scale, cv::INTER_AREA);
+    small = small > 127;
   }
-  if (best_area < options.min_hand_pixels) {
+  if (!use_mask) CleanMask(&small, 1.0);
+  const Regions found = LargestRegions(small);
+  const double px_per_found = 1.0 / (find_scale * find_scale);  // picture px per found px
+  const auto area_px = [&](int area) {
+    return static_cast<int64_t>(std::llround(area * px_per_found));
+  };
+  if (area_px(found.largest_area) < options.min_hand_pixels) {
     return Status(StatusCode::kNoHand,
                   what + ": no hand found (largest " +
-                      std::string(options.mask.empty() ? "skin-coloured" : "mask") +
-                      " region has " + std::to_string(best_area) + " pixels, need " +
+                      std::string(use_mask ? "mask" : "skin-coloured") + " region has " +
+                      std::to_string(area_px(found.largest_area)) + " pixels, need " +
                       std::to_string(options.min_hand_pixels) + ")");
   }
-  const cv::Mat hand = labels == best;
+  if (options.second_region_share > 0 && area_px(found.second_area) >= options.min_hand_pixels &&
+      found.second_area >= options.second_region_share * found.largest_area) {
+    return Status(StatusCode::kNoHand,
+                  what + ": two hand-sized " + std::string(use_mask ? "mask" : "skin-coloured") +
+                      " regions (" + std::to_string(area_px(found.largest_area)) + " and " +
+                      std::to_string(area_px(found.second_area)) +
+                      " pixels): crop the picture to one hand, or give --roi or --mask");
+  }
+  const double found_diameter = RegionDiameter(found.labels == found.largest) / find_scale;
 
-  // 3. Silhouette contour with the converter's rule (a one-link label image).
+  // 3. Crop around the hand (a margin of a fifth of its diameter, for the clean-up and Canny)
+  // and resample it to the working size.
+  const double work_scale = options.work_diameter_px > 0 && found_diameter > 0
+                                ? options.work_diameter_px / found_diameter
+                                : 1.0;
+  const double s =
+      options.work_diameter_px > 0 ? options.work_diameter_px / kReferenceHandDiameterPx : 1.0;
+  cv::Rect crop(0, 0, w, h);
+  if (options.work_diameter_px > 0) {
+    const double margin = 0.2 * found_diameter + 4;
+    const cv::Rect b = found.largest_box;
+    const int x0 = std::max(0, static_cast<int>(std::floor(b.x / find_scale - margin)));
+    const int y0 = std::max(0, static_cast<int>(std::floor(b.y / find_scale - margin)));
+    const int x1 = std::min(w, static_cast<int>(std::ceil((b.x + b.width) / find_scale + margin)));
+    const int y1 = std::min(h, static_cast<int>(std::ceil((b.y + b.height) / find_scale + margin)));
+    crop = cv::Rect(x0, y0, std::max(1, x1 - x0), std::max(1, y1 - y0));
+  }
+  cv::Mat work_bgr = bgr(crop);
+  cv::Mat work_cand = cand(crop);
+  if (!keep.empty()) work_cand = work_cand & keep(crop);
+  const cv::Size work_size(std::max(1, static_cast<int>(std::lround(crop.width * work_scale))),
+                           std::max(1, static_cast<int>(std::lround(crop.height * work_scale))));
+  // The exact factors of the resize (sizes are whole pixels).
+  const double fx = double(work_size.width) / crop.width;
+  const double fy = double(work_size.height) / crop.height;
+  if (work_size != crop.size()) {
+    cv::resize(work_bgr, work_bgr, work_size, 0, 0, fx > 1 ? cv::INTER_CUBIC : cv::INTER_AREA);
+    if (use_mask) {
+      cv::resize(work_cand, work_cand, work_size, 0, 0, cv::INTER_AREA);
+      work_cand = work_cand > 127;
+    } else {
+      // Skin colour of the resampled picture (not a resampled mask): the same rule at any size.
+      work_cand = SkinMask(work_bgr, options.skin);
+      if (!keep.empty()) {
+        cv::Mat k;
+        cv::resize(keep(crop), k, work_size, 0, 0, cv::INTER_NEAREST);
+        work_cand &= k;
+      }
+    }
+  }
+  const int ww = work_bgr.cols;
+  const int wh = work_bgr.rows;
+  if (!use_mask) CleanMask(&work_cand, s);
+  const Regions work_regions = LargestRegions(work_cand);
+  if (work_regions.largest == 0) {
+    return Status(StatusCode::kNoHand, what + ": no hand found after resampling it");
+  }
+  cv::Mat hand = work_regions.labels == work_regions.largest;
+
+  // 4. The hand, not the arm.
+  QueryEdges out;
+  WristCut wrist;
+  if (options.cut_forearm) {
+    wrist = CutForearm(&hand, options.wrist_cut_radii);
+    if (wrist.cut) {
+      const Regions kept = LargestRegions(hand);
+      hand = kept.labels == kept.largest;
+    }
+  }
+  // A hand that touches the border away from the arm has lost part of itself there (with no arm
+  // found, every run counts: fingers leave the picture).
+  {
+    cv::Mat on_picture_border = cv::Mat::zeros(wh, ww, CV_8U);
+    // Only crop sides that are the picture's own sides count.
+    if (crop.y == 0) hand.row(0).copyTo(on_picture_border.row(0));
+    if (crop.y + crop.height == h) hand.row(wh - 1).copyTo(on_picture_border.row(wh - 1));
+    if (crop.x == 0) hand.col(0).copyTo(on_picture_border.col(0));
+    if (crop.x + crop.width == w) hand.col(ww - 1).copyTo(on_picture_border.col(ww - 1));
+    const double diameter = RegionDiameter(hand);
+    std::vector<BorderRun> runs =
+        BorderRuns(on_picture_border, std::max(2, static_cast<int>(0.1 * diameter)));
+    std::sort(runs.begin(), runs.end(), [](const BorderRun& a, const BorderRun& b) {
+      return a.length < b.length;
+    });
+    const bool arm_at_border = !options.cut_forearm || wrist.arm;
+    if (arm_at_border && !runs.empty()) runs.pop_back();  // the arm's
+    int cut_px = 0;
+    for (const BorderRun& r : runs) cut_px += r.length;
+    if (diameter > 0 && cut_px > options.max_cut_share * diameter) {
+      return Status(
+          StatusCode::kNoHand,
+          what + ": the hand is cut by the picture's border (" +
+              std::to_string(static_cast<int>(std::lround(cut_px / work_scale))) +
+              " px of it lie on the border" + (arm_at_border ? " away from the arm" : "") +
+              "); the search needs the whole hand: use a picture with a margin around it");
+    }
+  }
+
+  // 5. Silhouette contour with the converter's rule (a one-link label image).
   LabelImage li;
-  li.width = w;
-  li.height = h;
-  li.labels.assign(static_cast<size_t>(w) * h, 0);
-  for (int y = 0; y < h; ++y) {
+  li.width = ww;
+  li.height = wh;
+  li.labels.assign(static_cast<size_t>(ww) * wh, 0);
+  for (int y = 0; y < wh; ++y) {
     const uint8_t* row = hand.ptr<uint8_t>(y);
-    for (int x = 0; x < w; ++x) li.labels[static_cast<size_t>(y) * w + x] = row[x] ? 1 : 0;
+    for (int x = 0; x < ww; ++x) li.labels[static_cast<size_t>(y) * ww + x] = row[x] ? 1 : 0;
   }
   const EdgeResult silhouette = ExtractEdges(li, DefaultJointPairs(), EdgeOptions{});
 
-  // 4. Canny edges near the hand, plus the contour.
+  // 6. Canny edges inside the hand (blur and thresholds for the working size), one outline.
   cv::Mat grey, edges;
-  cv::cvtColor(bgr, grey, cv::COLOR_BGR2GRAY);
-  cv::GaussianBlur(grey, grey, {5, 5}, 0);
-  cv::Canny(grey, edges, options.canny_low, options.canny_high, 3, true);
-  cv::Mat near_hand;
-  const int d = options.dilate_px;
-  cv::dilate(hand, near_hand, cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * d + 1, 2 * d + 1}));
-  edges &= options.interior_edges_only ? hand : near_hand;
-  if (const int c = options.contour_clearance_px; c > 0) {
-    cv::Mat near_contour = cv::Mat::zeros(h, w, CV_8U);
+  cv::cvtColor(work_bgr, grey, cv::COLOR_BGR2GRAY);
+  if (s == 1.0) {
+    cv::GaussianBlur(grey, grey, {5, 5}, 0);
+  } else {
+    // OpenCV's sigma for a 5x5 kernel is 1.1 px; the gradient scales with 1/s.
+    cv::GaussianBlur(grey, grey, {0, 0}, 1.1 * s);
+  }
+  cv::Canny(grey, edges, options.canny_low / s, options.canny_high / s, 3, true);
+  if (options.interior_edges_only) {
+    edges &= hand;
+  } else {
+    cv::Mat near_hand;
+    cv::dilate(hand, near_hand, Ellipse(2 * options.dilate_px * s + 1));
+    edges &= near_hand;
+  }
+  if (const int c = static_cast<int>(std::lround(options.contour_clearance_px * s)); c > 0) {
+    cv::Mat near_contour = cv::Mat::zeros(wh, ww, CV_8U);
     for (const EdgePixel& p : silhouette.silhouette) near_contour.at<uint8_t>(p.row, p.col) = 255;
-    cv::dilate(near_contour,
-               near_contour,
-               cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * c + 1, 2 * c + 1}));
+    cv::dilate(near_contour, near_contour, Ellipse(2 * c + 1));
     edges.setTo(0, near_contour);
   }
   for (const EdgePixel& p : silhouette.silhouette) edges.at<uint8_t>(p.row, p.col) = 255;
 
-  QueryEdges out;
   out.kind = QueryInputKind::kPhoto;
   out.width = w;
   out.height = h;
-  out.hand_pixels = silhouette.num_hand_pixels;
-  out.touches_border = silhouette.touches_border;
+  out.hand_pixels = static_cast<int64_t>(std::llround(silhouette.num_hand_pixels / (fx * fy)));
+  out.touches_border =
+      silhouette.touches_border &&
+      (crop.x == 0 || crop.y == 0 || crop.x + crop.width == w || crop.y + crop.height == h);
   HANDDB_RETURN_IF_ERROR(Finish(what, NonZeroPixels(edges), silhouette.silhouette, &out));
+  // Back to the picture's pixels: working x (continuous) = (source x - crop.x) * fx.
+  out.work_scale = std::sqrt(fx * fy);
+  out.centre_x = crop.x + out.centre_x / fx;
+  out.centre_y = crop.y + out.centre_y / fy;
+  out.diameter_px /= out.work_scale;
+  out.scale *= out.work_scale;
+  const auto to_source = [&](std::vector<EdgePixelXY>* pixels) {
+    for (EdgePixelXY& p : *pixels) {
+      p.x = std::clamp(static_cast<int>(crop.x + (p.x + 0.5) / fx), 0, w - 1);
+      p.y = std::clamp(static_cast<int>(crop.y + (p.y + 0.5) / fy), 0, h - 1);
+    }
+    std::sort(pixels->begin(), pixels->end(), [](const EdgePixelXY& a, const EdgePixelXY& b) {
+      return a.y != b.y ? a.y < b.y : a.x < b.x;
+    });
+    pixels->erase(std::unique(pixels->begin(),
+                              pixels->end(),
+                              [](const EdgePixelXY& a, const EdgePixelXY& b) {
+                                return a.x == b.x && a.y == b.y;
+                              }),
+                  pixels->end());
+  };
+  to_source(&out.edge_pixels);
+  to_source(&out.contour_pixels);
+  if (wrist.palm_radius > 0) {
+    out.palm_centre_x = crop.x + wrist.palm_centre.x / fx;
+    out.palm_centre_y = crop.y + wrist.palm_centre.y / fy;
+    out.palm_radius_px = wrist.palm_radius / out.work_scale;
+  }
+  out.forearm_cut = wrist.cut;
+  if (wrist.cut) {
+    out.wrist_line = {crop.x + wrist.a.x / fx,
+                      crop.y + wrist.a.y / fy,
+                      crop.x + wrist.b.x / fx,
+                      crop.y + wrist.b.y / fy};
+  }
   return out;
+}
+
+// A picture decoded reduced (a huge JPEG): every pixel quantity back in the file's pixels.
+void ScaleToSource(cv::Size source, cv::Size decoded, QueryEdges* q) {
+  const double fx = double(source.width) / decoded.width;
+  const double fy = double(source.height) / decoded.height;
+  const double f = std::sqrt(fx * fy);
+  q->width = source.width;
+  q->height = source.height;
+  for (auto* pixels : {&q->edge_pixels, &q->contour_pixels}) {
+    for (EdgePixelXY& p : *pixels) {
+      p.x = std::min(source.width - 1, static_cast<int>((p.x + 0.5) * fx));
+      p.y = std::min(source.height - 1, static_cast<int>((p.y + 0.5) * fy));
+    }
+  }
+  q->hand_pixels = static_cast<int64_t>(std::llround(q->hand_pixels * fx * fy));
+  q->work_scale /= f;
+  q->palm_centre_x *= fx;
+  q->palm_centre_y *= fy;
+  q->palm_radius_px *= f;
+  for (size_t i = 0; i < 4; ++i) q->wrist_line[i] *= i % 2 == 0 ? fx : fy;
+  q->centre_x *= fx;
+  q->centre_y *= fy;
+  q->diameter_px *= f;
+  q->scale /= f;
 }
 
 }  // namespace
@@ -318,6 +697,10 @@ bool ImageEdgeOptions::Check() const {
   CHECK_OPTION_GE(contour_clearance_px, 0);
   CHECK_OPTION_LE(contour_clearance_px, 20);
   CHECK_OPTION_GE(min_hand_pixels, 1);
+  CHECK_OPTION(work_diameter_px == 0 || (work_diameter_px >= 16 && work_diameter_px <= 4096));
+  CHECK_OPTION(wrist_cut_radii >= 1 && wrist_cut_radii <= 20);
+  CHECK_OPTION(second_region_share >= 0 && second_region_share <= 1);
+  CHECK_OPTION_GE(max_cut_share, 0);
   CHECK_OPTION(roi.empty() || (roi.width > 0 && roi.height > 0));
   CHECK_OPTION(label_edges.Check());
   return true;
@@ -355,23 +738,40 @@ Result<QueryEdges> LoadQueryEdges(const std::filesystem::path& image,
   if (!options.Check()) {
     return Status(StatusCode::kInvalidArgument, "invalid image edge options (see the line above)");
   }
-  if (Status s = CheckImageFileComplete(image); !s.ok()) return s;  // issue 14 items 6, 7, 8
+  // Issue 14 items 6, 7, 8; a JPEG above kMaxImagePixels is decoded at 1/2, 1/4 or 1/8 of its
+  // size (libjpeg scales while it decodes, so the full image is never in memory).
+  if (Status s = CheckImageFileComplete(image, kMaxImagePixels, kMaxJpegPixels); !s.ok()) return s;
   QueryInputKind kind = options.kind;
   if (kind == QueryInputKind::kAuto && Lower(image.extension().string()) == ".exr") {
     kind = QueryInputKind::kLabels;
   }
   if (kind == QueryInputKind::kLabels) return FromLabels(image, options);
 
-  const cv::Mat any = cv::imread(image.string(), cv::IMREAD_UNCHANGED);
+  int flags = cv::IMREAD_UNCHANGED;
+  const std::optional<ImageSize> size = ReadImageSize(image);
+  if (size && std::string_view(size->format) == "JPEG" &&
+      size->width * size->height > kMaxImagePixels) {
+    const uint64_t pixels = size->width * size->height;
+    flags = pixels <= 4 * kMaxImagePixels    ? cv::IMREAD_REDUCED_COLOR_2
+            : pixels <= 16 * kMaxImagePixels ? cv::IMREAD_REDUCED_COLOR_4
+                                             : cv::IMREAD_REDUCED_COLOR_8;
+  }
+  const cv::Mat any = cv::imread(image.string(), flags);
   if (any.empty()) {
     return Status(StatusCode::kBadImage,
                   image.string() + ": cannot read the image (not a PNG/JPEG/... or corrupt)");
   }
+  const cv::Size source =
+      flags == cv::IMREAD_UNCHANGED || !size
+          ? any.size()
+          : cv::Size(static_cast<int>(size->width), static_cast<int>(size->height));
   if (kind == QueryInputKind::kAuto) {
     kind = LooksLikeEdgeImage(any) ? QueryInputKind::kEdges : QueryInputKind::kPhoto;
   }
-  if (kind == QueryInputKind::kEdges) return FromEdgeImage(image, any);
-  return FromPhoto(image, any, options);
+  Result<QueryEdges> out = kind == QueryInputKind::kEdges ? FromEdgeImage(image, any)
+                                                          : FromPhoto(image, any, source, options);
+  if (out.ok() && source != any.size()) ScaleToSource(source, any.size(), &*out);
+  return out;
 }
 
 }  // namespace handdb

@@ -3,9 +3,12 @@
 // Three kinds of input (docs/query.md):
 //  - a photo (PNG/JPEG): the hand is found by skin colour (a documented, tunable YCrCb box), or
 //    given by --mask (non-zero = hand), optionally restricted to --roi; the largest connected
-//    region is the hand. Edges = the silhouette contour plus the Canny edges (OpenCV) inside the
-//    hand region, except those within `contour_clearance_px` of the contour (one outline, as in
-//    the database's views, not Canny's outline beside the contour's);
+//    region is the hand. The hand is then cropped and resampled to a fixed working size (its
+//    diameter `work_diameter_px`), so the mask clean-up, the Canny blur and thresholds and the
+//    wrist cut act the same on a 100 px thumbnail and a 12 Mpx phone photo; a visible forearm is
+//    cut off at the wrist. Edges = the silhouette contour plus the Canny edges (OpenCV) inside
+//    the hand region, except those within `contour_clearance_px` of the contour (one outline, as
+//    in the database's views, not Canny's outline beside the contour's);
 //  - an edge image (non-zero pixels are edges);
 //  - a Blender label EXR (clean synthetic edges through the converter's own code:
 //    edges/exr_io.h + edges/view_conversion.h, BorderContact::kAllow).
@@ -16,6 +19,7 @@
 // same).
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -56,8 +60,30 @@ struct ImageEdgeOptions {
   SkinModel skin;
   std::filesystem::path mask;  // photo: hand mask image (non-zero = hand), replaces skin colour
   PixelRect roi;               // photo: only this rectangle can hold the hand (empty: all)
-  double canny_low = 40;       // Canny hysteresis thresholds (on the 5x5-blurred grey image)
+  // Canny hysteresis thresholds, on the grey image blurred by OpenCV's 5x5 Gaussian, at the
+  // working size below (scaled with it, so they hold for any working size).
+  double canny_low = 40;
   double canny_high = 120;
+  // Working size: the hand (the largest skin/mask region) is cropped with a margin and resampled
+  // so its diameter is this many px before the mask clean-up (3x3 opening, 5x5 closing) and
+  // Canny; kernel sizes, blur, thresholds and `dilate_px` / `contour_clearance_px` are those of a
+  // hand `kReferenceHandDiameterPx` across and scale with the working size. 0: work at the
+  // picture's own resolution (the behaviour before issue 16 item 3). Measured on the
+  // development photos (docs/evaluation.md): at their own size, 96/128/160 px and native are
+  // within noise of each other (48.5-53% top-1); at 4x their size native falls to 35.5% and
+  // 128 px keeps 49%. Smaller working sizes lose thin creases (a 1 px line at 150 px is gone at
+  // 96), so the default is 128.
+  double work_diameter_px = 128;
+  // The forearm (issue 16 item 2): a region that leaves the picture (or runs far) past the palm
+  // is cut off along the line across it `wrist_cut_radii` palm radii from the palm centre (the
+  // largest inscribed circle), at right angles to the way the arm leaves. The database's hand
+  // ends ~1.8 radii from its palm centre (its short wrist stub); 2.6 cuts only arms clearly
+  // longer than that. The arm is the widest run of the region along the picture's border if it
+  // is at least 0.8 palm radii long; narrower runs are fingers leaving the picture (and the
+  // picture is refused as a cut hand). Failure case: four fingers held together that leave the
+  // picture look like an arm. false: keep the whole region.
+  bool cut_forearm = true;
+  double wrist_cut_radii = 2.6;
   // Canny edges inside the hand region only (the database's views have no background edges).
   // false: also those within `dilate_px` outside it (the behaviour before issue 16 item 3).
   bool interior_edges_only = true;
@@ -66,7 +92,13 @@ struct ImageEdgeOptions {
   // finds the hand's outline too, a pixel or two from the contour, and the outline twice
   // weighs the silhouette double in D_c. 0: keep them.
   int contour_clearance_px = 2;
-  int min_hand_pixels = 400;  // smaller largest regions mean "no hand found"
+  int min_hand_pixels = 400;  // smaller largest regions (picture px) mean "no hand found"
+  // A second skin region at least this share of the largest (and min_hand_pixels) means two
+  // hands, or a hand and a face: refused (crop the picture or give --roi / --mask). 0: never.
+  double second_region_share = 0.5;
+  // The hand may leave the picture in one place (the arm); where it touches the border elsewhere
+  // for more than this share of its diameter (fingers cut off), the picture is refused.
+  double max_cut_share = 0.25;
   // Label EXR: the converter's edge rule (edges/edges.h). Set these to the options the
   // database was converted with (its manifest records them; `handdb query` reads them) so a
   // label query is converted exactly like the database's views.
@@ -74,6 +106,11 @@ struct ImageEdgeOptions {
   JointPairs label_joint_pairs = DefaultJointPairs();
   bool Check() const;
 };
+
+// The hand diameter (px) at which the photo path's pixel-sized defaults are set: 3x3 opening,
+// 5x5 closing, OpenCV's 5x5 Gaussian before Canny, 2 px contour clearance (the development
+// photos, 100 x 100 px JPEGs of hands ~96 px across, were the reference).
+constexpr double kReferenceHandDiameterPx = 96;
 
 struct EdgePixelXY {
   int32_t x = 0;  // column
@@ -88,6 +125,13 @@ struct QueryEdges {
   std::vector<EdgePixelXY> contour_pixels;  // the silhouette used for normalisation
   int64_t hand_pixels = 0;                  // photo/labels: pixels of the hand region
   bool touches_border = false;              // the hand region reaches the image border
+  // Photo: what the working size and the wrist cut did (for --json and the contact sheet).
+  double work_scale = 1;     // working px per source px (1: the picture's own resolution)
+  bool forearm_cut = false;  // a forearm was cut off
+  double palm_centre_x = 0;  // the palm's inscribed circle, source px (0 radius: not found)
+  double palm_centre_y = 0;
+  double palm_radius_px = 0;
+  std::array<double, 4> wrist_line{};  // the cut: x0, y0, x1, y1 in source px (when forearm_cut)
   // Normalisation: normalised = (pixel centre - centre) * scale.
   double centre_x = 0, centre_y = 0, diameter_px = 0, scale = 0;
   std::vector<PointQ> points;              // normalised frame, sorted by (y, x), unique

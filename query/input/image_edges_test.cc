@@ -280,7 +280,9 @@ TEST_F(ImageEdgesTest, MaskAndRoi) {
   o.mask = dir_ / "mask.png";
   auto with_mask = LoadQueryEdges(photo, o);
   ASSERT_TRUE(with_mask.ok()) << with_mask.status().ToString();
-  EXPECT_EQ(with_mask->hand_pixels, static_cast<int64_t>(cv::countNonZero(mask)));
+  // Counted at the working size and scaled back: close to the mask's own count.
+  EXPECT_NEAR(
+      double(with_mask->hand_pixels), cv::countNonZero(mask), 0.03 * cv::countNonZero(mask));
 
   // A wrong-size mask, a missing mask.
   ASSERT_TRUE(cv::imwrite((dir_ / "small.png").string(), cv::Mat::zeros(10, 10, CV_8U)));
@@ -325,6 +327,182 @@ TEST_F(ImageEdgesTest, BadInputs) {
     f << "nope";
   }
   EXPECT_FALSE(LoadQueryEdges(dir_ / "bad.exr", o).ok());
+}
+
+// The hand region of `li` (label != 0) as a mask.
+cv::Mat HandMask(const LabelImage& li) {
+  cv::Mat m = cv::Mat::zeros(li.height, li.width, CV_8U);
+  for (int y = 0; y < li.height; ++y) {
+    for (int x = 0; x < li.width; ++x) m.at<uint8_t>(y, x) = li.label(x, y) ? 255 : 0;
+  }
+  return m;
+}
+
+// The undirected chamfer distance of two normalised point sets, px.
+double Chamfer(const std::vector<PointQ>& a, const std::vector<PointQ>& b) {
+  const auto one_way = [](const std::vector<PointQ>& x, const std::vector<PointQ>& y) {
+    double sum = 0;
+    for (const PointQ& p : x) {
+      double best = 1e30;
+      for (const PointQ& q : y) {
+        best = std::min(best, std::hypot(double(p.x - q.x), double(p.y - q.y)));
+      }
+      sum += best;
+    }
+    return sum / x.size() / kPointScale;
+  };
+  return one_way(a, b) + one_way(b, a);
+}
+
+TEST_F(ImageEdgesTest, ThePictureSizeDoesNotChangeTheEdges) {
+  // The same photo at 1x and 3x: resampled to the working size first, both give the same
+  // normalised edges (kernels and Canny thresholds no longer depend on the picture's size).
+  const fs::path small = WritePhoto(Hand(0.3).image, "small.png", 3);
+  cv::Mat big;
+  cv::resize(cv::imread(small.string()), big, cv::Size(), 3, 3, cv::INTER_CUBIC);
+  ASSERT_TRUE(cv::imwrite((dir_ / "big.png").string(), big));
+  auto a = LoadQueryEdges(small, ImageEdgeOptions{});
+  auto b = LoadQueryEdges(dir_ / "big.png", ImageEdgeOptions{});
+  ASSERT_TRUE(a.ok()) << a.status().ToString();
+  ASSERT_TRUE(b.ok()) << b.status().ToString();
+  EXPECT_NEAR(b->diameter_px, 3 * a->diameter_px, 0.03 * 3 * a->diameter_px);
+  EXPECT_NEAR(b->work_scale, a->work_scale / 3, 0.03 * a->work_scale);
+  EXPECT_LT(Chamfer(a->points, b->points), 2.0);  // px of the 192 px normalised hand
+  // The map back to the picture: the normalised centre lands on the hand's centre.
+  const Point2f c = b->ImageFromNormalised({0, 0});
+  EXPECT_NEAR(c.x, b->centre_x, 1e-3);
+  EXPECT_NEAR(c.y, b->centre_y, 1e-3);
+  EXPECT_NEAR(b->centre_x, 3 * a->centre_x, 3.0);
+  EXPECT_EQ(b->width, 3 * 320);
+}
+
+TEST_F(ImageEdgesTest, ForearmIsCutOffAtTheWrist) {
+  const SyntheticHand h = Hand(0);
+  // A skin-coloured forearm from the wrist to the bottom of the picture, narrower than the palm.
+  LabelImage with_arm = h.image;
+  cv::Mat dt;
+  cv::distanceTransform(HandMask(h.image), dt, cv::DIST_L2, 5);
+  double palm_radius = 0;
+  cv::minMaxLoc(dt, nullptr, &palm_radius);
+  const auto& wrist = h.keypoints_px[0];
+  const auto& middle = h.keypoints_px[9];
+  const double ux = wrist[0] - middle[0], uy = wrist[1] - middle[1];
+  const double len = std::hypot(ux, uy);
+  cv::Mat arm = cv::Mat::zeros(with_arm.height, with_arm.width, CV_8U);
+  cv::line(arm,
+           cv::Point(int(wrist[0]), int(wrist[1])),
+           cv::Point(int(wrist[0] + 1000 * ux / len), int(wrist[1] + 1000 * uy / len)),
+           255,
+           int(1.7 * palm_radius));
+  for (int y = 0; y < arm.rows; ++y) {
+    for (int x = 0; x < arm.cols; ++x) {
+      if (arm.at<uint8_t>(y, x) && with_arm.label(x, y) == 0) {
+        with_arm.labels[size_t(y) * with_arm.width + x] = 1;
+      }
+    }
+  }
+  auto hand = LoadQueryEdges(WritePhoto(h.image, "hand.png"), ImageEdgeOptions{});
+  auto cut = LoadQueryEdges(WritePhoto(with_arm, "arm.png"), ImageEdgeOptions{});
+  ImageEdgeOptions keep_arm;
+  keep_arm.cut_forearm = false;
+  auto uncut = LoadQueryEdges(WritePhoto(with_arm, "arm.png"), keep_arm);
+  ASSERT_TRUE(hand.ok()) << hand.status().ToString();
+  ASSERT_TRUE(cut.ok()) << cut.status().ToString();
+  ASSERT_TRUE(uncut.ok()) << uncut.status().ToString();
+  EXPECT_FALSE(hand->forearm_cut);  // a hand that does not reach the border is left alone
+  EXPECT_TRUE(cut->forearm_cut);
+  EXPECT_FALSE(uncut->forearm_cut);
+  // With the cut, the normalisation is nearly the hand's own; without it the arm sets it.
+  EXPECT_NEAR(cut->diameter_px, hand->diameter_px, 0.15 * hand->diameter_px);
+  EXPECT_GT(uncut->diameter_px, 1.3 * hand->diameter_px);
+  EXPECT_LT(Chamfer(cut->points, hand->points), 0.5 * Chamfer(uncut->points, hand->points));
+  // The cut line lies below the palm centre (the arm leaves at the bottom), across the arm.
+  EXPECT_GT(cut->wrist_line[1], cut->palm_centre_y);
+  EXPECT_GT(cut->wrist_line[3], cut->palm_centre_y);
+  EXPECT_GT(cut->palm_radius_px, 0.8 * palm_radius);
+}
+
+TEST_F(ImageEdgesTest, PicturesTheSearchCannotUseAreRefusedInOneLine) {
+  const SyntheticHand h = Hand(0);
+  ImageEdgeOptions o;
+  // Two hands side by side.
+  LabelImage two;
+  two.width = 2 * h.image.width;
+  two.height = h.image.height;
+  two.labels.assign(size_t(two.width) * two.height, 0);
+  for (int y = 0; y < h.image.height; ++y) {
+    for (int x = 0; x < h.image.width; ++x) {
+      const uint16_t l = h.image.label(x, y);
+      two.labels[size_t(y) * two.width + x] = l;
+      two.labels[size_t(y) * two.width + x + h.image.width] = l;
+    }
+  }
+  const fs::path two_path = WritePhoto(two, "two.png");
+  auto r = LoadQueryEdges(two_path, o);
+  EXPECT_EQ(r.status().code(), StatusCode::kNoHand);
+  EXPECT_NE(r.status().message().find("two.png: two hand-sized skin-coloured regions"),
+            std::string::npos)
+      << r.status().message();
+  o.roi = {0, 0, h.image.width, h.image.height};  // one of them
+  EXPECT_TRUE(LoadQueryEdges(two_path, o).ok());
+  o = {};
+
+  // A hand whose fingers leave the picture at the top.
+  SyntheticHandParams p;
+  p.width = 320;
+  p.height = 200;
+  p.centre_x = 160;
+  p.centre_y = 85;
+  p.bend = {0.3, -0.25, 0, 0.25, 0.45};  // spread: separate fingers cross the top
+  const fs::path cut_path = WritePhoto(RenderSyntheticHand(p).image, "cut.png");
+  r = LoadQueryEdges(cut_path, o);
+  EXPECT_EQ(r.status().code(), StatusCode::kNoHand);
+  EXPECT_NE(r.status().message().find("cut.png: the hand is cut by the picture's border"),
+            std::string::npos)
+      << r.status().message();
+
+  // A grey picture: no colour to find skin by; a mask makes it usable.
+  cv::Mat grey;
+  cv::cvtColor(cv::imread(WritePhoto(h.image, "c.png").string()), grey, cv::COLOR_BGR2GRAY);
+  ASSERT_TRUE(cv::imwrite((dir_ / "grey.png").string(), grey));
+  r = LoadQueryEdges(dir_ / "grey.png", o);
+  EXPECT_EQ(r.status().code(), StatusCode::kNoHand);
+  EXPECT_NE(r.status().message().find("grey.png: a grey image (320x300)"), std::string::npos)
+      << r.status().message();
+  EXPECT_NE(r.status().message().find("--mask"), std::string::npos);
+  ASSERT_TRUE(cv::imwrite((dir_ / "mask.png").string(), HandMask(h.image)));
+  o.mask = dir_ / "mask.png";
+  EXPECT_TRUE(LoadQueryEdges(dir_ / "grey.png", o).ok());
+}
+
+TEST_F(ImageEdgesTest, AHugeJpegIsDecodedReducedNotRefused) {
+  // A real 9000 x 8000 JPEG (72 Mpx, above kMaxImagePixels): decoded at half size, the answer in
+  // the file's own pixels.
+  const SyntheticHand h = Hand(0.2);
+  const fs::path src = WritePhoto(h.image, "src.png");
+  cv::Mat photo = cv::imread(src.string());
+  cv::Mat big(8000, 9000, CV_8UC3, cv::Scalar(140, 110, 90));
+  cv::Mat scaled;
+  cv::resize(photo, scaled, cv::Size(), 20, 20, cv::INTER_LINEAR);
+  scaled(cv::Rect(0, 0, 6400, 6000)).copyTo(big(cv::Rect(1000, 1000, 6400, 6000)));
+  const fs::path jpeg = dir_ / "huge.jpg";
+  ASSERT_TRUE(cv::imwrite(jpeg.string(), big, {cv::IMWRITE_JPEG_QUALITY, 80}));
+  big.release();
+  scaled.release();
+  auto small = LoadQueryEdges(src, ImageEdgeOptions{});
+  auto huge = LoadQueryEdges(jpeg, ImageEdgeOptions{});
+  ASSERT_TRUE(small.ok()) << small.status().ToString();
+  ASSERT_TRUE(huge.ok()) << huge.status().ToString();
+  EXPECT_EQ(huge->width, 9000);
+  EXPECT_EQ(huge->height, 8000);
+  EXPECT_NEAR(huge->diameter_px, 20 * small->diameter_px, 0.05 * 20 * small->diameter_px);
+  EXPECT_NEAR(huge->centre_x, 1000 + 20 * small->centre_x, 40);
+  EXPECT_NEAR(huge->centre_y, 1000 + 20 * small->centre_y, 40);
+  EXPECT_LT(Chamfer(huge->points, small->points), 3.0);
+  for (const EdgePixelXY& p : huge->edge_pixels) {
+    ASSERT_LT(p.x, 9000);
+    ASSERT_LT(p.y, 8000);
+  }
 }
 
 TEST(ImageEdges, ParsePixelRectAndOptions) {

@@ -6,6 +6,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "base/atomic_file.h"
+#include "base/image_file.h"
 
 namespace handdb {
 namespace {
@@ -56,17 +57,26 @@ Status WriteContactSheet(const std::filesystem::path& out_png,
   std::vector<cv::Mat> tiles;
 
   if (!input_image.empty()) {
-    cv::Mat img = query.kind == QueryInputKind::kLabels
-                      ? cv::Mat()
-                      : cv::imread(input_image.string(), cv::IMREAD_COLOR);
+    // A huge JPEG is read reduced (as the query read it); edge pixels are in the file's pixels.
+    int flags = cv::IMREAD_COLOR;
+    if (const auto size = ReadImageSize(input_image);
+        size && size->width * size->height > kMaxImagePixels) {
+      flags = cv::IMREAD_REDUCED_COLOR_8;
+    }
+    cv::Mat img =
+        query.kind == QueryInputKind::kLabels ? cv::Mat() : cv::imread(input_image.string(), flags);
+
     cv::Mat tile(th, t, CV_8UC3, kWhite);
     if (img.empty()) {
       // Label EXRs are not images OpenCV reads: draw the source edge pixels instead.
       img = cv::Mat(std::max(query.height, 1), std::max(query.width, 1), CV_8UC3, kWhite);
     }
+    // Picture px per source px (below 1 for a JPEG read reduced).
+    const double f = query.width > 0 ? static_cast<double>(img.cols) / query.width : 1.0;
     for (const EdgePixelXY& p : query.edge_pixels) {
-      if (p.x >= 0 && p.y >= 0 && p.x < img.cols && p.y < img.rows) {
-        img.at<cv::Vec3b>(p.y, p.x) = cv::Vec3b(0, 200, 0);
+      const int x = static_cast<int>(p.x * f), y = static_cast<int>(p.y * f);
+      if (x >= 0 && y >= 0 && x < img.cols && y < img.rows) {
+        img.at<cv::Vec3b>(y, x) = cv::Vec3b(0, 200, 0);
       }
     }
     const double s = std::min(static_cast<double>(t) / img.cols, static_cast<double>(t) / img.rows);
@@ -78,8 +88,30 @@ Status WriteContactSheet(const std::filesystem::path& out_png,
         0,
         0,
         cv::INTER_AREA);
-    small.copyTo(tile(
-        cv::Rect((t - small.cols) / 2, kCaptionPx + (t - small.rows) / 2, small.cols, small.rows)));
+    const cv::Point2d at((t - small.cols) / 2, kCaptionPx + (t - small.rows) / 2);
+    small.copyTo(
+        tile(cv::Rect(static_cast<int>(at.x), static_cast<int>(at.y), small.cols, small.rows)));
+    // The palm circle and the wrist cut (photo path), in the tile's pixels.
+    const auto to_tile = [&](double x, double y) {
+      return cv::Point(static_cast<int>(std::lround(at.x + x * f * s)),
+                       static_cast<int>(std::lround(at.y + y * f * s)));
+    };
+    if (query.palm_radius_px > 0) {
+      cv::circle(tile,
+                 to_tile(query.palm_centre_x, query.palm_centre_y),
+                 std::max(1, static_cast<int>(std::lround(query.palm_radius_px * f * s))),
+                 cv::Scalar(255, 160, 0),
+                 1,
+                 cv::LINE_AA);
+    }
+    if (query.forearm_cut) {
+      cv::line(tile,
+               to_tile(query.wrist_line[0], query.wrist_line[1]),
+               to_tile(query.wrist_line[2], query.wrist_line[3]),
+               cv::Scalar(0, 0, 230),
+               2,
+               cv::LINE_AA);
+    }
     Caption(tile, "input (" + std::string(QueryInputKindName(query.kind)) + ")");
     tiles.push_back(tile);
   }
