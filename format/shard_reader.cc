@@ -140,14 +140,28 @@ const uint8_t* ShardReader::coarse_field(size_t i) const {
   return all.empty() ? nullptr : all.data() + i * kCoarseFieldSize;
 }
 
+namespace {
+
+// Drops the mapped pages that lie wholly inside a section: the pages it shares with its
+// neighbours stay.
+void ReleaseSectionPages(const MappedFile& file, const RawSection& s) {
+  constexpr uint64_t kPage = 4096;
+  const uint64_t begin = (s.offset + kPage - 1) & ~(kPage - 1);
+  const uint64_t end = std::min<uint64_t>(s.offset + s.size, file.size()) & ~(kPage - 1);
+  file.Advise(begin, end, MappedFile::Advice::kDontNeed);
+}
+
+}  // namespace
+
 void ShardReader::ReleaseViewTablePages() const {
   const Impl& r = *impl_;
-  const RawSection& vs = r.layout.sections[r.layout.views];
-  constexpr uint64_t kPage = 4096;
-  // Whole pages inside the section only: the pages it shares with its neighbours stay.
-  const uint64_t begin = (vs.offset + kPage - 1) & ~(kPage - 1);
-  const uint64_t end = std::min<uint64_t>(vs.offset + vs.size, r.file.size()) & ~(kPage - 1);
-  r.file.Advise(begin, end, MappedFile::Advice::kDontNeed);
+  ReleaseSectionPages(r.file, r.layout.sections[r.layout.views]);
+}
+
+void ShardReader::ReleaseCoarseFieldPages() const {
+  const Impl& r = *impl_;
+  if (r.layout.coarse_fields < 0) return;
+  ReleaseSectionPages(r.file, r.layout.sections[static_cast<size_t>(r.layout.coarse_fields)]);
 }
 
 ViewLabel ShardReader::label(size_t i) const {

@@ -100,6 +100,9 @@ class ShardReader {
   // the kernel's fault-around, 32-64 KB of the table at a time).
   // No-op for readers over caller memory.
   void ReleaseViewTablePages() const;
+  // The same for the coarse-fields section, for a caller that keeps its own copy of the fields
+  // (the search's cell-major one, query/coarse_bound.h): coarse_field() still works afterwards.
+  void ReleaseCoarseFieldPages() const;
 
  private:
   struct Impl;

@@ -7,8 +7,10 @@
 //
 //   A(v, r) = mean_q d(q, Y_v) >= sum_c n_r(c) F_v(c) / |Q_r|  =: L_A(v, r)
 //
-// valid for every roll, and a short dot product over the cells the query occupies (a hand's ~600
-// points occupy ~150-250 of the 1,849 cells).
+// valid for every roll. A hand's ~600 points occupy ~150-250 of the 1,849 cells, so per pair it
+// is a short dot product; per rolled query and every view at once it is a matrix-vector product,
+// which CoarseFields computes from a cell-major copy of the fields (views side by side, so one
+// cell's values for 16 views are one 16-byte load) instead of one gather per cell and pair.
 #pragma once
 
 #include <cstdint>
@@ -22,40 +24,64 @@ namespace handdb {
 
 class Database;
 
-// Every view's coarse field: its shard's own (format v1.1, zero-copy) where the shard has the
-// section, else computed from the points, in parallel (~110 us per view).
-class CoarseFields {
- public:
-  CoarseFields() = default;
-  CoarseFields(const Database& db, int num_threads);
-  const uint8_t* field(view_id_t v) const { return fields_[v]; }
-  bool empty() const { return fields_.empty(); }
-  size_t computed_bytes() const { return computed_.size(); }  // 0: all read from the shards
-
- private:
-  std::vector<const uint8_t*> fields_;  // per view
-  std::vector<uint8_t> computed_;       // storage when the shards have none
-};
-
-// The rolled query's occupied cells and their point counts.
+// The rolled query's occupied cells and their point counts. A cell holding more than kMaxCount
+// points is listed more than once (the sum is the same), so every product count x field value
+// fits 16 bits in the vector kernel.
 class CellHistogram {
  public:
+  static constexpr uint32_t kMaxCount = 128;
   void Build(std::span<const PointQ> points);
-  // L_A in px: sum_c n(c) F(c) / |Q| / 2, rounded down by a relative 1e-12 (so it never exceeds
-  // the exact value), given the number of query points.
+  // L_A in px for a row-major field (kCells bytes): sum_c n(c) F(c) / |Q| / 2, rounded down by a
+  // relative 1e-12 (so it never exceeds the exact value), given the number of query points.
   double LowerBound(const uint8_t* field, size_t num_query_points) const {
+    return static_cast<double>(Sum([field](int c) { return field[c]; })) /
+           CoarseGrid::kValueUnitsPerPx / static_cast<double>(num_query_points) * (1 - 1e-12);
+  }
+  // sum_c n(c) value(c) in field units (exact integer).
+  template <typename ValueAt>
+  uint64_t Sum(ValueAt value_at) const {
     uint64_t sum = 0;
     for (size_t i = 0; i < cells_.size(); ++i) {
-      sum += static_cast<uint64_t>(counts_[i]) * field[cells_[i]];
+      sum += static_cast<uint64_t>(counts_[i]) * value_at(cells_[i]);
     }
-    return static_cast<double>(sum) / CoarseGrid::kValueUnitsPerPx /
-           static_cast<double>(num_query_points) * (1 - 1e-12);
+    return sum;
   }
   size_t num_cells() const { return cells_.size(); }
+  std::span<const uint16_t> cells() const { return cells_; }
+  std::span<const uint16_t> counts() const { return counts_; }
 
  private:
   std::vector<uint16_t> cells_;
-  std::vector<uint32_t> counts_;
+  std::vector<uint16_t> counts_;  // each <= kMaxCount
+};
+
+// Every view's coarse field, cell-major in blocks of kBlock views: the shard's own (format v1.1)
+// where the shard has the section, else computed from the points, in parallel (~110 us per
+// view). The copy replaces the shards' row-major sections in memory (their mapped pages are
+// released once copied), so the fields are resident once.
+class CoarseFields {
+ public:
+  static constexpr size_t kBlock = 128;  // views per block
+
+  CoarseFields() = default;
+  CoarseFields(const Database& db, int num_threads);
+  bool empty() const { return num_views_ == 0; }
+  size_t num_views() const { return num_views_; }
+  size_t num_blocks() const { return (num_views_ + kBlock - 1) / kBlock; }
+  size_t computed_views() const { return computed_views_; }  // 0: all read from the shards
+  // F_v(cell) in 1/2 px.
+  uint8_t value(size_t v, int cell) const {
+    return planes_[((v / kBlock) * CoarseGrid::kCells + static_cast<size_t>(cell)) * kBlock +
+                   v % kBlock];
+  }
+  // For the views of block b: out[i] = sum_c n(c) F_{b kBlock + i}(c) (1/2 px units, exact), for
+  // i < kBlock (views past the end get 0).
+  void BlockSums(const CellHistogram& histogram, size_t block, uint32_t* out) const;
+
+ private:
+  size_t num_views_ = 0;
+  size_t computed_views_ = 0;
+  std::vector<uint8_t> planes_;  // [block][cell][view in block]
 };
 
 }  // namespace handdb

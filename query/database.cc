@@ -138,6 +138,10 @@ const uint8_t* Database::coarse_field(view_id_t v) const {
   return views_[v].coarse_field;
 }
 
+void Database::ReleaseCoarseFieldPages() const {
+  for (const auto& shard : shards_) shard->ReleaseCoarseFieldPages();
+}
+
 ViewLabel Database::label(view_id_t v) const {
   THROW_CHECK_LT(v, views_.size());
   if (shards_.empty()) return memory_labels_[v];

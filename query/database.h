@@ -56,6 +56,10 @@ class Database {
   // True when every view has one (then the search reads them instead of computing them).
   bool has_coarse_fields() const { return !shards_.empty() && shards_without_coarse_fields_ == 0; }
   size_t shards_without_coarse_fields() const { return shards_without_coarse_fields_; }
+  // Drops the coarse-fields sections' mapped pages from the resident set, for a caller that has
+  // copied the fields (the Searcher's cell-major copy); coarse_field() still works (the pages
+  // fault back in from the page cache).
+  void ReleaseCoarseFieldPages() const;
   // Name of a shape id from the metadata's shape table, "" if unknown.
   std::string_view shape_name(shape_id_t id) const;
   // Bytes of the database on disk (sum of shard sizes) or in memory (points + labels).

@@ -174,10 +174,17 @@ void DistanceGrid::Build(std::span<const PointQ> points) {
   }
 }
 
-float DistanceGrid::LowerBound(PointQ p, bool negate) const {
+namespace {
+
+bool FlipsX(GridFlip flip) { return flip == GridFlip::kX || flip == GridFlip::kXY; }
+bool FlipsY(GridFlip flip) { return flip == GridFlip::kY || flip == GridFlip::kXY; }
+
+}  // namespace
+
+float DistanceGrid::LowerBound(PointQ p, GridFlip flip) const {
   // 32-bit coordinates: -(-32768) is representable.
-  const int x = negate ? -static_cast<int>(p.x) : p.x;
-  const int y = negate ? -static_cast<int>(p.y) : p.y;
+  const int x = FlipsX(flip) ? -static_cast<int>(p.x) : p.x;
+  const int y = FlipsY(flip) ? -static_cast<int>(p.y) : p.y;
   const int ax = std::abs(x);
   const int ay = std::abs(y);
   if (ax > fast_limit_ || ay > fast_limit_) {
@@ -195,16 +202,16 @@ float DistanceGrid::LowerBound(PointQ p, bool negate) const {
   return std::max(0.0f, d - off);
 }
 
-double DistanceGrid::SumLowerBounds(std::span<const PointQ> points, bool negate) const {
+double DistanceGrid::SumLowerBounds(std::span<const PointQ> points, GridFlip flip) const {
   double sum = 0;
-  for (const PointQ& p : points) sum += LowerBound(p, negate);
+  for (const PointQ& p : points) sum += LowerBound(p, flip);
   return sum;
 }
 
 namespace {
 
 #ifdef HANDDB_HAVE_AVX2_PATH
-template <bool kNegate>
+template <bool kNegX, bool kNegY>
 __attribute__((target("avx2"), always_inline)) inline __m256 Step(const PointQ* p,
                                                                   __m256i vbias,
                                                                   __m256i vhalf,
@@ -217,10 +224,9 @@ __attribute__((target("avx2"), always_inline)) inline __m256 Step(const PointQ* 
   const __m256i v = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
   __m256i x = _mm256_srai_epi32(_mm256_slli_epi32(v, 16), 16);
   __m256i y = _mm256_srai_epi32(v, 16);
-  if constexpr (kNegate) {  // the point reflected through the origin: -p (32-bit lanes, exact)
-    x = _mm256_sub_epi32(_mm256_setzero_si256(), x);
-    y = _mm256_sub_epi32(_mm256_setzero_si256(), y);
-  }
+  // The point reflected in an axis (32-bit lanes, exact).
+  if constexpr (kNegX) x = _mm256_sub_epi32(_mm256_setzero_si256(), x);
+  if constexpr (kNegY) y = _mm256_sub_epi32(_mm256_setzero_si256(), y);
   const __m256i ix = _mm256_sra_epi32(_mm256_add_epi32(x, vbias), vshift);
   const __m256i iy = _mm256_sra_epi32(_mm256_add_epi32(y, vbias), vshift);
   const __m256i idx = _mm256_add_epi32(_mm256_mullo_epi32(iy, vsize), ix);
@@ -238,7 +244,7 @@ __attribute__((target("avx2"), always_inline)) inline __m256 Step(const PointQ* 
 
 // Eight points per step: unpack int16 x/y, compute node and offset-table indices, two gathers.
 // Returns the sum over the first n - n % 8 points; *done receives that count.
-template <bool kNegate>
+template <bool kNegX, bool kNegY>
 __attribute__((target("avx2"))) double SumLowerBoundsAvx2(const PointQ* pts,
                                                           size_t n,
                                                           const uint16_t* dt,
@@ -261,13 +267,13 @@ __attribute__((target("avx2"))) double SumLowerBoundsAvx2(const PointQ* pts,
   size_t i = 0;
   for (; i + 16 <= n; i += 16) {
     acc0 = _mm256_add_ps(
-        acc0, Step<kNegate>(pts + i, vbias, vhalf, vmask, vsize, vshift, zero, dt, table));
+        acc0, Step<kNegX, kNegY>(pts + i, vbias, vhalf, vmask, vsize, vshift, zero, dt, table));
     acc1 = _mm256_add_ps(
-        acc1, Step<kNegate>(pts + i + 8, vbias, vhalf, vmask, vsize, vshift, zero, dt, table));
+        acc1, Step<kNegX, kNegY>(pts + i + 8, vbias, vhalf, vmask, vsize, vshift, zero, dt, table));
   }
   for (; i + 8 <= n; i += 8)
     acc0 = _mm256_add_ps(
-        acc0, Step<kNegate>(pts + i, vbias, vhalf, vmask, vsize, vshift, zero, dt, table));
+        acc0, Step<kNegX, kNegY>(pts + i, vbias, vhalf, vmask, vsize, vshift, zero, dt, table));
   alignas(32) float lanes[16];
   _mm256_store_ps(lanes, acc0);
   _mm256_store_ps(lanes + 8, acc1);
@@ -281,7 +287,7 @@ __attribute__((target("avx2"))) double SumLowerBoundsAvx2(const PointQ* pts,
 
 }  // namespace
 
-template <bool kNegate>
+template <bool kNegX, bool kNegY>
 double DistanceGrid::SumLowerBoundsFastImpl(std::span<const PointQ> points) const {
   const uint16_t* dt = dt_.data();
   const float* table = offset_table_.data();
@@ -297,12 +303,13 @@ double DistanceGrid::SumLowerBoundsFastImpl(std::span<const PointQ> points) cons
   double vector_sum = 0;
 #ifdef HANDDB_HAVE_AVX2_PATH
   if (HaveAvx2()) {
-    vector_sum = SumLowerBoundsAvx2<kNegate>(pts, n, dt, table, mask, half, bias, shift, size, &i);
+    vector_sum =
+        SumLowerBoundsAvx2<kNegX, kNegY>(pts, n, dt, table, mask, half, bias, shift, size, &i);
   }
 #endif
   auto one = [&](const PointQ& p) {
-    const int x = kNegate ? -static_cast<int>(p.x) : p.x;
-    const int y = kNegate ? -static_cast<int>(p.y) : p.y;
+    const int x = kNegX ? -static_cast<int>(p.x) : p.x;
+    const int y = kNegY ? -static_cast<int>(p.y) : p.y;
     const float off = table[(((y + half) & mask) << shift) | ((x + half) & mask)];
     const float d = static_cast<float>(dt[((y + bias) >> shift) * size + ((x + bias) >> shift)]) *
                     (1.0f / kUnitsPerPx);
@@ -319,8 +326,18 @@ double DistanceGrid::SumLowerBoundsFastImpl(std::span<const PointQ> points) cons
          (static_cast<double>(acc[2]) + acc[3]);
 }
 
-double DistanceGrid::SumLowerBoundsFast(std::span<const PointQ> points, bool negate) const {
-  return negate ? SumLowerBoundsFastImpl<true>(points) : SumLowerBoundsFastImpl<false>(points);
+double DistanceGrid::SumLowerBoundsFast(std::span<const PointQ> points, GridFlip flip) const {
+  switch (flip) {
+    case GridFlip::kNone:
+      return SumLowerBoundsFastImpl<false, false>(points);
+    case GridFlip::kX:
+      return SumLowerBoundsFastImpl<true, false>(points);
+    case GridFlip::kY:
+      return SumLowerBoundsFastImpl<false, true>(points);
+    case GridFlip::kXY:
+      return SumLowerBoundsFastImpl<true, true>(points);
+  }
+  return 0;
 }
 
 double DistanceGrid::MeanLowerBoundMargin(size_t n, double mean) {

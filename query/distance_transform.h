@@ -28,6 +28,12 @@
 
 namespace handdb {
 
+// How a grid of the set Q is read: at p (kNone), or at p reflected in an axis or both. The grid
+// of Q read at F(p) bounds d(p, F(Q)) (F is an isometry and its own inverse): rolls r and
+// r + R/2 are Q and -Q (kXY), and the mirrored query's rolls are Q reflected in x or y (kX, kY),
+// so one grid serves up to four (hand, roll) pairs (docs/query.md).
+enum class GridFlip { kNone, kX, kY, kXY };
+
 struct DistanceGridOptions {
   // Grid step in px: 1, 1/2, 1/4, 1/8 or 1/16 (a power-of-two fraction of a pixel, so that node
   // indices come from integer shifts of PointQ coordinates).
@@ -55,17 +61,16 @@ class DistanceGrid {
   }
   // Node nearest to p (may be outside [0, size) for points off the grid).
   int NodeIndex(int coord) const { return (coord + half_extent_u_ + cell_u_ / 2) >> shift_; }
-  // The lower bound of d(p, Q) in px described above; negate: of d(-p, Q), which is d(p, -Q):
-  // the grid of Q also bounds distances to Q rotated by 180 degrees (the searcher's roll
-  // r + R/2, docs/query.md).
-  float LowerBound(PointQ p, bool negate = false) const;
+  // The lower bound of d(p, Q) in px described above; with a flip F, of d(F(p), Q), which is
+  // d(p, F(Q)).
+  float LowerBound(PointQ p, GridFlip flip = GridFlip::kNone) const;
   // Sum of LowerBound over points (float accumulation; see MeanLowerBoundMargin()).
-  double SumLowerBounds(std::span<const PointQ> points, bool negate = false) const;
+  double SumLowerBounds(std::span<const PointQ> points, GridFlip flip = GridFlip::kNone) const;
   // True if every point with |x|, |y| <= max_abs (PointQ units) is on the grid's fast path
-  // (for p and for -p alike).
+  // (for p and for any flip of p alike).
   bool Covers(int max_abs) const { return max_abs <= fast_limit_; }
   // SumLowerBounds for points known to satisfy Covers(); no bounds checks.
-  double SumLowerBoundsFast(std::span<const PointQ> points, bool negate = false) const;
+  double SumLowerBoundsFast(std::span<const PointQ> points, GridFlip flip = GridFlip::kNone) const;
 
   int size() const { return size_; }
   // The grid step of the last Build (px): options' cell_px, doubled while a far point would make
@@ -78,7 +83,7 @@ class DistanceGrid {
   static double MeanLowerBoundMargin(size_t n, double mean);
 
  private:
-  template <bool kNegate>
+  template <bool kNegX, bool kNegY>
   double SumLowerBoundsFastImpl(std::span<const PointQ> points) const;
 
   DistanceGridOptions options_;

@@ -96,43 +96,47 @@ TEST_P(LowerBound, FastSumEqualsPerPointSum) {
   EXPECT_EQ(grid.SumLowerBounds(pts), per_point);
 }
 
-// Read at -p, the grid of Q bounds d(p, -Q) (the set turned by 180 degrees): the searcher's
-// rolls r and r + R/2 share one grid.
-TEST_P(LowerBound, NegatedReadsBoundTheReflectedSet) {
+// Read at F(p), the grid of Q bounds d(p, F(Q)) for every flip F: rolls r and r + R/2 share one
+// grid (-Q, kXY), and so do the mirrored query's rolls (Q reflected in x or y).
+TEST_P(LowerBound, FlippedReadsBoundTheReflectedSet) {
   const auto set = RandomPoints(600, 150 * 16, 6);
-  std::vector<PointQ> reflected;
-  for (const PointQ& q : set) {
-    reflected.push_back({static_cast<int16_t>(-q.x), static_cast<int16_t>(-q.y)});
-  }
   DistanceGrid grid(DistanceGridOptions{GetParam(), 170});
   grid.Build(set);
   const auto probes = RandomPoints(20000, 2040 * 16, 7);
   const auto near = RandomPoints(20000, 160 * 16, 8);
-  double sum_gap = 0;
-  for (const auto* ps : {&probes, &near}) {
-    for (const PointQ& p : *ps) {
-      const double exact = ExactDistancePx(reflected, p);
-      const double lb = grid.LowerBound(p, /*negate=*/true);
-      ASSERT_LE(lb, exact + 1e-5) << p.x << "," << p.y;
-      if (ps == &near) sum_gap += exact - lb;
-    }
-  }
-  EXPECT_LT(sum_gap / near.size(), 1.4143 * GetParam());
-  // The fast and per-point sums agree for negated reads too, and differ from plain reads.
   ASSERT_TRUE(grid.Covers(160 * 16));
-  double per_point = 0, plain = 0;
-  for (const auto& p : near) {
-    per_point += grid.LowerBound(p, true);
-    plain += grid.LowerBound(p);
+  double plain = 0;
+  for (const auto& p : near) plain += grid.LowerBound(p);
+  for (const GridFlip flip : {GridFlip::kX, GridFlip::kY, GridFlip::kXY}) {
+    const int sx = flip == GridFlip::kY ? 1 : -1;
+    const int sy = flip == GridFlip::kX ? 1 : -1;
+    std::vector<PointQ> reflected;
+    for (const PointQ& q : set) {
+      reflected.push_back({static_cast<int16_t>(sx * q.x), static_cast<int16_t>(sy * q.y)});
+    }
+    double sum_gap = 0;
+    for (const auto* ps : {&probes, &near}) {
+      for (const PointQ& p : *ps) {
+        const double exact = ExactDistancePx(reflected, p);
+        const double lb = grid.LowerBound(p, flip);
+        ASSERT_LE(lb, exact + 1e-5) << p.x << "," << p.y;
+        if (ps == &near) sum_gap += exact - lb;
+      }
+    }
+    EXPECT_LT(sum_gap / near.size(), 1.4143 * GetParam());
+    // The fast and per-point sums agree for flipped reads too, and differ from plain reads.
+    double per_point = 0;
+    for (const auto& p : near) per_point += grid.LowerBound(p, flip);
+    const double fast = grid.SumLowerBoundsFast(near, flip);
+    const double mean = fast / near.size();
+    EXPECT_NEAR(
+        mean, per_point / near.size(), DistanceGrid::MeanLowerBoundMargin(near.size(), mean));
+    EXPECT_EQ(grid.SumLowerBounds(near, flip), per_point);
+    EXPECT_NE(per_point, plain);
+    // The most negative coordinate flips without overflow (off the grid: the box fallback).
+    const PointQ corner{-32768, -32768};
+    EXPECT_EQ(grid.LowerBound(corner, flip), grid.LowerBound(corner));
   }
-  const double fast = grid.SumLowerBoundsFast(near, true);
-  const double mean = fast / near.size();
-  EXPECT_NEAR(mean, per_point / near.size(), DistanceGrid::MeanLowerBoundMargin(near.size(), mean));
-  EXPECT_EQ(grid.SumLowerBounds(near, true), per_point);
-  EXPECT_NE(per_point, plain);
-  // The most negative coordinate negates without overflow (off the grid: the box fallback).
-  const PointQ corner{-32768, -32768};
-  EXPECT_EQ(grid.LowerBound(corner, true), grid.LowerBound(corner));
 }
 
 INSTANTIATE_TEST_SUITE_P(Cells, LowerBound, ::testing::Values(1.0f, 0.5f, 0.25f));

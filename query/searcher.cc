@@ -1,6 +1,7 @@
 #include "query/searcher.h"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -13,6 +14,7 @@
 #include "query/chamfer.h"
 #include "query/coarse_bound.h"
 #include "query/distance_transform.h"
+#include "query/point_buckets.h"
 
 namespace handdb {
 namespace {
@@ -33,20 +35,22 @@ struct Scored {
   double lower_bound = 0;
   view_id_t view = 0;
   roll_id_t roll = 0;
+  Hand hand = Hand::kRight;
 };
 
-// The total order of results: distance, then view id, then roll.
+// The total order of results: distance, then view id, then roll, then right before left.
 bool Before(const Scored& x, const Scored& y) {
   if (x.distance != y.distance) return x.distance < y.distance;
   if (x.view != y.view) return x.view < y.view;
-  return x.roll < y.roll;
+  if (x.roll != y.roll) return x.roll < y.roll;
+  return x.hand == Hand::kRight && y.hand == Hand::kLeft;
 }
 
 // Shared top-k under a mutex; threshold() is the k-th best distance (+inf until k are known),
 // readable without the lock.
 class TopK {
  public:
-  // `bound`: pairs above it are never wanted (the other hand's k-th best, or +inf).
+  // `bound`: pairs above it are never wanted (+inf: every pair may be).
   TopK(size_t k, double bound) : k_(k), threshold_(bound) { items_.reserve(k + 1); }
 
   void Insert(const Scored& s) {
@@ -55,7 +59,7 @@ class TopK {
     if (items_.size() == k_ && !Before(s, items_.back())) return;
     // A pair is scored once (ScoreRollBest marks what it scored); kept as a guard.
     for (const Scored& it : items_) {
-      if (it.view == s.view && it.roll == s.roll) return;
+      if (it.view == s.view && it.roll == s.roll && it.hand == s.hand) return;
     }
     items_.insert(std::upper_bound(items_.begin(), items_.end(), s, Before), s);
     if (items_.size() > k_) items_.pop_back();
@@ -96,90 +100,200 @@ double Limit(double threshold, double known, double n) {
   return (threshold - known) * n * (1 + kAbandonSlack) + kAbandonSlack;
 }
 
-// Per-query state shared by the workers.
+// An upper bound (PointQ units) of d(q, Y_v) for q in a cell with coarse value F (1/2 px): the
+// box's nearest point to Y_v is F away, and q is at most the box's diagonal (8 sqrt 2 px, 181.02
+// units) from it.
+int32_t NearestWithin(uint8_t coarse_value) {
+  return static_cast<int32_t>(coarse_value) * (kPointScale / 2) + 182 + kPointScale / 2;
+}
+
+// Where each 1 px row of the coarse grid starts in a view's points sorted by y (every converted
+// view: edges/view_conversion.h): the points with y in [y0, y1] are [start[row(y0)],
+// start[row(y1) + 1]), found with two lookups. A query point whose nearest view point is known to
+// be within r scans only the rows within r of it: no kd-tree or bucket sort to build per view,
+// ~1,000 instructions to index one (docs/query.md).
+class RowIndex {
+ public:
+  static constexpr int kRowUnits = 16;
+  static constexpr int kRows = 2 * CoarseGrid::kHalfUnits / kRowUnits;
+  void Build(std::span<const PointQ> points) {
+    start_.assign(kRows + 1, 0);
+    uint32_t i = 0;
+    for (int row = 0; row < kRows; ++row) {
+      const int y_end = -CoarseGrid::kHalfUnits + (row + 1) * kRowUnits;  // exclusive
+      while (i < points.size() && points[i].y < y_end) ++i;
+      start_[static_cast<size_t>(row) + 1] = i;
+    }
+  }
+  // Exact nearest squared distance from q to `points` (the set Build saw), given that one point
+  // is within `radius` units of q: only the rows within radius of q.y are scanned.
+  int32_t NearestSquared(PointQ q, std::span<const PointQ> points, int32_t radius) const {
+    const int r0 = std::max(0, (q.y - radius + CoarseGrid::kHalfUnits) / kRowUnits);
+    const int r1 = std::min(kRows - 1, (q.y + radius + CoarseGrid::kHalfUnits) / kRowUnits);
+    if (q.y - radius + CoarseGrid::kHalfUnits >= 0 && r0 <= r1) {
+      const uint32_t lo = start_[static_cast<size_t>(r0)];
+      const uint32_t hi = start_[static_cast<size_t>(r1) + 1];
+      if (lo < hi) {
+        const int32_t best = NearestSquaredSmall(q, points.subspan(lo, hi - lo));
+        if (best <= radius * radius) return best;
+      }
+    }
+    return NearestSquaredSmall(q, points);
+  }
+
+ private:
+  std::vector<uint32_t> start_;
+};
+
+// A (hand, roll) combination searched: the query, mirrored for the left hand, rolled by
+// -angle(roll). Hand::kEither searches the 2R slots of both hands in one run.
+struct Slot {
+  Hand hand = Hand::kRight;
+  roll_id_t roll = 0;
+};
+
+// A slot that reads another slot's distance grid: the grid of the base slot's rolled query Q_b,
+// read at flip(y), bounds d(y, flip(Q_b)), and the member's own rolled query is flip(Q_b) up to
+// `gap_px` per point (rounding ties; 0 in practice), so d(y, Q_m) >= d(flip(y), Q_b) - gap.
+struct GridMember {
+  uint32_t slot = 0;
+  GridFlip flip = GridFlip::kNone;
+  double gap_px = 0;  // set once the slots are prepared
+};
+
+// Per-query state shared by the workers: every slot's rolled query, its coarse histogram and
+// the point cells the linear scans read, and (lazily) its kd-tree.
 class QueryContext {
  public:
   QueryContext(const Database& db,
                std::span<const int32_t> max_abs,
+               std::span<const uint8_t> y_sorted,
                const CoarseFields* coarse,
                std::span<const Point2f> query,
+               std::vector<Slot> slots,
                const SearchOptions& options)
       : db_(db),
         options_(options),
         query_(query),
         max_abs_(max_abs),
+        y_sorted_(y_sorted),
         coarse_(coarse),
-        rolled_(db.num_rolls()),
-        histograms_(coarse != nullptr ? db.num_rolls() : 0),
-        point_cells_(coarse != nullptr ? db.num_rolls() : 0),
+        slots_(std::move(slots)),
+        rolled_(slots_.size()),
+        histograms_(coarse != nullptr ? slots_.size() : 0),
+        point_cells_(coarse != nullptr ? slots_.size() : 0),
         scan_d2_(ResolveNumThreads(options.num_threads)),
-        rolled_max_abs_(db.num_rolls()),
-        query_trees_(db.num_rolls()),
-        query_tree_once_(db.num_rolls()),
-        caches_(ResolveNumThreads(options.num_threads)) {}
-
-  // The query rotated by -angle(r) and quantised.
-  void PrepareRoll(roll_id_t r) {
-    rolled_[r] = RotateAndQuantise(query_, -RollAngle(r, db_.num_rolls()));
-    int32_t m = 0;
-    for (const PointQ& p : rolled_[r]) {
-      m = std::max({m, std::abs(static_cast<int32_t>(p.x)), std::abs(static_cast<int32_t>(p.y))});
-    }
-    rolled_max_abs_[r] = m;
-    if (coarse_ != nullptr) {
-      histograms_[r].Build(rolled_[r]);
-      point_cells_[r].resize(rolled_[r].size());
-      for (size_t i = 0; i < rolled_[r].size(); ++i) {
-        point_cells_[r][i] = static_cast<int16_t>(CoarseGrid::CellOf(rolled_[r][i]));
+        rolled_max_abs_(slots_.size()),
+        query_trees_(slots_.size()),
+        query_tree_once_(slots_.size()),
+        query_buckets_(slots_.size()),
+        query_buckets_once_(slots_.size()),
+        caches_(ResolveNumThreads(options.num_threads)),
+        bucket_caches_(ResolveNumThreads(options.num_threads)),
+        row_caches_(ResolveNumThreads(options.num_threads)) {
+    for (const Slot& s : slots_) {
+      if (s.hand == Hand::kLeft && mirrored_.empty()) {
+        // x -> -x is exact in float, so the mirrored query of a mirrored view is the view itself.
+        mirrored_.assign(query.begin(), query.end());
+        for (Point2f& p : mirrored_) p.x = -p.x;
       }
     }
   }
 
-  // L_A(v, r) of query/coarse_field.h (px), 0 without coarse fields.
-  double CoarseBound(view_id_t v, roll_id_t r) const {
-    if (coarse_ == nullptr) return 0.0;
-    return histograms_[r].LowerBound(coarse_->field(v), rolled_[r].size());
+  size_t num_slots() const { return slots_.size(); }
+  const Slot& slot(size_t s) const { return slots_[s]; }
+
+  // The slot's query rotated by -angle(roll) and quantised, and what the bounds read of it.
+  void PrepareSlot(size_t s) {
+    const std::span<const Point2f> source =
+        slots_[s].hand == Hand::kLeft ? std::span<const Point2f>(mirrored_) : query_;
+    rolled_[s] = RotateAndQuantise(source, -RollAngle(slots_[s].roll, db_.num_rolls()));
+    int32_t m = 0;
+    for (const PointQ& p : rolled_[s]) {
+      m = std::max({m, std::abs(static_cast<int32_t>(p.x)), std::abs(static_cast<int32_t>(p.y))});
+    }
+    rolled_max_abs_[s] = m;
+    if (coarse_ != nullptr) {
+      histograms_[s].Build(rolled_[s]);
+      point_cells_[s].resize(rolled_[s].size());
+      for (size_t i = 0; i < rolled_[s].size(); ++i) {
+        point_cells_[s][i] = static_cast<int16_t>(CoarseGrid::CellOf(rolled_[s][i]));
+      }
+    }
   }
-  // A lower bound of B(v, r) from a stored bound L <= L_A + L_B: L - L_A <= L_B (the same L_A
-  // computation, so the subtraction is exact up to the last rounding, which goes down).
-  double BLowerBound(view_id_t v, roll_id_t r, double stored_px) const {
-    if (coarse_ == nullptr) return stored_px;
-    return std::max(0.0, (stored_px - CoarseBound(v, r)) * (1 - 1e-12));
-  }
-  // The kd-tree over the rolled query, built on first use: rolls whose pairs are all pruned
-  // never get one (and the trees do not exist during the bounds step).
-  const KdTree& QueryTree(roll_id_t r) {
-    std::call_once(query_tree_once_[r], [&] {
-      query_trees_[r] = std::make_unique<KdTree>(rolled_[r], options_.kdtree);
+
+  const CellHistogram& histogram(size_t s) const { return histograms_[s]; }
+
+  // The kd-tree over the rolled query, built on first use: slots whose pairs are all pruned
+  // never get one.
+  const KdTree& QueryTree(size_t s) {
+    std::call_once(query_tree_once_[s], [&] {
+      query_trees_[s] = std::make_unique<KdTree>(rolled_[s], options_.kdtree);
     });
-    return *query_trees_[r];
+    return *query_trees_[s];
   }
-  std::span<const PointQ> rolled(roll_id_t r) const { return rolled_[r]; }
-  // max_i |rolled(r2)[i] + rolled(r)[i]| (px): how far rolled(r2) is from rolled(r) turned by
-  // 180 degrees, point by point (both are the query's points in the same order). For r2 = r + R/2
-  // it is 0 unless a coordinate sits on a rounding tie; either way d(y, rolled(r2)) >=
-  // d(-y, rolled(r)) - gap for every y, so roll r's grid read at -y, minus the gap, bounds B of
-  // roll r2.
-  double NegationGap(roll_id_t r, roll_id_t r2) const {
-    const std::vector<PointQ>& a = rolled_[r];
-    const std::vector<PointQ>& b = rolled_[r2];
+  std::span<const PointQ> rolled(size_t s) const { return rolled_[s]; }
+
+  // The rolled query's buckets (query/point_buckets.h), built on first use; unusable for a query
+  // with points off the coarse grid (then the kd-tree answers).
+  const PointBuckets& QueryBuckets(size_t s) {
+    std::call_once(query_buckets_once_[s], [&] { query_buckets_[s].Build(rolled_[s]); });
+    return query_buckets_[s];
+  }
+
+  const RowIndex& ViewRows(view_id_t v, int worker) {
+    auto& cache = row_caches_[worker];
+    for (size_t i = 0; i < cache.size(); ++i) {
+      if (cache[i].first == v) {
+        std::rotate(cache.begin(), cache.begin() + i, cache.begin() + i + 1);
+        return cache.front().second;
+      }
+    }
+    if (cache.size() < kBucketCacheSize) cache.emplace_back();
+    std::rotate(cache.begin(), cache.end() - 1, cache.end());
+    cache.front().first = v;
+    cache.front().second.Build(db_.points(v));
+    return cache.front().second;
+  }
+
+  // View v's buckets from worker `worker`'s cache: like the view kd-trees, a small LRU catches
+  // the few rolls of one view that are refined close together.
+  const PointBuckets& ViewBuckets(view_id_t v, int worker) {
+    auto& cache = bucket_caches_[worker];
+    for (size_t i = 0; i < cache.size(); ++i) {
+      if (cache[i].first == v) {
+        std::rotate(cache.begin(), cache.begin() + i, cache.begin() + i + 1);
+        return cache.front().second;
+      }
+    }
+    if (cache.size() < kBucketCacheSize) cache.emplace_back();
+    std::rotate(cache.begin(), cache.end() - 1, cache.end());  // the oldest entry, reused
+    cache.front().first = v;
+    cache.front().second.Build(db_.points(v));
+    return cache.front().second;
+  }
+
+  // max_i |rolled(member)[i] - flip(rolled(base)[i])| (px), rounded up: how far the member's
+  // rolled query is from the base's, flipped, point by point (both are the query's points in the
+  // same order). 0 unless a coordinate sits on a rounding tie.
+  double FlipGap(size_t base, size_t member, GridFlip flip) const {
+    const std::vector<PointQ>& a = rolled_[base];
+    const std::vector<PointQ>& b = rolled_[member];
     THROW_CHECK_EQ(a.size(), b.size());
+    const int64_t sx = flip == GridFlip::kX || flip == GridFlip::kXY ? -1 : 1;
+    const int64_t sy = flip == GridFlip::kY || flip == GridFlip::kXY ? -1 : 1;
     int64_t worst = 0;
     for (size_t i = 0; i < a.size(); ++i) {
-      const int64_t dx = static_cast<int64_t>(a[i].x) + b[i].x;
-      const int64_t dy = static_cast<int64_t>(a[i].y) + b[i].y;
+      const int64_t dx = b[i].x - sx * a[i].x;
+      const int64_t dy = b[i].y - sy * a[i].y;
       worst = std::max(worst, dx * dx + dy * dy);
     }
-    // Rounded up: a slightly larger gap keeps the bound valid.
     return worst == 0 ? 0.0 : std::sqrt(static_cast<double>(worst)) / kPointScale * (1 + 1e-12);
   }
 
-  // The kd-tree over view v's points from worker `worker`'s cache. Pairs are visited in
-  // increasing bound and the rolls of one view have similar bounds, so a small per-worker LRU
-  // cache catches the reuse while memory stays bounded (a tree over 600 points is ~10 KB;
-  // caching every refined view cost ~1x the database size on the paper-size benchmark). On the
-  // real paper database 8 entries per worker built 6,436 trees for 6,556 refined pairs and 2
-  // entries the same within 1%, so 2 it is.
+  // The kd-tree over view v's points from worker `worker`'s cache (a small LRU: pairs are
+  // visited in increasing bound and the rolls of one view have similar bounds). Only brute force
+  // and views beyond the linear scans' coordinate range build them.
   const KdTree& ViewTree(view_id_t v, int worker) {
     auto& cache = caches_[worker];
     for (size_t i = 0; i < cache.size(); ++i) {
@@ -194,23 +308,29 @@ class QueryContext {
     return *cache.front().second;
   }
 
-  // Exact D_c of (v, r); returns false (abandoned) once it provably exceeds `threshold`.
-  // `lower_bound` <= B(v, r) (0 if unknown): A goes first, abandoned as soon as
-  // lower_bound + partial A exceeds the threshold, then B, abandoned once A + partial B does.
-  bool Score(
-      view_id_t v, roll_id_t r, double threshold, double lower_bound, int worker, Scored* out) {
+  // Exact D_c of (v, slot s); returns false (abandoned) once it provably exceeds `threshold`.
+  // bound_a_px <= L_A(v, s) <= A (the coarse bound, 0 if unknown) and bound_b_px <= B (0 if
+  // unknown): A goes first, abandoned as soon as bound_b + a lower bound of A exceeds the
+  // threshold, then B, abandoned once A + partial B does.
+  bool Score(view_id_t v,
+             size_t s,
+             double threshold,
+             double bound_a_px,
+             double bound_b_px,
+             int worker,
+             Scored* out) {
     const std::span<const PointQ> view = db_.points(v);
-    const std::span<const PointQ> q = rolled_[r];
+    const std::span<const PointQ> q = rolled_[s];
     const double nv = static_cast<double>(view.size());
     const double nq = static_cast<double>(q.size());
     bool stopped = false;
-    const double limit_a = Limit(threshold, lower_bound, nq);
+    const double limit_a = Limit(threshold, bound_b_px, nq);
     if (limit_a < 0) return false;
     double sum_a = 0;
     // Brute force keeps the kd-trees: it is the reference the scans are tested against.
     if (!options_.brute_force && max_abs_[v] <= kSmallCoordLimit &&
-        rolled_max_abs_[r] <= kSmallCoordLimit) {
-      if (!ScanA(v, r, limit_a, worker, &sum_a)) {
+        rolled_max_abs_[s] <= kSmallCoordLimit) {
+      if (!ScanA(v, s, limit_a, bound_a_px, worker, &sum_a)) {
         probe_abandoned_.fetch_add(1, std::memory_order_relaxed);
         return false;
       }
@@ -221,40 +341,57 @@ class QueryContext {
     const double a = sum_a / nq;
     const double limit_b = Limit(threshold, a, nv);
     if (limit_b < 0) return false;
-    const double sum_b = QueryTree(r).SumNearestDistances(view, limit_b, &stopped);
+    const PointBuckets* buckets = options_.brute_force ? nullptr : &QueryBuckets(s);
+    const double sum_b = buckets != nullptr && buckets->usable()
+                             ? buckets->SumNearestDistances(view, limit_b, &stopped)
+                             : QueryTree(s).SumNearestDistances(view, limit_b, &stopped);
     if (stopped) return false;
     out->a = a;
     out->b = sum_b / nv;
     out->distance = out->a + out->b;
     out->view = v;
-    out->roll = r;
+    out->roll = slots_[s].roll;
+    out->hand = slots_[s].hand;
     return true;
   }
 
-  // The sum of A for (v, r) by linear scans of the view's points (no kd-tree: for a few hundred
-  // points a vectorised scan per query point is cheaper than building a tree that one pair
-  // uses), abandoned as soon as a lower bound of the whole sum exceeds `limit`: the exact
-  // distances of the points scanned so far plus the coarse bound F_v(cell) of the others
-  // (query/coarse_field.h; 0 without coarse fields). Points are scanned spread out first (every
-  // step-th point, then the gaps), so the bound rises quickly. A pair that is not abandoned gets
-  // the same sum as the kd-tree path, bit for bit: the nearest squared distances are exact
-  // integers either way, and they are summed in the query's order.
-  bool ScanA(view_id_t v, roll_id_t r, double limit, int worker, double* sum_out) {
+  // The sum of A for (v, s) from exact nearest distances, without a kd-tree (~20-50 us to build
+  // for the one or few pairs of a view that are refined): for a view sorted by y, a vectorised
+  // scan of the rows within reach of each query point (RowIndex: q's cell's coarse value bounds
+  // how far its nearest point can be); otherwise the view's buckets (query/point_buckets.h) or,
+  // for points off the coarse grid, a scan of every point. Abandoned as soon as a lower bound of
+  // the whole sum exceeds `limit`: it starts at bound_a_px |Q| <= sum_q F_v(cell(q))
+  // (query/coarse_bound.h) and each scanned point replaces its F_v(cell) by its exact distance
+  // (which is never smaller). Points are scanned spread out first (every step-th point, then the
+  // gaps), so the bound rises quickly. A pair that is not abandoned gets the same sum as the
+  // kd-tree path, bit for bit: the nearest squared distances are exact integers either way, and
+  // they are summed in the query's order.
+  bool ScanA(view_id_t v, size_t s, double limit, double bound_a_px, int worker, double* sum_out) {
     const std::span<const PointQ> view = db_.points(v);
-    const std::span<const PointQ> q = rolled_[r];
+    const std::span<const PointQ> q = rolled_[s];
     std::vector<int32_t>& d2 = scan_d2_[worker];
     d2.resize(q.size());
     const double stop = limit == kInf ? kInf : limit * (1 + 1e-9) + 1e-9;
-    const uint8_t* field = coarse_ != nullptr ? coarse_->field(v) : nullptr;
-    const int16_t* cells = coarse_ != nullptr ? point_cells_[r].data() : nullptr;
-    double bound = coarse_ != nullptr ? CoarseBound(v, r) * static_cast<double>(q.size()) : 0.0;
+    const int16_t* cells = coarse_ != nullptr ? point_cells_[s].data() : nullptr;
+    double bound = coarse_ != nullptr ? bound_a_px * static_cast<double>(q.size()) : 0.0;
+    // Views sorted by y (every converted view) scan a window of rows; others use buckets.
+    const bool window = cells != nullptr && y_sorted_[v] != 0;
+    const RowIndex* rows = window ? &ViewRows(v, worker) : nullptr;
+    const PointBuckets* buckets = window ? nullptr : &ViewBuckets(v, worker);
     const size_t step = std::max<size_t>(1, q.size() / kScanSpread);
     for (size_t offset = 0; offset < step; ++offset) {
       for (size_t i = offset; i < q.size(); i += step) {
-        d2[i] = NearestSquaredSmall(q[i], view);
+        if (window && cells[i] >= 0) {
+          d2[i] = rows->NearestSquared(q[i], view, NearestWithin(coarse_->value(v, cells[i])));
+        } else if (window) {
+          d2[i] = NearestSquaredSmall(q[i], view);
+        } else {
+          d2[i] =
+              buckets->usable() ? buckets->NearestSquared(q[i]) : NearestSquaredSmall(q[i], view);
+        }
         double gain = std::sqrt(static_cast<double>(d2[i])) / static_cast<double>(kPointScale);
-        if (field != nullptr && cells[i] >= 0) {
-          gain -= static_cast<double>(field[cells[i]]) / CoarseGrid::kValueUnitsPerPx;
+        if (cells != nullptr && cells[i] >= 0) {
+          gain -= static_cast<double>(coarse_->value(v, cells[i])) / CoarseGrid::kValueUnitsPerPx;
         }
         bound += gain;
         if (bound > stop) return false;
@@ -276,19 +413,27 @@ class QueryContext {
   const Database& db_;
   const SearchOptions& options_;
   std::span<const Point2f> query_;
-  std::span<const int32_t> max_abs_;  // per view: max |x|, |y| (PointQ units)
-  const CoarseFields* coarse_;        // nullptr: no A bound
+  std::vector<Point2f> mirrored_;      // the query mirrored (x -> -x), for left-hand slots
+  std::span<const int32_t> max_abs_;   // per view: max |x|, |y| (PointQ units)
+  std::span<const uint8_t> y_sorted_;  // per view: points sorted by y, all on the coarse grid
+  const CoarseFields* coarse_;         // nullptr: no A bound
+  std::vector<Slot> slots_;
   std::vector<std::vector<PointQ>> rolled_;
-  std::vector<CellHistogram> histograms_;          // per roll, with coarse fields
-  std::vector<std::vector<int16_t>> point_cells_;  // per roll: each point's coarse cell or -1
+  std::vector<CellHistogram> histograms_;          // per slot, with coarse fields
+  std::vector<std::vector<int16_t>> point_cells_;  // per slot: each point's coarse cell or -1
   static constexpr size_t kScanSpread = 64;        // points in ScanA's first spread-out pass
   std::vector<std::vector<int32_t>> scan_d2_;      // per worker: ScanA's squared distances
   std::vector<int32_t> rolled_max_abs_;
   std::atomic<uint64_t> probe_abandoned_{0};
   std::vector<std::unique_ptr<KdTree>> query_trees_;
   std::vector<std::once_flag> query_tree_once_;
+  std::vector<PointBuckets> query_buckets_;
+  std::vector<std::once_flag> query_buckets_once_;
   static constexpr size_t kTreeCacheSize = 2;
   std::vector<std::vector<std::pair<view_id_t, std::unique_ptr<KdTree>>>> caches_;
+  static constexpr size_t kBucketCacheSize = 4;
+  std::vector<std::vector<std::pair<view_id_t, PointBuckets>>> bucket_caches_;
+  std::vector<std::vector<std::pair<view_id_t, RowIndex>>> row_caches_;
   std::atomic<uint64_t> num_view_trees_{0};
 };
 
@@ -304,12 +449,17 @@ bool SearchOptions::Check() const {
 Searcher::Searcher(std::shared_ptr<const Database> db) : db_(std::move(db)) {
   THROW_CHECK(db_ != nullptr);
   max_abs_.resize(db_->num_views());
+  y_sorted_.resize(db_->num_views());
   for (view_id_t v = 0; v < db_->num_views(); ++v) {
+    const std::span<const PointQ> pts = db_->points(v);
     int32_t m = 0;
-    for (const PointQ& p : db_->points(v)) {
+    for (const PointQ& p : pts) {
       m = std::max({m, std::abs(static_cast<int32_t>(p.x)), std::abs(static_cast<int32_t>(p.y))});
     }
     max_abs_[v] = m;
+    y_sorted_[v] =
+        m < CoarseGrid::kHalfUnits &&
+        std::is_sorted(pts.begin(), pts.end(), [](PointQ a, PointQ b) { return a.y < b.y; });
   }
   // The grid holds distances to the rolled query, looked up only at view points; its bounds
   // are the same at every node whatever the extent (it grows to contain the query), so the
@@ -352,120 +502,144 @@ Status CheckQuery(std::span<const Point2f> query_px, const SearchOptions& option
   return Status::Ok();
 }
 
+// The slots of a search, the first hand's rolls first: right, left, or right then left.
+std::vector<Slot> MakeSlots(Hand hand, uint32_t rolls) {
+  std::vector<Slot> slots;
+  for (Hand h : {Hand::kRight, Hand::kLeft}) {
+    if (hand != Hand::kEither && hand != h) continue;
+    for (roll_id_t r = 0; r < rolls; ++r) slots.push_back({h, r});
+  }
+  return slots;
+}
+
+// The slots that share one distance grid, the base (kNone) first. With R even, roll r + R/2 is
+// roll r turned by 180 degrees (kXY). The left hand's roll r' is the right hand's roll R - r'
+// mirrored in x: rot(-a) M X = M rot(a) X with M = diag(-1, 1), and a = -angle(R - r') (kX), and
+// its roll R/2 - r is then the right roll r + R/2 mirrored, i.e. roll r reflected in y (kY). So a
+// both-hand search builds R/2 grids for its 2R slots (docs/query.md).
+std::vector<std::vector<GridMember>> MakeGridGroups(size_t num_slots, uint32_t rolls) {
+  const bool halves = rolls >= 2 && rolls % 2 == 0;
+  const bool both = num_slots == 2 * static_cast<size_t>(rolls);
+  std::vector<std::vector<GridMember>> groups;
+  for (uint32_t r = 0; r < (halves ? rolls / 2 : rolls); ++r) {
+    std::vector<GridMember> g = {{r, GridFlip::kNone}};
+    if (halves) g.push_back({r + rolls / 2, GridFlip::kXY});
+    if (both) {
+      g.push_back({rolls + (rolls - r) % rolls, GridFlip::kX});
+      if (halves) g.push_back({rolls + rolls / 2 - r, GridFlip::kY});
+    }
+    groups.push_back(std::move(g));
+  }
+  return groups;
+}
+
 // One query's stages, sharing the query context, the top k and the counters: BruteForce(), or
-// Bounds() then Refine(); then Matches().
+// Bounds() then Refine(); then Matches(). Pairs are indexed s * num_views + v over the slots s.
 class QueryRun {
  public:
   QueryRun(const Database& db,
            std::span<const int32_t> max_abs,
+           std::span<const uint8_t> y_sorted,
            float grid_half_extent_px,
            const CoarseFields* coarse,
            std::span<const Point2f> query_px,
            const SearchOptions& options,
-           double threshold,
            int threads,
            ThreadPool* pool,
-           Hand hand,
            std::chrono::steady_clock::time_point progress_since)
       : db_(db),
         max_abs_(max_abs),
         grid_half_extent_px_(grid_half_extent_px),
+        coarse_(coarse),
         options_(options),
         threads_(threads),
         pool_(pool),
         num_views_(db.num_views()),
         num_rolls_(db.num_rolls()),
         k_(static_cast<size_t>(options.top_k)),
-        ctx_(db, max_abs, coarse, query_px, options),
-        top_(k_, threshold),
-        hand_(hand),
+        ctx_(db,
+             max_abs,
+             y_sorted,
+             coarse,
+             query_px,
+             MakeSlots(options.hand, db.num_rolls()),
+             options),
+        top_(k_, kInf),
         progress_since_(progress_since) {}
 
-  // The reference: exact D_c for every (view, roll).
+  size_t num_slots() const { return ctx_.num_slots(); }
+
+  // The reference: exact D_c for every (view, slot).
   void BruteForce(SearchStats* stats, std::chrono::steady_clock::time_point start) {
     ParallelFor(
-        num_rolls_,
+        num_slots(),
         threads_,
-        [&](size_t r, int) {
-          ctx_.PrepareRoll(static_cast<roll_id_t>(r));
+        [&](size_t s, int) {
+          ctx_.PrepareSlot(s);
           return true;
         },
         pool_);
     stats->seconds_bounds = Seconds(start);
     const auto refine_start = std::chrono::steady_clock::now();
-    const auto progress = MakeProgress("brute force", num_views_ * num_rolls_, "pairs");
+    const auto progress = MakeProgress("brute force", num_views_ * num_slots(), "pairs");
     ParallelFor(
         num_views_,
         threads_,
         [&](size_t v, int worker) {
           if (!db_.points(static_cast<view_id_t>(v)).empty()) {
-            for (roll_id_t r = 0; r < num_rolls_; ++r) {
-              Scored s;
-              ctx_.Score(static_cast<view_id_t>(v), r, kInf, 0.0, worker, &s);
-              top_.Insert(s);
+            for (size_t s = 0; s < num_slots(); ++s) {
+              Scored sc;
+              ctx_.Score(static_cast<view_id_t>(v), s, kInf, 0.0, 0.0, worker, &sc);
+              top_.Insert(sc);
             }
-            refined_.fetch_add(num_rolls_, std::memory_order_relaxed);
+            refined_.fetch_add(num_slots(), std::memory_order_relaxed);
           }
-          progress->Add(num_rolls_);
+          progress->Add(num_slots());
           return true;
         },
         pool_);
     stats->seconds_refine = Seconds(refine_start);
   }
 
-  // Step 1: lower bounds, roll-major (one distance transform per roll, reused for every view),
-  // index r * num_views + v. The threshold is learnt on the way: after each roll its best few
-  // pairs are scored exactly, and a pair's bound stops accumulating as soon as it exceeds the
-  // current k-th best D_c (the partial sum is still a valid lower bound, and already too large to
-  // matter).
-  //
-  // With an even number of rolls, roll r + R/2 is roll r turned by 180 degrees: d(y, -Q) =
-  // d(-y, Q), so one grid serves both, read at -y for the second (minus the point-by-point gap
-  // between the two rolled queries, 0 but for rounding ties): half the distance transforms.
-  std::vector<Bound> Bounds() {
-    std::vector<Bound> bound(num_views_ * num_rolls_);
-    const DistanceGridOptions grid_options{options_.dt_cell_px, grid_half_extent_px_};
-    std::vector<DistanceGrid> grids(threads_, DistanceGrid(grid_options));
-    const bool pairs = num_rolls_ >= 2 && num_rolls_ % 2 == 0;
-    const uint32_t tasks = pairs ? num_rolls_ / 2 : num_rolls_;
-    const auto progress = MakeProgress("bounds", num_rolls_, "rolls");
+  // Step 1: lower bounds of every pair, L = L_A + L_B (docs/query.md).
+  //  a. Every slot's rolled query and coarse histogram.
+  //  b. L_A of every pair: per block of views, one streaming product per slot (CoarseFields).
+  //  c. The threshold seeded: the pairs with the smallest L_A scored exactly, so that it is
+  //     near the final k-th best before any distance grid is built.
+  //  d. Per grid group (up to four slots sharing one distance transform), most promising first:
+  //     L_B for the pairs whose L_A is still <= the k-th best, stopped as soon as L exceeds it,
+  //     then each slot's best two pairs scored. A group with no such pair builds no grid.
+  void Bounds() {
+    const size_t n = num_views_ * num_slots();
+    la_.assign(n, 0);
+    lb_.assign(n, 0);
     ParallelFor(
-        tasks,
+        num_slots(),
         threads_,
-        [&](size_t ri, int worker) {
-          const roll_id_t r = static_cast<roll_id_t>(ri);
-          ctx_.PrepareRoll(r);
-          DistanceGrid& grid = grids[worker];
-          grid.Build(ctx_.rolled(r));
-          Bound* out = bound.data() + ri * num_views_;
-          BoundRoll(grid, r, /*negate=*/false, /*gap_px=*/0.0, out);
-          ScoreRollBest(r, out, worker);
-          if (pairs) {
-            const roll_id_t r2 = static_cast<roll_id_t>(r + num_rolls_ / 2);
-            ctx_.PrepareRoll(r2);
-            Bound* out2 = bound.data() + static_cast<size_t>(r2) * num_views_;
-            BoundRoll(grid, r2, /*negate=*/true, ctx_.NegationGap(r, r2), out2);
-            ScoreRollBest(r2, out2, worker);
-          }
-          progress->Add(pairs ? 2 : 1);
+        [&](size_t s, int) {
+          ctx_.PrepareSlot(s);
           return true;
         },
         pool_);
-    return bound;
+    CoarseBounds();
+    if (coarse_ != nullptr) Seed();
+    FineBounds();
   }
 
   // Step 2: visit pairs in increasing bound. First the k smallest bounds give a threshold,
   // then only pairs whose bound is <= it are sorted and visited.
-  void Refine(const std::vector<Bound>& bound) {
-    const size_t n = bound.size();
+  void Refine() {
+    const size_t n = la_.size();
+    auto total = [&](uint32_t i) { return static_cast<uint32_t>(la_[i]) + lb_[i]; };
     auto by_bound = [&](uint32_t x, uint32_t y) {
-      return bound[x] != bound[y] ? bound[x] < bound[y] : x < y;
+      const uint32_t tx = total(x), ty = total(y);
+      return tx != ty ? tx < ty : x < y;
     };
     // The k smallest bounds with a bounded max-heap (no N-sized index array).
     std::vector<uint32_t> first;
     first.reserve(k_ + 1);
     for (uint32_t i = 0; i < n; ++i) {
-      if (bound[i] == kNoBound) continue;
+      if (la_[i] == kNoBound) continue;
       if (first.size() < k_) {
         first.push_back(i);
         std::push_heap(first.begin(), first.end(), by_bound);
@@ -476,25 +650,25 @@ class QueryRun {
       }
     }
     std::sort(first.begin(), first.end(), by_bound);
-    Visit(bound, first);
+    Visit(first);
     const double t0 = top_.threshold();
     std::vector<uint32_t> rest;
     const uint32_t last_first = first.empty() ? 0 : first.back();
     for (uint32_t i = 0; i < n; ++i) {
-      if (bound[i] != kNoBound && BoundPx(bound[i]) <= t0 &&
-          (first.empty() || by_bound(last_first, i))) {
+      if (la_[i] != kNoBound && TotalPx(i) <= t0 && (first.empty() || by_bound(last_first, i))) {
         rest.push_back(i);
       }
     }
     std::sort(rest.begin(), rest.end(), by_bound);
     // `rest` bounds the pairs to refine; the visit stops early once bounds pass the k-th best.
     const auto progress = MakeProgress("refine", rest.size(), "pairs");
-    Visit(bound, rest, progress.get());
+    Visit(rest, progress.get());
     progress->SetTotal(progress->done());
   }
 
-  // The top k, best first, with labels rolled (and mirrored back for kLeft) and shape names.
-  std::vector<Match> Matches(Hand hand) const {
+  // The top k, best first, with labels rolled (and mirrored back for the left hand) and shape
+  // names.
+  std::vector<Match> Matches() const {
     std::vector<Match> matches;
     for (const Scored& s : top_.items()) {
       Match m;
@@ -506,8 +680,8 @@ class QueryRun {
       m.b = s.b;
       m.lower_bound = s.lower_bound;
       m.label = RollLabel(db_.label(s.view), m.roll_angle);
-      if (hand == Hand::kLeft) m.label = MirrorLabel(m.label);
-      m.hand = hand;
+      if (s.hand == Hand::kLeft) m.label = MirrorLabel(m.label);
+      m.hand = s.hand;
       m.shape_name = std::string(db_.shape_name(m.label.shape_id));
       matches.push_back(std::move(m));
     }
@@ -515,6 +689,9 @@ class QueryRun {
   }
 
   void AddInto(SearchStats* stats) const {
+    stats->bounded += la_.size();
+    stats->grids += grids_.load();
+    stats->grid_bounded += grid_bounded_.load();
     stats->refined += refined_.load();
     stats->abandoned += abandoned_.load();
     stats->view_trees += ctx_.num_view_trees();
@@ -522,93 +699,200 @@ class QueryRun {
   }
 
  private:
-  // The bound of every view against one roll's distance grid, into out[v]. negate: the grid is
-  // of a roll whose query is rolled(r) turned by 180 degrees, up to gap_px per point (Bounds()).
-  void BoundRoll(
-      const DistanceGrid& grid, roll_id_t r, bool negate, double gap_px, Bound* out) const {
-    constexpr size_t kChunk = 64;
-    for (view_id_t v = 0; v < num_views_; ++v) {
-      const std::span<const PointQ> pts = db_.points(v);
-      if (pts.empty()) {
-        out[v] = kNoBound;
-        continue;
+  double TotalPx(size_t i) const { return BoundPx(la_[i]) + BoundPx(lb_[i]); }
+
+  // L_A of every pair into la_ (kNoBound for views without points), or 0 without coarse fields.
+  // L_A = sum / 2 / |Q| px with an exact integer sum, so floor(64 L_A) is an integer division.
+  void CoarseBounds() {
+    if (coarse_ == nullptr) {
+      for (size_t s = 0; s < num_slots(); ++s) {
+        for (view_id_t v = 0; v < num_views_; ++v) {
+          if (db_.points(v).empty()) la_[s * num_views_ + v] = kNoBound;
+        }
       }
-      // The coarse A bound first: a short dot product that on real photos prunes most pairs
-      // alone; then the B bound, stopped as soon as the sum is above the k-th best.
-      const double threshold = top_.threshold();
-      const double bound_a = ctx_.CoarseBound(v, r);
-      if (bound_a > threshold) {
-        out[v] = BoundBelow(bound_a);
-        continue;
-      }
-      const double n = static_cast<double>(pts.size());
-      const double limit = Limit(threshold, bound_a, n) + gap_px * n;
-      const bool fast = grid.Covers(max_abs_[v]);
-      double sum = 0;
-      for (size_t i = 0; i < pts.size() && sum <= limit; i += kChunk) {
-        const auto chunk = pts.subspan(i, std::min(kChunk, pts.size() - i));
-        sum += fast ? grid.SumLowerBoundsFast(chunk, negate) : grid.SumLowerBounds(chunk, negate);
-      }
-      const double mean = sum / n;
-      out[v] = BoundBelow(bound_a + mean - DistanceGrid::MeanLowerBoundMargin(pts.size(), mean) -
-                          gap_px);
+      return;
     }
+    ParallelFor(
+        coarse_->num_blocks(),
+        threads_,
+        [&](size_t b, int) {
+          std::array<uint32_t, CoarseFields::kBlock> sums;
+          const size_t v0 = b * CoarseFields::kBlock;
+          const size_t v1 = std::min(num_views_, v0 + CoarseFields::kBlock);
+          for (size_t s = 0; s < num_slots(); ++s) {
+            coarse_->BlockSums(ctx_.histogram(s), b, sums.data());
+            const uint64_t nq = ctx_.rolled(s).size();
+            Bound* out = la_.data() + s * num_views_;
+            for (size_t v = v0; v < v1; ++v) {
+              const uint64_t units = static_cast<uint64_t>(sums[v - v0]) *
+                                     static_cast<uint64_t>(kBoundUnitsPerPx / 2) / nq;
+              out[v] = db_.points(static_cast<view_id_t>(v)).empty()
+                           ? kNoBound
+                           : static_cast<Bound>(std::min<uint64_t>(units, kBoundMax));
+            }
+          }
+          return true;
+        },
+        pool_);
   }
 
-  // Scores this roll's most promising pairs now so later rolls can stop early.
-  // A pair scored here is marked kNoBound so that Refine does not score it again (its D_c is
-  // in the top k already, or was above the threshold, which only falls).
-  void ScoreRollBest(roll_id_t r, Bound* out, int worker) {
-    const size_t m = std::min<size_t>(num_views_, top_.threshold() == kInf ? k_ : 2);
+  // Scores the pairs with the smallest L_A (a few times k), best first, and marks them scored.
+  void Seed() {
+    const size_t m = 2 * k_ + 8;
     std::vector<uint32_t> best;
     best.reserve(m + 1);
-    auto less = [&](uint32_t x, uint32_t y) { return out[x] != out[y] ? out[x] < out[y] : x < y; };
-    for (uint32_t v = 0; v < num_views_; ++v) {
-      if (out[v] == kNoBound) continue;
+    auto less = [&](uint32_t x, uint32_t y) { return la_[x] != la_[y] ? la_[x] < la_[y] : x < y; };
+    for (uint32_t i = 0; i < la_.size(); ++i) {
+      if (la_[i] == kNoBound) continue;
       if (best.size() < m) {
-        best.push_back(v);
+        best.push_back(i);
         std::push_heap(best.begin(), best.end(), less);
-      } else if (m > 0 && less(v, best.front())) {
+      } else if (less(i, best.front())) {
         std::pop_heap(best.begin(), best.end(), less);
-        best.back() = v;
+        best.back() = i;
         std::push_heap(best.begin(), best.end(), less);
       }
     }
-    for (uint32_t v : best) {
-      const double threshold = top_.threshold();
-      if (BoundPx(out[v]) > threshold) continue;
-      refined_.fetch_add(1, std::memory_order_relaxed);
-      Scored sc;
-      if (ctx_.Score(v, r, threshold, ctx_.BLowerBound(v, r, BoundPx(out[v])), worker, &sc)) {
-        sc.lower_bound = BoundPx(out[v]);
-        top_.Insert(sc);
-      } else {
-        abandoned_.fetch_add(1, std::memory_order_relaxed);
-      }
-      out[v] = kNoBound;
-    }
+    std::sort(best.begin(), best.end(), less);
+    ParallelFor(
+        best.size(),
+        threads_,
+        [&](size_t j, int worker) {
+          ScorePair(best[j], worker);
+          return true;
+        },
+        pool_);
   }
 
-  // Scores the pairs of `order` (increasing bound) until a bound exceeds the k-th best.
-  void Visit(const std::vector<Bound>& bound,
-             std::span<const uint32_t> order,
-             Progress* progress = nullptr) {
+  void FineBounds() {
+    auto groups = MakeGridGroups(num_slots(), num_rolls_);
+    // Each group's smallest L_A, to visit the most promising grids first.
+    std::vector<std::pair<Bound, size_t>> order;
+    for (size_t g = 0; g < groups.size(); ++g) {
+      Bound best = kNoBound;
+      for (GridMember& m : groups[g]) {
+        m.gap_px = ctx_.FlipGap(groups[g][0].slot, m.slot, m.flip);
+        const Bound* la = la_.data() + static_cast<size_t>(m.slot) * num_views_;
+        best = std::min(best, *std::min_element(la, la + num_views_));
+      }
+      order.emplace_back(best, g);
+    }
+    std::sort(order.begin(), order.end());
+    const DistanceGridOptions grid_options{options_.dt_cell_px, grid_half_extent_px_};
+    std::vector<DistanceGrid> grids(threads_, DistanceGrid(grid_options));
+    const auto progress = MakeProgress("bounds", num_slots(), "rolls");
     ParallelFor(
         order.size(),
         threads_,
         [&](size_t i, int worker) {
-          const uint32_t idx = order[i];
+          const std::vector<GridMember>& group = groups[order[i].second];
+          if (BoundPx(order[i].first) <= top_.threshold()) {
+            DistanceGrid& grid = grids[worker];
+            grid.Build(ctx_.rolled(group[0].slot));
+            grids_.fetch_add(1, std::memory_order_relaxed);
+            for (const GridMember& m : group) {
+              BoundSlot(grid, m);
+              ScoreSlotBest(m.slot, worker);
+            }
+          }
+          progress->Add(group.size());
+          return true;
+        },
+        pool_);
+  }
+
+  // L_B into lb_ for every pair of the member's slot whose L_A is <= the k-th best, from the
+  // group's grid read through the member's flip, minus its gap.
+  void BoundSlot(const DistanceGrid& grid, const GridMember& m) {
+    constexpr size_t kChunk = 64;
+    const size_t base = static_cast<size_t>(m.slot) * num_views_;
+    uint64_t bounded = 0;
+    for (view_id_t v = 0; v < num_views_; ++v) {
+      const Bound la = la_[base + v];
+      const double threshold = top_.threshold();
+      if (la == kNoBound || BoundPx(la) > threshold) continue;
+      const std::span<const PointQ> pts = db_.points(v);
+      const double n = static_cast<double>(pts.size());
+      const double limit = Limit(threshold, BoundPx(la), n) + m.gap_px * n;
+      const bool fast = grid.Covers(max_abs_[v]);
+      double sum = 0;
+      for (size_t i = 0; i < pts.size() && sum <= limit; i += kChunk) {
+        const auto chunk = pts.subspan(i, std::min(kChunk, pts.size() - i));
+        sum += fast ? grid.SumLowerBoundsFast(chunk, m.flip) : grid.SumLowerBounds(chunk, m.flip);
+      }
+      const double mean = sum / n;
+      lb_[base + v] =
+          BoundBelow(mean - DistanceGrid::MeanLowerBoundMargin(pts.size(), mean) - m.gap_px);
+      ++bounded;
+    }
+    grid_bounded_.fetch_add(bounded, std::memory_order_relaxed);
+  }
+
+  // Scores this slot's most promising pairs now so later groups can stop early (k pairs while
+  // fewer than k are known, then 2).
+  void ScoreSlotBest(size_t s, int worker) {
+    const size_t m = std::min<size_t>(num_views_, top_.threshold() == kInf ? k_ : 2);
+    const size_t base = s * num_views_;
+    std::vector<uint32_t> best;
+    best.reserve(m + 1);
+    auto less = [&](uint32_t x, uint32_t y) {
+      const uint32_t tx = static_cast<uint32_t>(la_[x]) + lb_[x];
+      const uint32_t ty = static_cast<uint32_t>(la_[y]) + lb_[y];
+      return tx != ty ? tx < ty : x < y;
+    };
+    for (uint32_t i = static_cast<uint32_t>(base); i < base + num_views_; ++i) {
+      if (la_[i] == kNoBound) continue;
+      if (best.size() < m) {
+        best.push_back(i);
+        std::push_heap(best.begin(), best.end(), less);
+      } else if (m > 0 && less(i, best.front())) {
+        std::pop_heap(best.begin(), best.end(), less);
+        best.back() = i;
+        std::push_heap(best.begin(), best.end(), less);
+      }
+    }
+    std::sort(best.begin(), best.end(), less);
+    for (uint32_t i : best) ScorePair(i, worker);
+  }
+
+  // Scores pair i unless its bound is above the k-th best, and marks it scored (kNoBound), so
+  // that Refine does not score it again (its D_c is in the top k already, or was above the
+  // threshold, which only falls).
+  void ScorePair(uint32_t i, int worker) {
+    const double threshold = top_.threshold();
+    const double bound = TotalPx(i);
+    if (bound > threshold) return;
+    const auto v = static_cast<view_id_t>(i % num_views_);
+    const size_t s = i / num_views_;
+    refined_.fetch_add(1, std::memory_order_relaxed);
+    Scored sc;
+    if (ctx_.Score(v, s, threshold, BoundPx(la_[i]), BoundPx(lb_[i]), worker, &sc)) {
+      sc.lower_bound = bound;
+      top_.Insert(sc);
+    } else {
+      abandoned_.fetch_add(1, std::memory_order_relaxed);
+    }
+    la_[i] = kNoBound;
+  }
+
+  // Scores the pairs of `order` (increasing bound) until a bound exceeds the k-th best.
+  void Visit(std::span<const uint32_t> order, Progress* progress = nullptr) {
+    ParallelFor(
+        order.size(),
+        threads_,
+        [&](size_t j, int worker) {
+          const uint32_t i = order[j];
           const double threshold = top_.threshold();
-          if (BoundPx(bound[idx]) > threshold) return false;  // every later pair: a larger bound
+          const double bound = TotalPx(i);
+          if (bound > threshold) return false;  // every later pair: a larger bound
           if (progress != nullptr) progress->Add();
-          const view_id_t v = idx % num_views_;
-          const roll_id_t r = static_cast<roll_id_t>(idx / num_views_);
+          const auto v = static_cast<view_id_t>(i % num_views_);
+          const size_t s = i / num_views_;
           refined_.fetch_add(1, std::memory_order_relaxed);
-          Scored s;
-          if (ctx_.Score(
-                  v, r, threshold, ctx_.BLowerBound(v, r, BoundPx(bound[idx])), worker, &s)) {
-            s.lower_bound = BoundPx(bound[idx]);
-            top_.Insert(s);
+          Scored sc;
+          if (ctx_.Score(v, s, threshold, BoundPx(la_[i]), BoundPx(lb_[i]), worker, &sc)) {
+            sc.lower_bound = bound;
+            top_.Insert(sc);
           } else {
             abandoned_.fetch_add(1, std::memory_order_relaxed);
           }
@@ -617,12 +901,12 @@ class QueryRun {
         pool_);
   }
 
-  // One phase's progress line (SearchOptions::progress), e.g. "query refine (left)".
+  // One phase's progress line (SearchOptions::progress), e.g. "query refine (both hands)".
   std::unique_ptr<Progress> MakeProgress(const std::string& phase,
                                          uint64_t total,
                                          const char* unit) const {
     std::string label = "query " + phase;
-    if (options_.hand == Hand::kEither) label += " (" + std::string(HandName(hand_)) + ")";
+    if (options_.hand == Hand::kEither) label += " (both hands)";
     auto progress = std::make_unique<Progress>(label, total, options_.progress, unit);
     progress->QuietUnlessSlow(progress_since_);
     return progress;
@@ -631,6 +915,7 @@ class QueryRun {
   const Database& db_;
   std::span<const int32_t> max_abs_;
   float grid_half_extent_px_;
+  const CoarseFields* coarse_;
   const SearchOptions& options_;
   const int threads_;
   ThreadPool* const pool_;
@@ -639,9 +924,14 @@ class QueryRun {
   const size_t k_;
   QueryContext ctx_;
   TopK top_;
+  // Per pair: L_A (kNoBound: a view without points, or a pair already scored) and L_B (0 until
+  // computed), both rounded down to 1/64 px; L = L_A + L_B <= D_c.
+  std::vector<Bound> la_;
+  std::vector<Bound> lb_;
+  std::atomic<uint64_t> grids_{0};
+  std::atomic<uint64_t> grid_bounded_{0};
   std::atomic<uint64_t> refined_{0};
   std::atomic<uint64_t> abandoned_{0};
-  const Hand hand_;
   const std::chrono::steady_clock::time_point progress_since_;
 };
 
@@ -676,45 +966,6 @@ ViewLabel MirrorLabel(const ViewLabel& label) {
   return out;
 }
 
-std::vector<Match> Searcher::SearchOnce(std::span<const Point2f> query_px,
-                                        const SearchOptions& options,
-                                        double threshold,
-                                        Hand hand,
-                                        int threads,
-                                        ThreadPool* pool,
-                                        std::chrono::steady_clock::time_point progress_since,
-                                        SearchStats* stats) const {
-  const auto start = std::chrono::steady_clock::now();
-  QueryRun run(*db_,
-               max_abs_,
-               grid_half_extent_px_,
-               options.coarse_bound && !coarse_.empty() ? &coarse_ : nullptr,
-               query_px,
-               options,
-               threshold,
-               threads,
-               pool,
-               hand,
-               progress_since);
-  SearchStats local;
-  if (options.brute_force) {
-    run.BruteForce(&local, start);
-  } else {
-    const std::vector<Bound> bound = run.Bounds();
-    local.bounded = bound.size();
-    local.seconds_bounds = Seconds(start);
-    const auto refine_start = std::chrono::steady_clock::now();
-    run.Refine(bound);
-    local.seconds_refine = Seconds(refine_start);
-  }
-  stats->bounded += local.bounded;
-  stats->seconds_bounds += local.seconds_bounds;
-  stats->seconds_refine += local.seconds_refine;
-  stats->searches += 1;
-  run.AddInto(stats);
-  return run.Matches(hand);
-}
-
 Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
                                             const SearchOptions& options,
                                             SearchStats* stats) const {
@@ -722,7 +973,7 @@ Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
   if (Status s = CheckQuery(query_px, options); !s.ok()) return s;
 
   const int threads = ResolveNumThreads(options.num_threads);
-  // One pool for the query's parallel loops (both hands); the calling thread is worker 0.
+  // One pool for the query's parallel loops; the calling thread is worker 0.
   std::optional<ThreadPool> pool_storage;
   ThreadPool* pool = threads > 1 ? &pool_storage.emplace(threads - 1) : nullptr;
   const auto progress_since = options.progress_since == std::chrono::steady_clock::time_point{}
@@ -731,32 +982,31 @@ Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
   SearchStats local;
   local.virtual_views = db_->num_virtual_views();
   local.query_points = query_px.size();
+  local.searches = options.hand == Hand::kEither ? 2 : 1;
 
-  std::vector<Match> matches;
-  if (options.hand != Hand::kLeft) {
-    matches =
-        SearchOnce(query_px, options, kInf, Hand::kRight, threads, pool, progress_since, &local);
+  // Hand::kEither searches both hands' slots in one run with one top k, ordered by (D_c, view
+  // id, roll, right before left): exactly the merge of the two brute-force searches.
+  QueryRun run(*db_,
+               max_abs_,
+               y_sorted_,
+               grid_half_extent_px_,
+               options.coarse_bound && !coarse_.empty() ? &coarse_ : nullptr,
+               query_px,
+               options,
+               threads,
+               pool,
+               progress_since);
+  if (options.brute_force) {
+    run.BruteForce(&local, start);
+  } else {
+    run.Bounds();
+    local.seconds_bounds = Seconds(start);
+    const auto refine_start = std::chrono::steady_clock::now();
+    run.Refine();
+    local.seconds_refine = Seconds(refine_start);
   }
-  if (options.hand != Hand::kRight) {
-    // x -> -x is exact in float, so the mirrored query of a mirrored view is the view itself.
-    std::vector<Point2f> mirrored(query_px.begin(), query_px.end());
-    for (Point2f& p : mirrored) p.x = -p.x;
-    // Only pairs that can enter the merged top-k matter: those at or below the right hand's
-    // k-th best. Brute force stays the plain reference and searches both in full.
-    const size_t k = static_cast<size_t>(options.top_k);
-    const double threshold =
-        !options.brute_force && matches.size() == k ? matches.back().distance : kInf;
-    std::vector<Match> left = SearchOnce(
-        mirrored, options, threshold, Hand::kLeft, threads, pool, progress_since, &local);
-    for (Match& m : left) matches.push_back(std::move(m));
-    std::stable_sort(matches.begin(), matches.end(), [](const Match& x, const Match& y) {
-      if (x.distance != y.distance) return x.distance < y.distance;
-      if (x.view_id != y.view_id) return x.view_id < y.view_id;
-      if (x.roll != y.roll) return x.roll < y.roll;
-      return x.hand == Hand::kRight && y.hand == Hand::kLeft;
-    });
-    if (matches.size() > k) matches.resize(k);
-  }
+  run.AddInto(&local);
+  std::vector<Match> matches = run.Matches();
   local.seconds_total = Seconds(start);
   if (stats != nullptr) *stats = local;
   return matches;

@@ -1,14 +1,16 @@
 // Exact top-k chamfer search over a database of virtual views (DESIGN.md section 7, docs/query.md).
 //
-// Distance: D_c = A + B of query/chamfer.h, exact on the 1/16 px grid. Pruned search:
-//  1. For each roll r, rotate the query into the canonical frame (Q_r) and build one exact
-//     Euclidean distance transform of it (query/distance_transform.h). For every canonical view,
-//     one lookup per point gives L(v, r) <= B(v, r) <= D_c(v, r): a proven lower bound.
-//  2. Visit (v, r) in increasing L; compute the exact B (kd-tree over Q_r) and A (kd-tree over
-//     Y_v, built lazily per view and cached for the query) only while L <= the current k-th best
-//     D_c, abandoning a pair as soon as its partial sum exceeds that threshold.
-// The result is exactly the top-k of brute force under the total order (D_c, view id, roll),
-// identical for any thread count and either kd-tree backend.
+// Distance: D_c = A + B of query/chamfer.h, exact on the 1/16 px grid. Pruned search over the
+// (view, slot) pairs, a slot being a (hand, roll): the query (mirrored for a left hand) rolled
+// into the canonical frame:
+//  1. Lower bounds L = L_A + L_B <= D_c: L_A of every pair from the views' coarse fields
+//     (query/coarse_bound.h, one streaming product per slot), the threshold seeded by scoring
+//     the pairs with the smallest L_A, then L_B (query/distance_transform.h, one distance grid
+//     shared by up to four slots) for the pairs whose L_A is still below the k-th best D_c.
+//  2. Visit pairs in increasing L; compute the exact A (linear scans, abandoned on a running
+//     lower bound) and B only while L <= the current k-th best D_c.
+// The result is exactly the top-k of brute force under the total order (D_c, view id, roll,
+// right before left), identical for any thread count and either kd-tree backend.
 #pragma once
 
 #include <chrono>
@@ -37,11 +39,11 @@ Result<Hand> ParseHand(std::string_view name);
 
 struct SearchOptions {
   int top_k = 10;  // number of matches returned
-  // kRight: today's search. kLeft: the query is mirrored before searching. kEither: both, merged
-  // into one top-k by (D_c, view id, roll, right before left); the mirrored search starts from
-  // the first one's k-th best D_c as its threshold, which keeps the result exact. The library
-  // default stays kRight (the rendered test sets are right hands); `handdb query` defaults to
-  // kEither.
+  // kRight: today's search. kLeft: the query is mirrored before searching. kEither: both, in one
+  // search with one top-k ordered by (D_c, view id, roll, right before left), which is exactly
+  // the merge of the two hands' results; the mirrored rolls share the right hand's distance
+  // grids. The library default stays kRight (the rendered test sets are right hands);
+  // `handdb query` defaults to kEither.
   Hand hand = Hand::kRight;
   int num_threads = -1;      // -1: all cores
   bool brute_force = false;  // D_c for every (view, roll), no pruning (the reference)
@@ -87,14 +89,16 @@ ViewLabel MirrorLabel(const ViewLabel& label);
 
 struct SearchStats {
   uint64_t virtual_views = 0;    // (view, roll) pairs in the database
-  uint64_t bounded = 0;          // pairs whose lower bound was computed
+  uint64_t bounded = 0;          // pairs whose lower bound was computed (both hands: 2 per pair)
+  uint64_t grids = 0;            // distance grids built (query/distance_transform.h)
+  uint64_t grid_bounded = 0;     // pairs whose B bound was computed from a grid
   uint64_t refined = 0;          // pairs whose exact D_c was started
   uint64_t abandoned = 0;        // of those, stopped early above the k-th best
   uint64_t probe_abandoned = 0;  // of those, dropped by the linear scans' running bound
   uint64_t view_trees = 0;       // kd-trees built over view points
   uint64_t query_points = 0;
-  uint32_t searches = 0;      // 1, or 2 for Hand::kEither (the counters and seconds add up both)
-  double seconds_bounds = 0;  // step 1 (rotations, distance transforms, lower bounds)
+  uint32_t searches = 0;      // hands searched: 1, or 2 for Hand::kEither
+  double seconds_bounds = 0;  // step 1 (rotations, coarse bounds, distance transforms, B bounds)
   double seconds_refine = 0;  // step 2
   double seconds_total = 0;
 };
@@ -121,19 +125,11 @@ class Searcher {
   const Database& database() const { return *db_; }
 
  private:
-  // One search of `query_px` as given; matches with D_c above `threshold` may be left out (the
-  // result is the exact top-k of the pairs with D_c <= threshold). Stats are added to `stats`.
-  std::vector<Match> SearchOnce(std::span<const Point2f> query_px,
-                                const SearchOptions& options,
-                                double threshold,
-                                Hand hand,
-                                int threads,
-                                ThreadPool* pool,
-                                std::chrono::steady_clock::time_point progress_since,
-                                SearchStats* stats) const;
-
   std::shared_ptr<const Database> db_;
   std::vector<int32_t> max_abs_;  // per view: max |x|, |y| of its points (PointQ units)
+  // Per view: 1 if its points are sorted by y and on the coarse grid (every converted view), so
+  // the linear scans may read a window of rows (docs/query.md).
+  std::vector<uint8_t> y_sorted_;
   // Half extent of the per-roll distance grids: the largest |x|, |y| of any view (px), so every
   // view's points are on the grid (the fast path) and no node is computed that no view reads.
   float grid_half_extent_px_ = 0;

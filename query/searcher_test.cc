@@ -25,6 +25,27 @@ std::shared_ptr<const Database> TestDatabase() {
   return db;
 }
 
+// The same views with their points sorted by (y, x), as the converter writes them
+// (edges/view_conversion.h): the linear scans then read windows of rows instead of buckets.
+std::shared_ptr<const Database> SortedTestDatabase() {
+  static const auto db = [] {
+    std::vector<ViewLabel> labels;
+    std::vector<std::vector<PointQ>> points;
+    const Database& unsorted = *TestDatabase();
+    for (view_id_t v = 0; v < unsorted.num_views(); ++v) {
+      labels.push_back(unsorted.label(v));
+      const auto p = unsorted.points(v);
+      points.emplace_back(p.begin(), p.end());
+      std::sort(points.back().begin(), points.back().end(), [](PointQ a, PointQ b) {
+        return a.y != b.y ? a.y < b.y : a.x < b.x;
+      });
+    }
+    return std::make_shared<const Database>(
+        Database::FromMemory(std::move(labels), std::move(points), kRolls));
+  }();
+  return db;
+}
+
 SearchOptions Options(int k = 5, int threads = 2) {
   SearchOptions o;
   o.top_k = k;
@@ -125,7 +146,8 @@ TEST(Searcher, ViewQueriedWithItsOwnEdgesIsRankOneAtDistanceZero) {
 // phase on stderr with its final count; a fast one prints nothing; the result is the same.
 TEST(Searcher, LongSearchesShowProgressOnStderrFastOnesNothing) {
   const Searcher searcher(TestDatabase());
-  const auto query = RolledView(*TestDatabase(), 7, 3);
+  // Turned, shifted and thinned, so that the refine step has pairs left to visit.
+  const auto query = Transform(RolledView(*TestDatabase(), 7, 3), 0.2f, 3, -2, 0.7, 5);
   SearchOptions options = Options();
   options.hand = Hand::kEither;
   auto quiet = searcher.Search(query, options);
@@ -142,13 +164,11 @@ TEST(Searcher, LongSearchesShowProgressOnStderrFastOnesNothing) {
   auto slow = searcher.Search(query, options);
   const std::string log = ::testing::internal::GetCapturedStderr();
   ASSERT_TRUE(slow.ok());
-  for (const char* line : {"query bounds (right) ",
-                           "query refine (right) ",
-                           "query bounds (left) ",
-                           "query refine (left) "}) {
+  // Both hands are one search: 2 x kRolls (hand, roll) slots.
+  for (const char* line : {"query bounds (both hands) ", "query refine (both hands) "}) {
     EXPECT_NE(log.find(line), std::string::npos) << line << " missing from:\n" << log;
   }
-  const std::string rolls = std::to_string(kRolls) + "/" + std::to_string(kRolls);
+  const std::string rolls = std::to_string(2 * kRolls) + "/" + std::to_string(2 * kRolls);
   EXPECT_NE(log.find(rolls + " 100.0%  "), std::string::npos) << log;
   EXPECT_EQ(log.find("\r"), std::string::npos);  // not a terminal: whole lines only
 
@@ -197,50 +217,54 @@ TEST(Searcher, SmallRotationsShiftsAndDroppedPointsKeepTopOne) {
 // >= 50 random queries: pruned == brute force (views, order, distances), for both backends and
 // any thread count.
 TEST(Searcher, PrunedEqualsBruteForce) {
-  const Searcher searcher(TestDatabase());
-  std::mt19937 rng(42);
-  std::uniform_int_distribution<uint32_t> view(0, kViews - 1);
-  std::uniform_int_distribution<uint32_t> roll(0, kRolls - 1);
-  std::uniform_real_distribution<float> u(-1, 1);
-  for (int i = 0; i < 60; ++i) {
-    std::vector<Point2f> q;
-    if (i % 4 == 3) {
-      // A shape unlike any view: an unrelated synthetic set.
-      RollPoints(testing::SyntheticEdgeSet(1000 + i, 100), 0.0f, &q);
-    } else {
-      q = Transform(RolledView(*TestDatabase(), view(rng), roll(rng)),
-                    0.3f * u(rng),
-                    4 * u(rng),
-                    4 * u(rng),
-                    0.5 + 0.5 * (u(rng) + 1) / 2,
-                    i);
-    }
-    SearchOptions pruned = Options(1 + i % 8, 1 + i % 3);
-    pruned.kdtree = i % 2 ? KdTreeBackend::kPcl : KdTreeBackend::kNanoflann;
-    pruned.dt_cell_px = i % 5 == 0 ? 0.5f : 1.0f;
-    pruned.coarse_bound = i % 3 != 1;
-    SearchOptions brute = pruned;
-    brute.brute_force = true;
-    brute.num_threads = 2;
-    brute.kdtree = KdTreeBackend::kNanoflann;
-    auto a = searcher.Search(q, pruned);
-    auto b = searcher.Search(q, brute);
-    ASSERT_TRUE(a.ok() && b.ok());
-    ExpectSameResults(*a, *b);
-    for (const Match& m : *a) {
-      EXPECT_LE(m.lower_bound, m.distance + 1e-9);
-      if (!pruned.coarse_bound) {
-        EXPECT_LE(m.lower_bound, m.b + 1e-9);
+  for (const bool sorted : {false, true}) {
+    const Searcher searcher(sorted ? SortedTestDatabase() : TestDatabase());
+    std::mt19937 rng(42);
+    std::uniform_int_distribution<uint32_t> view(0, kViews - 1);
+    std::uniform_int_distribution<uint32_t> roll(0, kRolls - 1);
+    std::uniform_real_distribution<float> u(-1, 1);
+    for (int i = 0; i < 60; ++i) {
+      std::vector<Point2f> q;
+      if (i % 4 == 3) {
+        // A shape unlike any view: an unrelated synthetic set.
+        RollPoints(testing::SyntheticEdgeSet(1000 + i, 100), 0.0f, &q);
+      } else {
+        q = Transform(RolledView(*TestDatabase(), view(rng), roll(rng)),
+                      0.3f * u(rng),
+                      4 * u(rng),
+                      4 * u(rng),
+                      0.5 + 0.5 * (u(rng) + 1) / 2,
+                      i);
       }
-      EXPECT_DOUBLE_EQ(m.distance, m.a + m.b);
+      SearchOptions pruned = Options(1 + i % 8, 1 + i % 3);
+      pruned.kdtree = i % 2 ? KdTreeBackend::kPcl : KdTreeBackend::kNanoflann;
+      pruned.dt_cell_px = i % 5 == 0 ? 0.5f : 1.0f;
+      pruned.coarse_bound = i % 3 != 1;
+      SearchOptions brute = pruned;
+      brute.brute_force = true;
+      brute.num_threads = 2;
+      brute.kdtree = KdTreeBackend::kNanoflann;
+      auto a = searcher.Search(q, pruned);
+      auto b = searcher.Search(q, brute);
+      ASSERT_TRUE(a.ok() && b.ok());
+      ExpectSameResults(*a, *b);
+      for (const Match& m : *a) {
+        EXPECT_LE(m.lower_bound, m.distance + 1e-9);
+        if (!pruned.coarse_bound) {
+          EXPECT_LE(m.lower_bound, m.b + 1e-9);
+        }
+        EXPECT_DOUBLE_EQ(m.distance, m.a + m.b);
+      }
     }
   }
 }
 
-// Rolls r and r + R/2 share one distance grid when R is even (the second read at -p); odd R and
-// R = 2 take the other paths. Pruned equals brute force, and every bound is below its D_c.
+// Rolls r and r + R/2 share one distance grid when R is even (the second read at -p), and the
+// mirrored query's rolls read the right hand's grids (at (-x, y) and (x, -y)); odd R and R = 1, 2
+// take the other paths. Pruned equals brute force for each hand setting, and every bound is below
+// its D_c.
 TEST(Searcher, PrunedEqualsBruteForceForOddAndTinyRollCounts) {
-  for (const uint32_t rolls : {1u, 2u, 15u, 48u}) {
+  for (const uint32_t rolls : {1u, 2u, 3u, 15u, 48u}) {
     const auto db = std::make_shared<const Database>(
         SyntheticDatabase(kViews, kPoints, rolls, /*views_per_shape=*/6));
     const Searcher searcher(db);
@@ -251,7 +275,9 @@ TEST(Searcher, PrunedEqualsBruteForceForOddAndTinyRollCounts) {
     for (int i = 0; i < 12; ++i) {
       const auto q = Transform(
           RolledView(*db, view(rng), roll(rng)), 0.3f * u(rng), 4 * u(rng), 4 * u(rng), 0.8, i);
-      const auto a = SearchBothWays(searcher, q, Options(1 + i % 6, 1 + i % 2));
+      SearchOptions options = Options(1 + i % 6, 1 + i % 2);
+      options.hand = i % 3 == 0 ? Hand::kEither : (i % 3 == 1 ? Hand::kRight : Hand::kLeft);
+      const auto a = SearchBothWays(searcher, q, options);
       ASSERT_FALSE(a.empty());
       for (const Match& m : a) EXPECT_LE(m.lower_bound, m.distance + 1e-9) << rolls;
     }
@@ -387,28 +413,30 @@ TEST(Searcher, MirroredViewIsFoundAsALeftHand) {
 // kEither's second (mirrored) search starts from the first one's k-th best; the merged top-k
 // must still equal brute force over both hands, and kLeft must equal brute force on the mirror.
 TEST(Searcher, EitherHandPrunedEqualsBruteForce) {
-  const Searcher searcher(TestDatabase());
-  std::mt19937 rng(7);
-  std::uniform_int_distribution<uint32_t> view(0, kViews - 1);
-  std::uniform_int_distribution<uint32_t> roll(0, kRolls - 1);
-  std::uniform_real_distribution<float> u(-1, 1);
-  int left_won = 0;
-  for (int i = 0; i < 24; ++i) {
-    std::vector<Point2f> q = Transform(RolledView(*TestDatabase(), view(rng), roll(rng)),
-                                       0.3f * u(rng),
-                                       3 * u(rng),
-                                       3 * u(rng),
-                                       0.6 + 0.4 * (u(rng) + 1) / 2,
-                                       100 + i);
-    if (i % 2) q = Mirrored(q);
-    SearchOptions pruned = Options(1 + i % 6, 1 + i % 2);
-    pruned.hand = i % 3 == 2 ? Hand::kLeft : Hand::kEither;
-    const auto a = SearchBothWays(searcher, q, pruned);
-    ASSERT_FALSE(a.empty());
-    if (a[0].hand == Hand::kLeft) ++left_won;
+  for (const bool sorted : {false, true}) {
+    const Searcher searcher(sorted ? SortedTestDatabase() : TestDatabase());
+    std::mt19937 rng(7);
+    std::uniform_int_distribution<uint32_t> view(0, kViews - 1);
+    std::uniform_int_distribution<uint32_t> roll(0, kRolls - 1);
+    std::uniform_real_distribution<float> u(-1, 1);
+    int left_won = 0;
+    for (int i = 0; i < 24; ++i) {
+      std::vector<Point2f> q = Transform(RolledView(*TestDatabase(), view(rng), roll(rng)),
+                                         0.3f * u(rng),
+                                         3 * u(rng),
+                                         3 * u(rng),
+                                         0.6 + 0.4 * (u(rng) + 1) / 2,
+                                         100 + i);
+      if (i % 2) q = Mirrored(q);
+      SearchOptions pruned = Options(1 + i % 6, 1 + i % 2);
+      pruned.hand = i % 3 == 2 ? Hand::kLeft : Hand::kEither;
+      const auto a = SearchBothWays(searcher, q, pruned);
+      ASSERT_FALSE(a.empty());
+      if (a[0].hand == Hand::kLeft) ++left_won;
+    }
+    EXPECT_GT(left_won, 4);  // both hands won somewhere, so the merge was exercised
+    EXPECT_LT(left_won, 20);
   }
-  EXPECT_GT(left_won, 4);  // both hands won somewhere, so the merge was exercised
-  EXPECT_LT(left_won, 20);
 }
 
 TEST(Searcher, MissingDatabaseDirectory) {
