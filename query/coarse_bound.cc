@@ -53,6 +53,28 @@ CoarseFields::CoarseFields(const Database& db, int num_threads) : num_views_(db.
 
 namespace {
 
+// ceil(sqrt(gx^2 + gy^2) / 8) for gaps gx, gy in [0, 128] PointQ units: a distance rounded up to
+// 1/2 px (exact: integer squares compared, no float).
+struct DiagonalGaps {
+  uint8_t value[CoarseGrid::kCellUnits + 1][CoarseGrid::kCellUnits + 1];
+  DiagonalGaps() {
+    for (int gx = 0; gx <= CoarseGrid::kCellUnits; ++gx) {
+      for (int gy = 0; gy <= CoarseGrid::kCellUnits; ++gy) {
+        int u = 0;
+        while (64 * u * u < gx * gx + gy * gy) ++u;  // (8u)^2 >= gx^2 + gy^2
+        value[gx][gy] = static_cast<uint8_t>(u);
+      }
+    }
+  }
+};
+const DiagonalGaps& Diagonals() {
+  static const DiagonalGaps table;
+  return table;
+}
+
+// ceil(g / 8): a gap along one axis rounded up to 1/2 px.
+int AxisGap(int g) { return (g + 7) >> 3; }
+
 #ifdef HANDDB_HAVE_AVX2_PATH
 // Two cells at a time: their bytes interleaved per view and multiplied by their counts with one
 // madd (int16 x int16 -> int32, counts <= 128 and values <= 255), 16 views per step.
@@ -95,6 +117,53 @@ __attribute__((target("avx2"))) void BlockSumsAvx2(const uint8_t* plane,
 #endif
 
 }  // namespace
+
+void NeighbourGaps(PointQ q, uint8_t out[8]) {
+  constexpr int kCell = CoarseGrid::kCellUnits;
+  const int fx = (static_cast<int>(q.x) + CoarseGrid::kHalfUnits) & (kCell - 1);
+  const int fy = (static_cast<int>(q.y) + CoarseGrid::kHalfUnits) & (kCell - 1);
+  const auto& d = Diagonals().value;
+  out[0] = d[fx][fy];
+  out[1] = static_cast<uint8_t>(AxisGap(fy));
+  out[2] = d[kCell - fx][fy];
+  out[3] = static_cast<uint8_t>(AxisGap(fx));
+  out[4] = static_cast<uint8_t>(AxisGap(kCell - fx));
+  out[5] = d[fx][kCell - fy];
+  out[6] = static_cast<uint8_t>(AxisGap(kCell - fy));
+  out[7] = d[kCell - fx][kCell - fy];
+}
+
+void CoarseFields::NeighbourValuesAtBorder(size_t v, int cell, uint8_t out[9]) const {
+  constexpr int kSide = CoarseGrid::kSide;
+  THROW_CHECK(cell >= 0 && cell < CoarseGrid::kCells);
+  const uint8_t* f = planes_.data() + (v / kBlock) * CoarseGrid::kCells * kBlock + v % kBlock;
+  const int ix = cell % kSide;
+  const int iy = cell / kSide;
+  int k = 0;
+  for (int dy = -1; dy <= 1; ++dy) {
+    for (int dx = -1; dx <= 1; ++dx) {
+      if (dx == 0 && dy == 0) continue;
+      const int x = ix + dx;
+      const int y = iy + dy;
+      out[k++] = x < 0 || y < 0 || x >= kSide || y >= kSide
+                     ? 0
+                     : f[static_cast<size_t>(y * kSide + x) * kBlock];
+    }
+  }
+  out[8] = f[static_cast<size_t>(cell) * kBlock];
+}
+
+int CoarseFields::PointLowerBound(size_t v, PointQ q) const {
+  const int cell = CoarseGrid::CellOf(q);
+  if (cell < 0) return 0;
+  uint8_t values[9];
+  uint8_t gaps[8];
+  NeighbourValues(v, cell, values);
+  NeighbourGaps(q, gaps);
+  int best = values[8];
+  for (int k = 0; k < 8; ++k) best = std::max(best, values[k] - gaps[k]);
+  return best;
+}
 
 void CoarseFields::BlockSums(const CellHistogram& histogram, size_t block, uint32_t* out) const {
   THROW_CHECK_LT(block, num_blocks());

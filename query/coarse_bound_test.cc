@@ -50,6 +50,39 @@ TEST(CoarseBound, HistogramBoundIsBelowTheExactQueryToViewTerm) {
   EXPECT_GE(hist.LowerBound(field.data(), far.size()), 100 - 8 * std::sqrt(2.0));
 }
 
+// The neighbour bound of one point is below its exact distance to the view, never below the own
+// cell's value, and above it for many points (so it prunes more); the cell-major copy holds the
+// fields the shards would (ComputeCoarseField).
+TEST(CoarseBound, PointBoundIsBelowTheExactDistanceAndAboveTheCellValue) {
+  const auto db = testing::SyntheticDatabase(150, 300, 4, /*views_per_shape=*/10);
+  const CoarseFields fields(db, 2);
+  EXPECT_EQ(fields.num_views(), 150u);
+  EXPECT_EQ(fields.computed_views(), 150u);  // in memory: no shard sections
+  std::mt19937 rng(9);
+  std::vector<uint8_t> want(CoarseGrid::kCells);
+  size_t better = 0;
+  size_t total = 0;
+  for (view_id_t v = 0; v < db.num_views(); v += 7) {
+    ComputeCoarseField(db.points(v), want.data());
+    for (int c = 0; c < CoarseGrid::kCells; ++c) ASSERT_EQ(fields.value(v, c), want[c]);
+    for (const PointQ& q : RandomPoints(&rng, 2000, 180 * 16)) {
+      const int bound = fields.PointLowerBound(v, q);
+      const double exact =
+          std::sqrt(static_cast<double>(NearestSquaredSmall(q, db.points(v)))) / kPointScale;
+      ASSERT_LE(bound / CoarseGrid::kValueUnitsPerPx, exact) << v << ": " << q.x << "," << q.y;
+      const int c = CoarseGrid::CellOf(q);
+      if (c < 0) {
+        EXPECT_EQ(bound, 0);
+        continue;
+      }
+      ASSERT_GE(bound, fields.value(v, c));
+      better += bound > fields.value(v, c);
+      ++total;
+    }
+  }
+  EXPECT_GT(better, total / 4);
+}
+
 // Queries with edges the views lack (clutter) are where the A bound matters: pruned search with
 // it equals brute force, and refines fewer pairs than the B bound alone.
 TEST(CoarseBound, SearchWithClutterEqualsBruteForceAndRefinesLess) {

@@ -9,6 +9,10 @@
 #include <mutex>
 #include <optional>
 
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
+
 #include "base/progress.h"
 #include "base/thread_pool.h"
 #include "query/chamfer.h"
@@ -182,7 +186,12 @@ class QueryContext {
         rolled_(slots_.size()),
         histograms_(coarse != nullptr ? slots_.size() : 0),
         point_cells_(coarse != nullptr ? slots_.size() : 0),
+        distinct_cells_(coarse != nullptr ? slots_.size() : 0),
+        point_entries_(coarse != nullptr ? slots_.size() : 0),
+        point_gaps_(coarse != nullptr ? slots_.size() : 0),
+        scan_neighbours_(ResolveNumThreads(options.num_threads)),
         scan_d2_(ResolveNumThreads(options.num_threads)),
+        scan_prior_(ResolveNumThreads(options.num_threads)),
         rolled_max_abs_(slots_.size()),
         query_trees_(slots_.size()),
         query_tree_once_(slots_.size()),
@@ -214,10 +223,29 @@ class QueryContext {
     }
     rolled_max_abs_[s] = m;
     if (coarse_ != nullptr) {
-      histograms_[s].Build(rolled_[s]);
-      point_cells_[s].resize(rolled_[s].size());
-      for (size_t i = 0; i < rolled_[s].size(); ++i) {
-        point_cells_[s][i] = static_cast<int16_t>(CoarseGrid::CellOf(rolled_[s][i]));
+      const std::vector<PointQ>& pts = rolled_[s];
+      histograms_[s].Build(pts);
+      point_cells_[s].resize(pts.size());
+      // What the scans' per-point bounds read: the distinct cells, each point's index among
+      // them and its gaps to the neighbouring cells' boxes.
+      std::vector<uint16_t>& distinct = distinct_cells_[s];
+      distinct.clear();
+      for (size_t i = 0; i < pts.size(); ++i) {
+        const int c = CoarseGrid::CellOf(pts[i]);
+        point_cells_[s][i] = static_cast<int16_t>(c);
+        if (c >= 0) distinct.push_back(static_cast<uint16_t>(c));
+      }
+      std::sort(distinct.begin(), distinct.end());
+      distinct.erase(std::unique(distinct.begin(), distinct.end()), distinct.end());
+      point_entries_[s].resize(pts.size());
+      point_gaps_[s].resize(8 * pts.size());
+      for (size_t i = 0; i < pts.size(); ++i) {
+        const int c = point_cells_[s][i];
+        point_entries_[s][i] =
+            c < 0 ? kOffGrid
+                  : static_cast<uint16_t>(std::lower_bound(distinct.begin(), distinct.end(), c) -
+                                          distinct.begin());
+        NeighbourGaps(pts[i], &point_gaps_[s][8 * i]);
       }
     }
   }
@@ -309,16 +337,9 @@ class QueryContext {
   }
 
   // Exact D_c of (v, slot s); returns false (abandoned) once it provably exceeds `threshold`.
-  // bound_a_px <= L_A(v, s) <= A (the coarse bound, 0 if unknown) and bound_b_px <= B (0 if
-  // unknown): A goes first, abandoned as soon as bound_b + a lower bound of A exceeds the
-  // threshold, then B, abandoned once A + partial B does.
-  bool Score(view_id_t v,
-             size_t s,
-             double threshold,
-             double bound_a_px,
-             double bound_b_px,
-             int worker,
-             Scored* out) {
+  // bound_b_px <= B (0 if unknown): A goes first, abandoned as soon as bound_b + a lower bound of
+  // A exceeds the threshold, then B, abandoned once A + partial B does.
+  bool Score(view_id_t v, size_t s, double threshold, double bound_b_px, int worker, Scored* out) {
     const std::span<const PointQ> view = db_.points(v);
     const std::span<const PointQ> q = rolled_[s];
     const double nv = static_cast<double>(view.size());
@@ -330,7 +351,7 @@ class QueryContext {
     // Brute force keeps the kd-trees: it is the reference the scans are tested against.
     if (!options_.brute_force && max_abs_[v] <= kSmallCoordLimit &&
         rolled_max_abs_[s] <= kSmallCoordLimit) {
-      if (!ScanA(v, s, limit_a, bound_a_px, worker, &sum_a)) {
+      if (!ScanA(v, s, limit_a, worker, &sum_a)) {
         probe_abandoned_.fetch_add(1, std::memory_order_relaxed);
         return false;
       }
@@ -360,20 +381,29 @@ class QueryContext {
   // scan of the rows within reach of each query point (RowIndex: q's cell's coarse value bounds
   // how far its nearest point can be); otherwise the view's buckets (query/point_buckets.h) or,
   // for points off the coarse grid, a scan of every point. Abandoned as soon as a lower bound of
-  // the whole sum exceeds `limit`: it starts at bound_a_px |Q| <= sum_q F_v(cell(q))
-  // (query/coarse_bound.h) and each scanned point replaces its F_v(cell) by its exact distance
-  // (which is never smaller). Points are scanned spread out first (every step-th point, then the
-  // gaps), so the bound rises quickly. A pair that is not abandoned gets the same sum as the
-  // kd-tree path, bit for bit: the nearest squared distances are exact integers either way, and
-  // they are summed in the query's order.
-  bool ScanA(view_id_t v, size_t s, double limit, double bound_a_px, int worker, double* sum_out) {
+  // the whole sum exceeds `limit`: it starts at the sum of the points' coarse bounds
+  // (CoarseFields::PointLowerBound), often above the limit before any scan, and each scanned point
+  // replaces its bound by its exact distance (which is never smaller). Points are scanned spread
+  // out first (every step-th point, then the gaps), so the bound rises quickly. A pair that is not
+  // abandoned gets the same sum as the kd-tree path, bit for bit: the nearest squared distances are
+  // exact integers either way, and they are summed in the query's order.
+  bool ScanA(view_id_t v, size_t s, double limit, int worker, double* sum_out) {
     const std::span<const PointQ> view = db_.points(v);
     const std::span<const PointQ> q = rolled_[s];
     std::vector<int32_t>& d2 = scan_d2_[worker];
     d2.resize(q.size());
     const double stop = limit == kInf ? kInf : limit * (1 + 1e-9) + 1e-9;
     const int16_t* cells = coarse_ != nullptr ? point_cells_[s].data() : nullptr;
-    double bound = coarse_ != nullptr ? bound_a_px * static_cast<double>(q.size()) : 0.0;
+    // Each point's lower bound from the coarse field around it (CoarseFields::PointLowerBound),
+    // in 1/2 px: their sum is already a lower bound of A's sum, often above the limit.
+    std::vector<uint8_t>& prior = scan_prior_[worker];
+    prior.assign(q.size(), 0);
+    double bound = 0;
+    if (coarse_ != nullptr) {
+      const uint64_t units = PointBounds(v, s, worker, prior.data());
+      bound = static_cast<double>(units) / CoarseGrid::kValueUnitsPerPx;
+      if (bound > stop) return false;
+    }
     // Views sorted by y (every converted view) scan a window of rows; others use buckets.
     const bool window = cells != nullptr && y_sorted_[v] != 0;
     const RowIndex* rows = window ? &ViewRows(v, worker) : nullptr;
@@ -389,11 +419,8 @@ class QueryContext {
           d2[i] =
               buckets->usable() ? buckets->NearestSquared(q[i]) : NearestSquaredSmall(q[i], view);
         }
-        double gain = std::sqrt(static_cast<double>(d2[i])) / static_cast<double>(kPointScale);
-        if (cells != nullptr && cells[i] >= 0) {
-          gain -= static_cast<double>(coarse_->value(v, cells[i])) / CoarseGrid::kValueUnitsPerPx;
-        }
-        bound += gain;
+        bound += std::sqrt(static_cast<double>(d2[i])) / static_cast<double>(kPointScale) -
+                 static_cast<double>(prior[i]) / CoarseGrid::kValueUnitsPerPx;
         if (bound > stop) return false;
       }
     }
@@ -404,6 +431,41 @@ class QueryContext {
     if (sum > limit) return false;
     *sum_out = sum;
     return true;
+  }
+
+  // CoarseFields::PointLowerBound of every point of slot s against view v into out (1/2 px), and
+  // their sum: the nine values around each distinct cell once, then per point one byte-wise
+  // saturating subtraction of its gaps and a maximum.
+  uint64_t PointBounds(view_id_t v, size_t s, int worker, uint8_t* out) {
+    const std::vector<uint16_t>& distinct = distinct_cells_[s];
+    std::vector<uint8_t>& nb = scan_neighbours_[worker];
+    nb.resize(16 * distinct.size());
+    for (size_t k = 0; k < distinct.size(); ++k)
+      coarse_->NeighbourValues(v, distinct[k], &nb[16 * k]);
+    const uint16_t* entries = point_entries_[s].data();
+    const uint8_t* gaps = point_gaps_[s].data();
+    uint64_t sum = 0;
+    for (size_t i = 0; i < point_entries_[s].size(); ++i) {
+      if (entries[i] == kOffGrid) {
+        out[i] = 0;
+        continue;
+      }
+      const uint8_t* values = &nb[16 * entries[i]];
+      int best = values[8];
+#ifdef __SSE2__
+      __m128i d = _mm_subs_epu8(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(values)),
+                                _mm_loadl_epi64(reinterpret_cast<const __m128i*>(gaps + 8 * i)));
+      d = _mm_max_epu8(d, _mm_srli_epi64(d, 32));
+      d = _mm_max_epu8(d, _mm_srli_epi64(d, 16));
+      d = _mm_max_epu8(d, _mm_srli_epi64(d, 8));
+      best = std::max(best, _mm_cvtsi128_si32(d) & 0xFF);
+#else
+      for (int k = 0; k < 8; ++k) best = std::max(best, values[k] - gaps[8 * i + k]);
+#endif
+      out[i] = static_cast<uint8_t>(best);
+      sum += out[i];
+    }
+    return sum;
   }
 
   uint64_t num_view_trees() const { return num_view_trees_.load(); }
@@ -421,8 +483,16 @@ class QueryContext {
   std::vector<std::vector<PointQ>> rolled_;
   std::vector<CellHistogram> histograms_;          // per slot, with coarse fields
   std::vector<std::vector<int16_t>> point_cells_;  // per slot: each point's coarse cell or -1
-  static constexpr size_t kScanSpread = 64;        // points in ScanA's first spread-out pass
-  std::vector<std::vector<int32_t>> scan_d2_;      // per worker: ScanA's squared distances
+  // Per slot: the cells holding points, each point's index among them (kOffGrid: none) and its
+  // eight gaps to the neighbouring cells' boxes (NeighbourGaps).
+  static constexpr uint16_t kOffGrid = 0xFFFF;
+  std::vector<std::vector<uint16_t>> distinct_cells_;
+  std::vector<std::vector<uint16_t>> point_entries_;
+  std::vector<std::vector<uint8_t>> point_gaps_;
+  std::vector<std::vector<uint8_t>> scan_neighbours_;  // per worker: 16 bytes per distinct cell
+  static constexpr size_t kScanSpread = 64;            // points in ScanA's first spread-out pass
+  std::vector<std::vector<int32_t>> scan_d2_;          // per worker: ScanA's squared distances
+  std::vector<std::vector<uint8_t>> scan_prior_;       // per worker: ScanA's per-point bounds
   std::vector<int32_t> rolled_max_abs_;
   std::atomic<uint64_t> probe_abandoned_{0};
   std::vector<std::unique_ptr<KdTree>> query_trees_;
@@ -589,7 +659,7 @@ class QueryRun {
           if (!db_.points(static_cast<view_id_t>(v)).empty()) {
             for (size_t s = 0; s < num_slots(); ++s) {
               Scored sc;
-              ctx_.Score(static_cast<view_id_t>(v), s, kInf, 0.0, 0.0, worker, &sc);
+              ctx_.Score(static_cast<view_id_t>(v), s, kInf, 0.0, worker, &sc);
               top_.Insert(sc);
             }
             refined_.fetch_add(num_slots(), std::memory_order_relaxed);
@@ -866,7 +936,7 @@ class QueryRun {
     const size_t s = i / num_views_;
     refined_.fetch_add(1, std::memory_order_relaxed);
     Scored sc;
-    if (ctx_.Score(v, s, threshold, BoundPx(la_[i]), BoundPx(lb_[i]), worker, &sc)) {
+    if (ctx_.Score(v, s, threshold, BoundPx(lb_[i]), worker, &sc)) {
       sc.lower_bound = bound;
       top_.Insert(sc);
     } else {
@@ -890,7 +960,7 @@ class QueryRun {
           const size_t s = i / num_views_;
           refined_.fetch_add(1, std::memory_order_relaxed);
           Scored sc;
-          if (ctx_.Score(v, s, threshold, BoundPx(la_[i]), BoundPx(lb_[i]), worker, &sc)) {
+          if (ctx_.Score(v, s, threshold, BoundPx(lb_[i]), worker, &sc)) {
             sc.lower_bound = bound;
             top_.Insert(sc);
           } else {
