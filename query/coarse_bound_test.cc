@@ -83,6 +83,35 @@ TEST(CoarseBound, PointBoundIsBelowTheExactDistanceAndAboveTheCellValue) {
   EXPECT_GT(better, total / 4);
 }
 
+// L_A's streaming product is the plain sum of n(c) F_v(c) over the query's points, exactly, for
+// every view of a full and a partial block; a cell holding more than kMaxCount points (listed
+// more than once) adds up the same, and views past the end get 0.
+TEST(CoarseBound, BlockSumsAreTheExactSumsOverTheQueryPoints) {
+  const auto db = testing::SyntheticDatabase(150, 300, 4, /*views_per_shape=*/10);
+  const CoarseFields fields(db, 2);
+  ASSERT_EQ(fields.num_blocks(), 2u);
+  std::mt19937 rng(11);
+  std::vector<PointQ> query = RandomPoints(&rng, 3000, 120 * 16);
+  query.insert(query.end(), 300, PointQ{5 * 16, -7 * 16});  // one cell far above kMaxCount
+  CellHistogram hist;
+  hist.Build(query);
+  std::vector<uint32_t> sums(CoarseFields::kBlock);
+  for (size_t b = 0; b < fields.num_blocks(); ++b) {
+    fields.BlockSums(hist, b, sums.data());
+    for (size_t i = 0; i < CoarseFields::kBlock; ++i) {
+      const size_t v = b * CoarseFields::kBlock + i;
+      uint64_t want = 0;
+      if (v < fields.num_views()) {
+        for (const PointQ& q : query) {
+          const int c = CoarseGrid::CellOf(q);
+          if (c >= 0) want += fields.value(v, c);
+        }
+      }
+      ASSERT_EQ(sums[i], want) << "view " << v;
+    }
+  }
+}
+
 // Queries with edges the views lack (clutter) are where the A bound matters: pruned search with
 // it equals brute force, and refines fewer pairs than the B bound alone.
 TEST(CoarseBound, SearchWithClutterEqualsBruteForceAndRefinesLess) {
