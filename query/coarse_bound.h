@@ -86,10 +86,10 @@ class CoarseFields {
   //   max_n F_v(n) - gap(q, box_n)   (n = c: gap 0)
   // since d(q, Y) >= d(p, Y) - |q - p| >= F_v(n) - |q - p| for p the point of box n nearest q.
   // The gaps are rounded up to 1/2 px (NeighbourGaps), so the integer result never exceeds the
-  // true bound; neighbours off the grid count 0. 0 for q off the grid. On real photos it leaves
-  // 2-5x fewer pairs to refine than F_v(c) alone (docs/query.md). The search computes it in
-  // bulk (NeighbourValues once per cell, then one byte-wise max per point); this is the plain
-  // form, for tests.
+  // true bound; neighbours off the grid count 0. 0 for q off the grid. The linear scans of A
+  // start from it, so a pair is often dropped before any point is scanned (docs/query.md). The
+  // search computes it in bulk (NeighbourValues once per cell, then one byte-wise max per
+  // point); this is the plain form, for tests.
   int PointLowerBound(size_t v, PointQ q) const;
   // F_v of cell c (out[8]) and of its eight neighbours (out[0..7], in NeighbourGaps' order; 0
   // for a neighbour off the grid).
