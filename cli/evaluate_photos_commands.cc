@@ -204,7 +204,9 @@ bool CheckTestSetEvaluateUsage(const CLI::App& app) {
                            "--skin",
                            "--canny",
                            "--contour-clearance",
-                           "--edges-outside"}) {
+                           "--edges-outside",
+                           "--work-diameter",
+                           "--no-wrist-cut"}) {
     if (app.get_option(name)->count() > 0) {
       std::fprintf(stderr,
                    "handdb evaluate: %s applies to --photos DIR; a test set uses --plots and its "
