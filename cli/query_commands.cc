@@ -222,7 +222,14 @@ Status WriteSheet(const QueryFlags& flags,
     }
     tiles.push_back(std::move(t));
   }
-  return WriteContactSheet(flags.sheet, flags.image, query, tiles, ContactSheetOptions{});
+  // The top match's skeleton over the input picture, where --json's keypoints_image_px put it.
+  std::vector<Point2f> skeleton;
+  if (!matches.empty()) {
+    for (const auto& k : matches.front().label.keypoints) {
+      skeleton.push_back(query.ImageFromNormalised({k[0], k[1]}));
+    }
+  }
+  return WriteContactSheet(flags.sheet, flags.image, query, tiles, ContactSheetOptions{}, skeleton);
 }
 
 // The --json document (schemas/query_result.schema.json).

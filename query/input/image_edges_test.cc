@@ -265,6 +265,28 @@ TEST_F(ImageEdgesTest, PhotoOfADatabaseViewFindsIt) {
   ASSERT_FALSE(img.empty());
   EXPECT_EQ(img.cols, 4 * 240 + 5 * 4);  // 5 tiles in 4 columns -> 2 rows
   EXPECT_EQ(img.rows, 2 * (240 + 22) + 3 * 4);
+
+  // With the top match's skeleton (here the true keypoints) drawn over the input tile.
+  std::vector<Point2f> skeleton;
+  for (const auto& k : target.keypoints_px) {
+    skeleton.push_back({static_cast<float>(k[0]), static_cast<float>(k[1])});
+  }
+  const fs::path with = dir_ / "sheet-skeleton.png";
+  ASSERT_TRUE(
+      WriteContactSheet(with, dir_ / "q.png", *photo, tiles, ContactSheetOptions{}, skeleton).ok());
+  const auto amber_pixels = [](const cv::Mat& sheet_img) {
+    const cv::Mat input_tile = sheet_img(cv::Rect(4, 4 + 22, 240, 240));
+    int n = 0;
+    for (int y = 0; y < input_tile.rows; ++y) {
+      for (int x = 0; x < input_tile.cols; ++x) {
+        const cv::Vec3b c = input_tile.at<cv::Vec3b>(y, x);
+        n += c[0] < 80 && c[1] > 150 && c[2] > 200;  // the bones' amber (BGR 0, 215, 255)
+      }
+    }
+    return n;
+  };
+  EXPECT_EQ(amber_pixels(img), 0);
+  EXPECT_GT(amber_pixels(cv::imread(with.string())), 100);
 }
 
 TEST_F(ImageEdgesTest, MaskAndRoi) {

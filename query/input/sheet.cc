@@ -50,8 +50,10 @@ Status WriteContactSheet(const std::filesystem::path& out_png,
                          const std::filesystem::path& input_image,
                          const QueryEdges& query,
                          std::span<const SheetTile> matches,
-                         const ContactSheetOptions& options) {
+                         const ContactSheetOptions& options,
+                         std::span<const Point2f> skeleton_px) {
   THROW_CHECK(options.Check());
+  THROW_CHECK(skeleton_px.empty() || skeleton_px.size() == kNumKeypoints);
   const int t = options.tile_px;
   const int th = t + kCaptionPx;
   std::vector<cv::Mat> tiles;
@@ -103,6 +105,25 @@ Status WriteContactSheet(const std::filesystem::path& out_png,
                  cv::Scalar(255, 160, 0),
                  1,
                  cv::LINE_AA);
+    }
+    if (!skeleton_px.empty()) {
+      // Wrist to each fingertip, and across the knuckles (docs/conventions.md keypoint order).
+      static constexpr int kBones[][2] = {
+          {0, 1},  {1, 2},   {2, 3},   {3, 4},   {0, 5},  {5, 6},   {6, 7},   {7, 8},
+          {0, 9},  {9, 10},  {10, 11}, {11, 12}, {0, 13}, {13, 14}, {14, 15}, {15, 16},
+          {0, 17}, {17, 18}, {18, 19}, {19, 20}, {5, 9},  {9, 13},  {13, 17}};
+      const cv::Scalar bone(0, 215, 255);  // amber (BGR)
+      for (const auto& b : kBones) {
+        cv::line(tile,
+                 to_tile(skeleton_px[b[0]].x, skeleton_px[b[0]].y),
+                 to_tile(skeleton_px[b[1]].x, skeleton_px[b[1]].y),
+                 bone,
+                 2,
+                 cv::LINE_AA);
+      }
+      for (const Point2f& k : skeleton_px) {
+        cv::circle(tile, to_tile(k.x, k.y), 2, kBlack, cv::FILLED, cv::LINE_AA);
+      }
     }
     if (query.forearm_cut) {
       cv::line(tile,

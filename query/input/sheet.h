@@ -28,12 +28,14 @@ struct ContactSheetOptions {
 };
 
 // `input_image` may be empty (no input tile); `query` gives the input's edge pixels and the
-// normalised query points. Written atomically. kBadImage if the input cannot be read, kIoError
-// on write failure.
+// normalised query points. `skeleton_px`, if not empty, is the top match's 21 keypoints
+// (docs/conventions.md order) in the input picture's pixels: its skeleton is drawn over the
+// input. Written atomically. kBadImage if the input cannot be read, kIoError on write failure.
 Status WriteContactSheet(const std::filesystem::path& out_png,
                          const std::filesystem::path& input_image,
                          const QueryEdges& query,
                          std::span<const SheetTile> matches,
-                         const ContactSheetOptions& options);
+                         const ContactSheetOptions& options,
+                         std::span<const Point2f> skeleton_px = {});
 
 }  // namespace handdb
