@@ -726,6 +726,7 @@ Status WritePhotoReportImages(const PhotoReport& report,
                      Fmt("  D=%.2f", o->match_distances[0]) + "  shape rank " +
                      (ShapeRank(*o) ? std::to_string(ShapeRank(*o)) : ">10");
         t.query_points = o->query_points;
+        t.skeleton_px = o->top1_keypoints_px;
         if (t.query_points.empty() && query_fn && item != item_of.end()) {
           // A report merged from Slurm parts: the query again (deterministic).
           auto query = query_fn(*item->second);
@@ -743,8 +744,10 @@ Status WritePhotoReportImages(const PhotoReport& report,
       tiles.push_back(std::move(t));
     }
     const std::string title =
-        success ? "successes: top-1 has the expected shape (blue photo edges, red match)"
-                : "failures: top-1 has another shape (blue photo edges, red match)";
+        success ? "successes: top-1 has the expected shape (its skeleton on the photo; blue photo "
+                  "edges, red match)"
+                : "failures: top-1 has another shape (its skeleton on the photo; blue photo edges, "
+                  "red match)";
     s = WriteExampleSheetPng(dir / (success ? "successes.png" : "failures.png"), tiles, title);
     if (!s.ok()) return s;
   }

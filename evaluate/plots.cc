@@ -6,8 +6,11 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <optional>
 
 #include "base/atomic_file.h"
+#include "base/image_file.h"
+#include "format/skeleton.h"
 
 namespace handdb {
 namespace {
@@ -208,8 +211,29 @@ Status WriteExampleSheetPng(const std::filesystem::path& path,
     if (any_image) {
       cv::Mat panel(kPanel, kPanel, CV_8UC3, kGrey);
       if (!tile.image.empty()) {
-        cv::Mat img = cv::imread(tile.image.string(), cv::IMREAD_COLOR);
-        if (!img.empty()) cv::resize(img, panel, panel.size(), 0, 0, cv::INTER_AREA);
+        // A huge JPEG is read at 1/8 (as the query read it reduced); keypoints are in the file's
+        // pixels.
+        const std::optional<ImageSize> size = ReadImageSize(tile.image);
+        const bool huge = size && size->width * size->height > kMaxImagePixels;
+        cv::Mat img =
+            cv::imread(tile.image.string(), huge ? cv::IMREAD_REDUCED_COLOR_8 : cv::IMREAD_COLOR);
+        if (!img.empty()) {
+          cv::resize(img, panel, panel.size(), 0, 0, cv::INTER_AREA);
+          const double sx = double(kPanel) / (huge ? size->width : img.cols);
+          const double sy = double(kPanel) / (huge ? size->height : img.rows);
+          if (tile.skeleton_px.size() == kNumKeypoints) {
+            const auto at = [&](int k) {
+              return cv::Point(static_cast<int>(std::lround(tile.skeleton_px[k].x * sx)),
+                               static_cast<int>(std::lround(tile.skeleton_px[k].y * sy)));
+            };
+            for (const auto& b : kSkeletonBones) {
+              cv::line(panel, at(b[0]), at(b[1]), cv::Scalar(0, 215, 255), 2, cv::LINE_AA);
+            }
+            for (int k = 0; k < kNumKeypoints; ++k) {
+              cv::circle(panel, at(k), 2, cv::Scalar(0, 0, 0), cv::FILLED, cv::LINE_AA);
+            }
+          }
+        }
       }
       panel.copyTo(sheet(cv::Rect(px, oy, kPanel, kPanel)));
       px += kPanel;

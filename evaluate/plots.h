@@ -41,6 +41,8 @@ struct ExampleTile {
   std::vector<Point2f> query_points;
   std::vector<Point2f> match_points;
   std::filesystem::path image;  // empty: none; unreadable: a grey box
+  // The top match's 21 keypoints in the image's pixels: its skeleton over the image (empty: none).
+  std::vector<Point2f> skeleton_px;
 };
 Status WriteExampleSheetPng(const std::filesystem::path& path,
                             const std::vector<ExampleTile>& tiles,

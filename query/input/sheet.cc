@@ -7,6 +7,7 @@
 
 #include "base/atomic_file.h"
 #include "base/image_file.h"
+#include "format/skeleton.h"
 
 namespace handdb {
 namespace {
@@ -107,13 +108,8 @@ Status WriteContactSheet(const std::filesystem::path& out_png,
                  cv::LINE_AA);
     }
     if (!skeleton_px.empty()) {
-      // Wrist to each fingertip, and across the knuckles (docs/conventions.md keypoint order).
-      static constexpr int kBones[][2] = {
-          {0, 1},  {1, 2},   {2, 3},   {3, 4},   {0, 5},  {5, 6},   {6, 7},   {7, 8},
-          {0, 9},  {9, 10},  {10, 11}, {11, 12}, {0, 13}, {13, 14}, {14, 15}, {15, 16},
-          {0, 17}, {17, 18}, {18, 19}, {19, 20}, {5, 9},  {9, 13},  {13, 17}};
       const cv::Scalar bone(0, 215, 255);  // amber (BGR)
-      for (const auto& b : kBones) {
+      for (const auto& b : kSkeletonBones) {
         cv::line(tile,
                  to_tile(skeleton_px[b[0]].x, skeleton_px[b[0]].y),
                  to_tile(skeleton_px[b[1]].x, skeleton_px[b[1]].y),
