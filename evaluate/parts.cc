@@ -159,6 +159,43 @@ Status MissingPart(const fs::path& path, uint32_t task, uint32_t num_tasks) {
                     std::to_string(num_tasks) + " has not written its part)");
 }
 
+// A part's document: its format, the header's fields, and `key`: `items`.
+json PartJson(const char* format, const PartHeader& h, const char* key, json items) {
+  return {{"format", format},
+          {"version", 1},
+          {"fingerprint", h.fingerprint.value},
+          {"inputs", h.fingerprint.inputs},
+          {"task", h.task},
+          {"tasks", h.num_tasks},
+          {"threads", h.threads},
+          {"started_at", h.started_at},
+          {"finished_at", h.finished_at},
+          {key, std::move(items)}};
+}
+
+// The header's fields of a schema-valid part (json::exception on a missing one).
+void ReadPartHeader(const json& doc, PartHeader* h) {
+  h->fingerprint.value = doc.at("fingerprint").get<std::string>();
+  h->fingerprint.inputs = doc.at("inputs");
+  h->task = doc.at("task").get<uint32_t>();
+  h->num_tasks = doc.at("tasks").get<uint32_t>();
+  h->threads = doc.at("threads").get<int>();
+  h->started_at = doc.at("started_at").get<double>();
+  h->finished_at = doc.at("finished_at").get<double>();
+}
+
+// Schema-checked, into a directory made if missing, atomic.
+Status WritePartDocument(const fs::path& path, const json& doc, const char* schema) {
+  HANDDB_RETURN_IF_ERROR(ValidateJson(doc, schema, path.string()));
+  std::error_code ec;
+  fs::create_directories(path.parent_path(), ec);
+  if (ec) {
+    return Status(StatusCode::kIoError,
+                  path.parent_path().string() + ": cannot create: " + ec.message());
+  }
+  return WriteJsonFileAtomic(path, doc);
+}
+
 }  // namespace
 
 json ScoringOptionsToJson(const EvaluationOptions& options) {
@@ -224,28 +261,13 @@ fs::path PartPath(const fs::path& work_dir, uint32_t task) {
 json PartToJson(const EvaluationPart& part) {
   json views = json::array();
   for (const auto& v : part.views) views.push_back(ViewToJson(v));
-  return {{"format", "handdb-evaluation-part"},
-          {"version", 1},
-          {"fingerprint", part.fingerprint.value},
-          {"inputs", part.fingerprint.inputs},
-          {"task", part.task},
-          {"tasks", part.num_tasks},
-          {"threads", part.threads},
-          {"started_at", part.started_at},
-          {"finished_at", part.finished_at},
-          {"views", views}};
+  return PartJson("handdb-evaluation-part", part, "views", std::move(views));
 }
 
 Result<EvaluationPart> PartFromJson(const json& doc, const std::string& where) {
   try {
     EvaluationPart part;
-    part.fingerprint.value = doc.at("fingerprint").get<std::string>();
-    part.fingerprint.inputs = doc.at("inputs");
-    part.task = doc.at("task").get<uint32_t>();
-    part.num_tasks = doc.at("tasks").get<uint32_t>();
-    part.threads = doc.at("threads").get<int>();
-    part.started_at = doc.at("started_at").get<double>();
-    part.finished_at = doc.at("finished_at").get<double>();
+    ReadPartHeader(doc, &part);
     for (const auto& v : doc.at("views")) part.views.push_back(ViewFromJson(v));
     return part;
   } catch (const json::exception& e) {
@@ -254,15 +276,7 @@ Result<EvaluationPart> PartFromJson(const json& doc, const std::string& where) {
 }
 
 Status WritePart(const fs::path& path, const EvaluationPart& part) {
-  const json doc = PartToJson(part);
-  HANDDB_RETURN_IF_ERROR(ValidateJson(doc, "evaluation_part.schema.json", path.string()));
-  std::error_code ec;
-  fs::create_directories(path.parent_path(), ec);
-  if (ec) {
-    return Status(StatusCode::kIoError,
-                  path.parent_path().string() + ": cannot create: " + ec.message());
-  }
-  return WriteJsonFileAtomic(path, doc);
+  return WritePartDocument(path, PartToJson(part), "evaluation_part.schema.json");
 }
 
 Result<EvaluationPart> ReadPart(const fs::path& path, const PartExpectation& expect) {
@@ -403,28 +417,13 @@ std::vector<uint32_t> PhotoTaskSlice(const PhotoSet& photos, uint32_t task, uint
 json PhotoPartToJson(const PhotoEvaluationPart& part) {
   json photos = json::array();
   for (const PhotoOutcome& o : part.photos) photos.push_back(o.ToJson());
-  return {{"format", "handdb-photo-evaluation-part"},
-          {"version", 1},
-          {"fingerprint", part.fingerprint.value},
-          {"inputs", part.fingerprint.inputs},
-          {"task", part.task},
-          {"tasks", part.num_tasks},
-          {"threads", part.threads},
-          {"started_at", part.started_at},
-          {"finished_at", part.finished_at},
-          {"photos", photos}};
+  return PartJson("handdb-photo-evaluation-part", part, "photos", std::move(photos));
 }
 
 Result<PhotoEvaluationPart> PhotoPartFromJson(const json& doc, const std::string& where) {
   try {
     PhotoEvaluationPart part;
-    part.fingerprint.value = doc.at("fingerprint").get<std::string>();
-    part.fingerprint.inputs = doc.at("inputs");
-    part.task = doc.at("task").get<uint32_t>();
-    part.num_tasks = doc.at("tasks").get<uint32_t>();
-    part.threads = doc.at("threads").get<int>();
-    part.started_at = doc.at("started_at").get<double>();
-    part.finished_at = doc.at("finished_at").get<double>();
+    ReadPartHeader(doc, &part);
     const json& photos = doc.at("photos");
     for (size_t k = 0; k < photos.size(); ++k) {
       auto o = PhotoOutcome::FromJson(photos.at(k), where + ": photos[" + std::to_string(k) + "]");
@@ -438,15 +437,7 @@ Result<PhotoEvaluationPart> PhotoPartFromJson(const json& doc, const std::string
 }
 
 Status WritePhotoPart(const fs::path& path, const PhotoEvaluationPart& part) {
-  const json doc = PhotoPartToJson(part);
-  HANDDB_RETURN_IF_ERROR(ValidateJson(doc, "photo_evaluation_part.schema.json", path.string()));
-  std::error_code ec;
-  fs::create_directories(path.parent_path(), ec);
-  if (ec) {
-    return Status(StatusCode::kIoError,
-                  path.parent_path().string() + ": cannot create: " + ec.message());
-  }
-  return WriteJsonFileAtomic(path, doc);
+  return WritePartDocument(path, PhotoPartToJson(part), "photo_evaluation_part.schema.json");
 }
 
 Result<PhotoEvaluationPart> ReadPhotoPart(const fs::path& path,

@@ -62,13 +62,17 @@ std::string PartName(uint32_t task);
 // WORK/parts/part-00007.json
 std::filesystem::path PartPath(const std::filesystem::path& work_dir, uint32_t task);
 
-struct EvaluationPart {
+// What every part says of the task that wrote it (test-set and photo evaluations alike).
+struct PartHeader {
   EvaluationFingerprint fingerprint;
   uint32_t task = 0;
   uint32_t num_tasks = 1;
   int threads = 1;
   double started_at = 0;  // Unix time, seconds
   double finished_at = 0;
+};
+
+struct EvaluationPart : PartHeader {
   std::vector<ViewOutcome> views;  // query_points are not stored
 };
 
@@ -127,13 +131,7 @@ Result<EvaluationFingerprint> ComputePhotoEvaluationFingerprint(
 // k % num_tasks == task (TaskSlice of every position).
 std::vector<uint32_t> PhotoTaskSlice(const PhotoSet& photos, uint32_t task, uint32_t num_tasks);
 
-struct PhotoEvaluationPart {
-  EvaluationFingerprint fingerprint;
-  uint32_t task = 0;
-  uint32_t num_tasks = 1;
-  int threads = 1;
-  double started_at = 0;  // Unix time, seconds
-  double finished_at = 0;
+struct PhotoEvaluationPart : PartHeader {
   std::vector<PhotoOutcome> photos;  // query_points are not stored
 };
 
