@@ -700,26 +700,8 @@ class QueryRun {
   // then only pairs whose bound is <= it are sorted and visited.
   void Refine() {
     const size_t n = la_.size();
-    auto total = [&](uint32_t i) { return static_cast<uint32_t>(la_[i]) + lb_[i]; };
-    auto by_bound = [&](uint32_t x, uint32_t y) {
-      const uint32_t tx = total(x), ty = total(y);
-      return tx != ty ? tx < ty : x < y;
-    };
-    // The k smallest bounds with a bounded max-heap (no N-sized index array).
-    std::vector<uint32_t> first;
-    first.reserve(k_ + 1);
-    for (uint32_t i = 0; i < n; ++i) {
-      if (la_[i] == kNoBound) continue;
-      if (first.size() < k_) {
-        first.push_back(i);
-        std::push_heap(first.begin(), first.end(), by_bound);
-      } else if (by_bound(i, first.front())) {
-        std::pop_heap(first.begin(), first.end(), by_bound);
-        first.back() = i;
-        std::push_heap(first.begin(), first.end(), by_bound);
-      }
-    }
-    std::sort(first.begin(), first.end(), by_bound);
+    auto by_bound = [&](uint32_t x, uint32_t y) { return ByBound(x, y); };
+    const std::vector<uint32_t> first = SmallestPairs(0, n, k_, by_bound);
     Visit(first);
     const double t0 = top_.threshold();
     std::vector<uint32_t> rest;
@@ -806,24 +788,38 @@ class QueryRun {
         pool_);
   }
 
-  // Scores the pairs with the smallest L_A (a few times k), best first, and marks them scored.
-  void Seed() {
-    const size_t m = 2 * k_ + 8;
+  // Pairs by their bound L_A + L_B, then by index.
+  bool ByBound(uint32_t x, uint32_t y) const {
+    const uint32_t tx = static_cast<uint32_t>(la_[x]) + lb_[x];
+    const uint32_t ty = static_cast<uint32_t>(la_[y]) + lb_[y];
+    return tx != ty ? tx < ty : x < y;
+  }
+
+  // The (at most) m pairs of [begin, end) not yet scored that come first under `less`, sorted by
+  // it: a bounded max-heap, no range-sized index array.
+  template <typename Less>
+  std::vector<uint32_t> SmallestPairs(size_t begin, size_t end, size_t m, Less less) const {
     std::vector<uint32_t> best;
     best.reserve(m + 1);
-    auto less = [&](uint32_t x, uint32_t y) { return la_[x] != la_[y] ? la_[x] < la_[y] : x < y; };
-    for (uint32_t i = 0; i < la_.size(); ++i) {
+    for (uint32_t i = static_cast<uint32_t>(begin); i < end; ++i) {
       if (la_[i] == kNoBound) continue;
       if (best.size() < m) {
         best.push_back(i);
         std::push_heap(best.begin(), best.end(), less);
-      } else if (less(i, best.front())) {
+      } else if (m > 0 && less(i, best.front())) {
         std::pop_heap(best.begin(), best.end(), less);
         best.back() = i;
         std::push_heap(best.begin(), best.end(), less);
       }
     }
     std::sort(best.begin(), best.end(), less);
+    return best;
+  }
+
+  // Scores the pairs with the smallest L_A (a few times k), best first, and marks them scored.
+  void Seed() {
+    auto less = [&](uint32_t x, uint32_t y) { return la_[x] != la_[y] ? la_[x] < la_[y] : x < y; };
+    const std::vector<uint32_t> best = SmallestPairs(0, la_.size(), 2 * k_ + 8, less);
     ParallelFor(
         best.size(),
         threads_,
@@ -903,26 +899,8 @@ class QueryRun {
   void ScoreSlotBest(size_t s, int worker) {
     const size_t m = std::min<size_t>(num_views_, top_.threshold() == kInf ? k_ : 2);
     const size_t base = s * num_views_;
-    std::vector<uint32_t> best;
-    best.reserve(m + 1);
-    auto less = [&](uint32_t x, uint32_t y) {
-      const uint32_t tx = static_cast<uint32_t>(la_[x]) + lb_[x];
-      const uint32_t ty = static_cast<uint32_t>(la_[y]) + lb_[y];
-      return tx != ty ? tx < ty : x < y;
-    };
-    for (uint32_t i = static_cast<uint32_t>(base); i < base + num_views_; ++i) {
-      if (la_[i] == kNoBound) continue;
-      if (best.size() < m) {
-        best.push_back(i);
-        std::push_heap(best.begin(), best.end(), less);
-      } else if (m > 0 && less(i, best.front())) {
-        std::pop_heap(best.begin(), best.end(), less);
-        best.back() = i;
-        std::push_heap(best.begin(), best.end(), less);
-      }
-    }
-    std::sort(best.begin(), best.end(), less);
-    for (uint32_t i : best) ScorePair(i, worker);
+    auto by_bound = [&](uint32_t x, uint32_t y) { return ByBound(x, y); };
+    for (uint32_t i : SmallestPairs(base, base + num_views_, m, by_bound)) ScorePair(i, worker);
   }
 
   // Scores pair i unless its bound is above the k-th best, and marks it scored (kNoBound), so
