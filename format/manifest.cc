@@ -66,16 +66,24 @@ json ManifestToJson(const Manifest& m) {
   for (const auto& s : m.skipped) {
     skipped.push_back({{"render_id", s.render_id}, {"file", s.file}, {"reason", s.reason}});
   }
-  return json{{"format", kManifestFormat},
-              {"version", m.version},
-              {"tool_version", m.tool_version},
-              {"rolls", m.rolls},
-              {"num_views", m.num_views},
-              {"num_virtual_views", m.num_virtual_views},
-              {"shards", std::move(shards)},
-              {"labels", std::move(labels)},
-              {"metadata", m.metadata.is_null() ? json::object() : m.metadata},
-              {"skipped", std::move(skipped)}};
+  json out{{"format", kManifestFormat},
+           {"version", m.version},
+           {"tool_version", m.tool_version},
+           {"rolls", m.rolls},
+           {"num_views", m.num_views},
+           {"num_virtual_views", m.num_virtual_views},
+           {"shards", std::move(shards)},
+           {"labels", std::move(labels)},
+           {"metadata", m.metadata.is_null() ? json::object() : m.metadata},
+           {"skipped", std::move(skipped)}};
+  if (m.index) {
+    out["index"] = {{"file", m.index->file},
+                    {"kind", m.index->kind},
+                    {"bytes", m.index->bytes},
+                    {"xxh3", m.index->xxh3},
+                    {"options", m.index->options}};
+  }
+  return out;
 }
 
 namespace {
@@ -139,6 +147,14 @@ Result<Manifest> ManifestFromJson(const json& doc, const std::string& what) {
       m.skipped.push_back({s.at("render_id").get<render_id_t>(),
                            s.at("file").get<std::string>(),
                            s.at("reason").get<std::string>()});
+    }
+    if (doc.contains("index")) {
+      const json& ix = doc.at("index");
+      m.index = ManifestIndex{ix.at("file").get<std::string>(),
+                              ix.at("kind").get<std::string>(),
+                              ix.at("bytes").get<uint64_t>(),
+                              ix.at("xxh3").get<std::string>(),
+                              ix.value("options", json::object())};
     }
   } catch (const json::exception& e) {
     // The schema has been checked, so this is a value out of the C++ type's range.

@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <set>
 #include <string>
 #include <tuple>
@@ -91,6 +92,17 @@ struct ManifestSkipped {
   std::string reason;  // e.g. "no hand pixels"
 };
 
+// The search index of the database (query/index/view_index.h, docs/index.md), when one was built
+// by `handdb index`: a manifest rewritten by convert lists none (the shards changed).
+struct ManifestIndex {
+  std::string file;  // "index-<xxh3>.hdbi" in the database directory
+  std::string kind;  // "chamfer-wpca-ivf"
+  uint64_t bytes = 0;
+  std::string xxh3;  // XXH3-64 of the whole file, 16 lowercase hex digits
+  nlohmann::json options = nlohmann::json::object();  // the build options
+  bool operator==(const ManifestIndex&) const = default;
+};
+
 struct Manifest {
   int version = kManifestVersion;
   std::string tool_version;
@@ -101,6 +113,7 @@ struct Manifest {
   std::vector<ManifestLabelField> labels = ShardLabelFields();
   nlohmann::json metadata = nlohmann::json::object();  // config, hand model hash, versions ...
   std::vector<ManifestSkipped> skipped;
+  std::optional<ManifestIndex> index;
 
   // The label fields of a view record (docs/format.md), names and units.
   static std::vector<ManifestLabelField> ShardLabelFields();
