@@ -23,8 +23,9 @@ set(HANDDB_SCHEMA_INSTALL_DIR ${CMAKE_INSTALL_DATADIR}/handdb/schemas)
 # Internals stay out: the shard byte layout (format/shard_layout.h), the chamfer terms, distance
 # transforms and SIMD kernels of query/, the samplers of generator/, and every *_testing.h.
 # query/kdtree.h and query/coarse_bound.h are doors because query/searcher.h needs their types
-# (SearchOptions::kdtree, the Searcher's coarse fields); format/coarse_field.h because
-# coarse_bound.h does.
+# (SearchOptions::kdtree, the Searcher's coarse fields), query/index/view_index.h for
+# SearchOptions::index and Searcher::SetIndex (and index/embedding.h for the index's grid);
+# format/coarse_field.h because coarse_bound.h does.
 set(HANDDB_DOORS_base status.h atomic_file.h json_schema.h thread_pool.h progress.h subprocess.h)
 set(HANDDB_DOORS_format view.h roll.h shard_reader.h shard_writer.h manifest.h validator.h
                         coarse_field.h)
@@ -32,7 +33,8 @@ set(HANDDB_DOORS_cluster slurm.h)
 set(HANDDB_DOORS_edges edges.h normalise.h exr_io.h view_conversion.h)
 set(HANDDB_DOORS_generator plan/plan.h hand/hand_model.h render/blender.h render/render_driver.h
                            convert/converter.h testset/testset.h)
-set(HANDDB_DOORS_query database.h searcher.h kdtree.h coarse_bound.h input/image_edges.h
+set(HANDDB_DOORS_query database.h searcher.h kdtree.h coarse_bound.h index/view_index.h
+                       index/embedding.h input/image_edges.h
                        input/sheet.h)
 set(HANDDB_DOORS_evaluate evaluate.h metrics.h plots.h parts.h photos.h photo_keypoints.h)
 set(HANDDB_MODULES base format cluster edges generator query evaluate)

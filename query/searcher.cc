@@ -513,6 +513,8 @@ bool SearchOptions::Check() const {
   CHECK_OPTION_GT(top_k, 0);
   CHECK_OPTION(num_threads == -1 || num_threads >= 1);
   CHECK_OPTION((DistanceGridOptions{dt_cell_px, 170.0f}.Check()));
+  CHECK_OPTION_GT(index.candidates, 0);
+  CHECK_OPTION(index.nprobe >= 0);
   return true;
 }
 
@@ -604,7 +606,8 @@ std::vector<std::vector<GridMember>> MakeGridGroups(size_t num_slots, uint32_t r
 }
 
 // One query's stages, sharing the query context, the top k and the counters: BruteForce(), or
-// Bounds() then Refine(); then Matches(). Pairs are indexed s * num_views + v over the slots s.
+// Bounds() (indexed search: BoundCandidates()) then Refine(); then Matches(). Pairs are indexed
+// s * num_views + v over the slots s.
 class QueryRun {
  public:
   QueryRun(const Database& db,
@@ -683,6 +686,8 @@ class QueryRun {
     const size_t n = num_views_ * num_slots();
     la_.assign(n, 0);
     lb_.assign(n, 0);
+    slot_begin_.resize(num_slots() + 1);
+    for (size_t s = 0; s <= num_slots(); ++s) slot_begin_[s] = s * num_views_;
     ParallelFor(
         num_slots(),
         threads_,
@@ -692,6 +697,48 @@ class QueryRun {
         },
         pool_);
     CoarseBounds();
+    if (coarse_ != nullptr) Seed();
+    FineBounds();
+  }
+
+  // Step 1 of indexed search (SearchMode::kIndexed): Bounds() over the candidate pairs only
+  // (s * num_views + v, any order, repeats allowed), each an entry of la_ / lb_ in increasing
+  // pair order: the slots of the grid groups holding candidates prepared, L_A per pair (the same
+  // exact integer sum as the streaming product, so the same bound), the threshold seeded from
+  // them, then L_B from the groups' grids. Refine() then gives the exact top-k among the
+  // candidates; with every pair a candidate, exactly the result of Bounds() and Refine().
+  void BoundCandidates(std::vector<uint32_t> pairs) {
+    std::sort(pairs.begin(), pairs.end());
+    pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+    pairs_ = std::move(pairs);
+    la_.assign(pairs_.size(), 0);
+    lb_.assign(pairs_.size(), 0);
+    slot_begin_.assign(num_slots() + 1, 0);
+    for (uint32_t p : pairs_) ++slot_begin_[p / num_views_ + 1];
+    for (size_t s = 0; s < num_slots(); ++s) slot_begin_[s + 1] += slot_begin_[s];
+    // Every slot of a group holding a candidate: FineBounds builds the grid from the group's base
+    // and measures each member's gap to it.
+    std::vector<size_t> prepare;
+    for (const std::vector<GridMember>& group : MakeGridGroups(num_slots(), num_rolls_)) {
+      if (GroupEntries(group) == 0) continue;
+      for (const GridMember& m : group) prepare.push_back(m.slot);
+    }
+    ParallelFor(
+        prepare.size(),
+        threads_,
+        [&](size_t j, int) {
+          ctx_.PrepareSlot(prepare[j]);
+          return true;
+        },
+        pool_);
+    ParallelFor(
+        pairs_.size(),
+        threads_,
+        [&](size_t e, int) {
+          la_[e] = PairCoarseBound(pairs_[e] % num_views_, pairs_[e] / num_views_);
+          return true;
+        },
+        pool_);
     if (coarse_ != nullptr) Seed();
     FineBounds();
   }
@@ -752,6 +799,26 @@ class QueryRun {
 
  private:
   double TotalPx(size_t i) const { return BoundPx(la_[i]) + BoundPx(lb_[i]); }
+
+  // The pair (s * num_views + v) of entry e of la_ / lb_: e itself in exact search.
+  size_t PairOf(size_t e) const { return pairs_.empty() ? e : pairs_[e]; }
+  size_t SlotEntries(size_t s) const { return slot_begin_[s + 1] - slot_begin_[s]; }
+  size_t GroupEntries(const std::vector<GridMember>& group) const {
+    size_t n = 0;
+    for (const GridMember& m : group) n += SlotEntries(m.slot);
+    return n;
+  }
+
+  // L_A of one pair as CoarseBounds() computes it (kNoBound for a view without points, 0 without
+  // coarse fields): sum_c n(c) F_v(c) is the same exact integer as the streaming product's.
+  Bound PairCoarseBound(size_t v, size_t s) const {
+    if (db_.points(static_cast<view_id_t>(v)).empty()) return kNoBound;
+    if (coarse_ == nullptr) return 0;
+    const uint64_t sum = ctx_.histogram(s).Sum([&](int c) { return coarse_->value(v, c); });
+    const uint64_t nq = ctx_.rolled(s).size();
+    const uint64_t units = sum * static_cast<uint64_t>(kBoundUnitsPerPx / 2) / nq;
+    return static_cast<Bound>(std::min<uint64_t>(units, kBoundMax));
+  }
 
   // L_A of every pair into la_ (kNoBound for views without points), or 0 without coarse fields.
   // L_A = sum / 2 / |Q| px with an exact integer sum, so floor(64 L_A) is an integer division.
@@ -832,21 +899,26 @@ class QueryRun {
 
   void FineBounds() {
     auto groups = MakeGridGroups(num_slots(), num_rolls_);
-    // Each group's smallest L_A, to visit the most promising grids first.
+    // Each group's smallest L_A, to visit the most promising grids first. A group without
+    // entries (indexed search: no candidate in its slots) builds no grid.
     std::vector<std::pair<Bound, size_t>> order;
     for (size_t g = 0; g < groups.size(); ++g) {
+      if (GroupEntries(groups[g]) == 0) continue;
       Bound best = kNoBound;
       for (GridMember& m : groups[g]) {
         m.gap_px = ctx_.FlipGap(groups[g][0].slot, m.slot, m.flip);
-        const Bound* la = la_.data() + static_cast<size_t>(m.slot) * num_views_;
-        best = std::min(best, *std::min_element(la, la + num_views_));
+        if (SlotEntries(m.slot) == 0) continue;
+        const Bound* la = la_.data() + slot_begin_[m.slot];
+        best = std::min(best, *std::min_element(la, la + SlotEntries(m.slot)));
       }
       order.emplace_back(best, g);
     }
     std::sort(order.begin(), order.end());
     const DistanceGridOptions grid_options{options_.dt_cell_px, grid_half_extent_px_};
     std::vector<DistanceGrid> grids(threads_, DistanceGrid(grid_options));
-    const auto progress = MakeProgress("bounds", num_slots(), "rolls");
+    size_t progress_slots = 0;
+    for (const auto& entry : order) progress_slots += groups[entry.second].size();
+    const auto progress = MakeProgress("bounds", progress_slots, "rolls");
     ParallelFor(
         order.size(),
         threads_,
@@ -871,12 +943,12 @@ class QueryRun {
   // group's grid read through the member's flip, minus its gap.
   void BoundSlot(const DistanceGrid& grid, const GridMember& m) {
     constexpr size_t kChunk = 64;
-    const size_t base = static_cast<size_t>(m.slot) * num_views_;
     uint64_t bounded = 0;
-    for (view_id_t v = 0; v < num_views_; ++v) {
-      const Bound la = la_[base + v];
+    for (size_t e = slot_begin_[m.slot]; e < slot_begin_[m.slot + 1]; ++e) {
+      const Bound la = la_[e];
       const double threshold = top_.threshold();
       if (la == kNoBound || BoundPx(la) > threshold) continue;
+      const auto v = static_cast<view_id_t>(PairOf(e) % num_views_);
       const std::span<const PointQ> pts = db_.points(v);
       const double n = static_cast<double>(pts.size());
       const double limit = Limit(threshold, BoundPx(la), n) + m.gap_px * n;
@@ -887,8 +959,7 @@ class QueryRun {
         sum += fast ? grid.SumLowerBoundsFast(chunk, m.flip) : grid.SumLowerBounds(chunk, m.flip);
       }
       const double mean = sum / n;
-      lb_[base + v] =
-          BoundBelow(mean - DistanceGrid::MeanLowerBoundMargin(pts.size(), mean) - m.gap_px);
+      lb_[e] = BoundBelow(mean - DistanceGrid::MeanLowerBoundMargin(pts.size(), mean) - m.gap_px);
       ++bounded;
     }
     grid_bounded_.fetch_add(bounded, std::memory_order_relaxed);
@@ -897,10 +968,11 @@ class QueryRun {
   // Scores this slot's most promising pairs now so later groups can stop early (k pairs while
   // fewer than k are known, then 2).
   void ScoreSlotBest(size_t s, int worker) {
-    const size_t m = std::min<size_t>(num_views_, top_.threshold() == kInf ? k_ : 2);
-    const size_t base = s * num_views_;
+    const size_t m = std::min<size_t>(SlotEntries(s), top_.threshold() == kInf ? k_ : 2);
     auto by_bound = [&](uint32_t x, uint32_t y) { return ByBound(x, y); };
-    for (uint32_t i : SmallestPairs(base, base + num_views_, m, by_bound)) ScorePair(i, worker);
+    for (uint32_t i : SmallestPairs(slot_begin_[s], slot_begin_[s + 1], m, by_bound)) {
+      ScorePair(i, worker);
+    }
   }
 
   // Scores pair i unless its bound is above the k-th best, and marks it scored (kNoBound), so
@@ -910,8 +982,8 @@ class QueryRun {
     const double threshold = top_.threshold();
     const double bound = TotalPx(i);
     if (bound > threshold) return;
-    const auto v = static_cast<view_id_t>(i % num_views_);
-    const size_t s = i / num_views_;
+    const auto v = static_cast<view_id_t>(PairOf(i) % num_views_);
+    const size_t s = PairOf(i) / num_views_;
     refined_.fetch_add(1, std::memory_order_relaxed);
     Scored sc;
     if (ctx_.Score(v, s, threshold, BoundPx(lb_[i]), worker, &sc)) {
@@ -934,8 +1006,8 @@ class QueryRun {
           const double bound = TotalPx(i);
           if (bound > threshold) return false;  // every later pair: a larger bound
           if (progress != nullptr) progress->Add();
-          const auto v = static_cast<view_id_t>(i % num_views_);
-          const size_t s = i / num_views_;
+          const auto v = static_cast<view_id_t>(PairOf(i) % num_views_);
+          const size_t s = PairOf(i) / num_views_;
           refined_.fetch_add(1, std::memory_order_relaxed);
           Scored sc;
           if (ctx_.Score(v, s, threshold, BoundPx(lb_[i]), worker, &sc)) {
@@ -972,10 +1044,15 @@ class QueryRun {
   const size_t k_;
   QueryContext ctx_;
   TopK top_;
-  // Per pair: L_A (kNoBound: a view without points, or a pair already scored) and L_B (0 until
-  // computed), both rounded down to 1/64 px; L = L_A + L_B <= D_c.
+  // Per pair (indexed search: per candidate pair, pairs_): L_A (kNoBound: a view without points,
+  // or a pair already scored) and L_B (0 until computed), both rounded down to 1/64 px;
+  // L = L_A + L_B <= D_c.
   std::vector<Bound> la_;
   std::vector<Bound> lb_;
+  // Indexed search: each entry's pair (s * num_views + v), increasing; empty in exact search,
+  // where entry i is pair i. The entries of slot s are [slot_begin_[s], slot_begin_[s + 1]).
+  std::vector<uint32_t> pairs_;
+  std::vector<size_t> slot_begin_;
   std::atomic<uint64_t> grids_{0};
   std::atomic<uint64_t> grid_bounded_{0};
   std::atomic<uint64_t> refined_{0};
@@ -984,6 +1061,10 @@ class QueryRun {
 };
 
 }  // namespace
+
+std::string_view SearchModeName(SearchMode mode) {
+  return mode == SearchMode::kIndexed ? "indexed" : "exact";
+}
 
 std::string_view HandName(Hand hand) {
   switch (hand) {
@@ -1019,6 +1100,19 @@ Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
                                             SearchStats* stats) const {
   const auto start = std::chrono::steady_clock::now();
   if (Status s = CheckQuery(query_px, options); !s.ok()) return s;
+  const bool indexed = options.mode == SearchMode::kIndexed && !options.brute_force;
+  if (indexed) {
+    if (index_ == nullptr) {
+      return Status(StatusCode::kInvalidArgument,
+                    db_->path().string() +
+                        ": indexed search needs an index (build one: handdb index " +
+                        db_->path().string() + ")");
+    }
+    if (index_->num_views() != db_->num_views() || index_->num_rolls() != db_->num_rolls()) {
+      return Status(StatusCode::kSizeMismatch,
+                    db_->path().string() + ": the index is of another database");
+    }
+  }
 
   const int threads = ResolveNumThreads(options.num_threads);
   // One pool for the query's parallel loops; the calling thread is worker 0.
@@ -1046,6 +1140,36 @@ Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
                progress_since);
   if (options.brute_force) {
     run.BruteForce(&local, start);
+  } else if (indexed) {
+    // The index's candidates per hand searched (the left hand's from the mirrored query), as
+    // pairs of the run's slots: the left hand's rolls follow the right hand's in a both-hand run.
+    IndexSearchOptions index_options = options.index;
+    index_options.num_threads = threads;
+    std::vector<uint32_t> pairs;
+    size_t first_slot = 0;
+    for (Hand h : {Hand::kRight, Hand::kLeft}) {
+      if (options.hand != Hand::kEither && options.hand != h) continue;
+      std::vector<Point2f> mirrored;
+      if (h == Hand::kLeft) {
+        mirrored.assign(query_px.begin(), query_px.end());
+        for (Point2f& p : mirrored) p.x = -p.x;
+      }
+      const std::vector<Candidate> candidates = index_->Candidates(
+          h == Hand::kLeft ? std::span<const Point2f>(mirrored) : query_px, index_options);
+      local.candidates += candidates.size();
+      for (const Candidate& c : candidates) {
+        if (c.view >= db_->num_views() || c.roll >= db_->num_rolls()) continue;
+        pairs.push_back(static_cast<uint32_t>((first_slot + c.roll) * db_->num_views() + c.view));
+      }
+      first_slot += db_->num_rolls();
+    }
+    local.seconds_index = Seconds(start);
+    const auto bounds_start = std::chrono::steady_clock::now();
+    run.BoundCandidates(std::move(pairs));
+    local.seconds_bounds = Seconds(bounds_start);
+    const auto refine_start = std::chrono::steady_clock::now();
+    run.Refine();
+    local.seconds_refine = Seconds(refine_start);
   } else {
     run.Bounds();
     local.seconds_bounds = Seconds(start);

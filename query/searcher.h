@@ -26,6 +26,7 @@
 #include "format/view.h"
 #include "query/coarse_bound.h"
 #include "query/database.h"
+#include "query/index/view_index.h"
 #include "query/kdtree.h"
 
 namespace handdb {
@@ -36,6 +37,13 @@ namespace handdb {
 enum class Hand { kRight, kLeft, kEither };
 std::string_view HandName(Hand hand);  // "right", "left", "either"
 Result<Hand> ParseHand(std::string_view name);
+
+// kExact: every (view, slot) pair is bounded, the exact top-k. kIndexed: the database's index
+// (query/index/view_index.h, docs/index.md) gives candidate (view, roll) pairs per hand searched
+// (the left hand's from the mirrored query), and only those pairs of the hand's slots are bounded
+// and refined, by the same steps: the exact top-k among the candidates.
+enum class SearchMode { kExact, kIndexed };
+std::string_view SearchModeName(SearchMode mode);  // "exact", "indexed"
 
 struct SearchOptions {
   int top_k = 10;  // number of matches returned
@@ -60,6 +68,9 @@ struct SearchOptions {
   // `--bruteforce` and big photo queries otherwise ran for minutes without a sign of life.
   bool progress = false;
   std::chrono::steady_clock::time_point progress_since{};
+  // kIndexed needs an index (Searcher::SetIndex); `index` says how many candidates per hand.
+  SearchMode mode = SearchMode::kExact;
+  IndexSearchOptions index;
   bool Check() const;
 };
 
@@ -98,6 +109,8 @@ struct SearchStats {
   uint64_t view_trees = 0;       // kd-trees built over view points
   uint64_t query_points = 0;
   uint32_t searches = 0;      // hands searched: 1, or 2 for Hand::kEither
+  uint64_t candidates = 0;    // kIndexed: pairs the index proposed (the only ones bounded)
+  double seconds_index = 0;   // kIndexed: the index's candidate search
   double seconds_bounds = 0;  // step 1 (rotations, coarse bounds, distance transforms, B bounds)
   double seconds_refine = 0;  // step 2
   double seconds_total = 0;
@@ -124,6 +137,10 @@ class Searcher {
 
   const Database& database() const { return *db_; }
 
+  // The index kIndexed searches use (built for this database: ViewIndex::Open checks that).
+  void SetIndex(std::shared_ptr<const ViewIndex> index) { index_ = std::move(index); }
+  const ViewIndex* index() const { return index_.get(); }
+
  private:
   std::shared_ptr<const Database> db_;
   std::vector<int32_t> max_abs_;  // per view: max |x|, |y| of its points (PointQ units)
@@ -134,6 +151,7 @@ class Searcher {
   // view's points are on the grid (the fast path) and no node is computed that no view reads.
   float grid_half_extent_px_ = 0;
   CoarseFields coarse_;  // per view: the A bound's coarse field
+  std::shared_ptr<const ViewIndex> index_;
 };
 
 }  // namespace handdb

@@ -1,0 +1,585 @@
+#include "query/index/view_index.h"
+
+#include <faiss/Clustering.h>
+#include <faiss/IndexFlat.h>
+#include <faiss/IndexIVFFlat.h>
+#include <faiss/impl/FaissException.h>
+#include <omp.h>
+#include <xxhash.h>
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <random>
+
+#include "base/atomic_file.h"
+#include "base/hex.h"
+#include "base/progress.h"
+#include "base/thread_pool.h"
+#include "query/chamfer.h"
+#include "query/database.h"
+#include "query/index/embedding.h"
+
+namespace handdb {
+namespace {
+
+constexpr char kMagic[8] = {'H', 'D', 'B', 'I', 'N', 'D', 'E', 'X'};
+constexpr uint16_t kMajor = 1;
+constexpr uint16_t kMinor = 0;
+constexpr uint32_t kHeaderSize = 128;
+constexpr uint64_t kFaissSeed = 1234;
+
+// Header field offsets (docs/index.md, "File layout"). Little-endian.
+constexpr size_t kOffMajor = 8, kOffMinor = 10, kOffHeaderSize = 12, kOffFileSize = 16,
+                 kOffFingerprint = 24, kOffViews = 32, kOffRolls = 40, kOffCellUnits = 44,
+                 kOffDims = 48, kOffNlist = 52, kOffWeight = 56, kOffSide = 60,
+                 kOffPayloadOffset = 64, kOffPayloadSize = 72, kOffPayloadChecksum = 80,
+                 kOffReserved = 88, kOffHeaderChecksum = 120;
+
+template <typename T>
+void Put(std::string* out, size_t off, T v) {
+  std::memcpy(out->data() + off, &v, sizeof(T));
+}
+template <typename T>
+T Get(std::string_view in, size_t off) {
+  T v;
+  std::memcpy(&v, in.data() + off, sizeof(T));
+  return v;
+}
+
+Status Corrupt(StatusCode code, const std::string& what, const std::string& problem) {
+  return Status(code, what + ": " + problem);
+}
+
+// An even sample of at most n of [0, total).
+std::vector<view_id_t> EvenSample(size_t total, size_t n) {
+  std::vector<view_id_t> out;
+  const size_t m = std::min(total, n);
+  out.reserve(m);
+  for (size_t i = 0; i < m; ++i) out.push_back(static_cast<view_id_t>(i * total / m));
+  return out;
+}
+
+int Threads(int requested) { return ResolveNumThreads(requested); }
+
+}  // namespace
+
+uint64_t DatabaseFingerprint(const Manifest& manifest) {
+  std::string text = "rolls=" + std::to_string(manifest.rolls) + "\n";
+  for (const ManifestShard& s : manifest.shards) {
+    text += ShardFinalFileName(s.file) + " " + std::to_string(s.views) + " " + s.xxh3 + "\n";
+  }
+  return XXH3_64bits(text.data(), text.size());
+}
+
+bool IndexBuildOptions::Check(std::string* error) const {
+  if (!grid.Check(error)) return false;
+  if (dims < 1 || dims > grid.dims()) {
+    *error = "--dims must be in [1, " + std::to_string(grid.dims()) + "]";
+    return false;
+  }
+  if (nlist < 0) {
+    *error = "--nlist must be >= 0 (0: automatic)";
+    return false;
+  }
+  if (train_views < 1) {
+    *error = "--train-views must be >= 1";
+    return false;
+  }
+  return true;
+}
+
+ViewIndex::ViewIndex() = default;
+ViewIndex::~ViewIndex() = default;
+ViewIndex::ViewIndex(ViewIndex&&) noexcept = default;
+ViewIndex& ViewIndex::operator=(ViewIndex&&) noexcept = default;
+
+Result<ViewIndex> ViewIndex::Build(const Database& db, const IndexBuildOptions& options) {
+  std::string error;
+  if (!options.Check(&error)) return Status(StatusCode::kInvalidArgument, error);
+  if (db.num_views() == 0) {
+    return Status(StatusCode::kInvalidArgument, db.path().string() + ": no views to index");
+  }
+  const auto start = std::chrono::steady_clock::now();
+  const int threads = Threads(options.num_threads);
+  // Eigen would use OpenMP threads (this library is built with it): one thread keeps the sums in
+  // one order, so the file is the same for any --threads.
+  Eigen::setNbThreads(1);
+  const EmbeddingGrid& grid = options.grid;
+  const int D = grid.dims();
+  const int H = grid.cells();
+  const size_t n = db.num_views();
+  const uint32_t rolls = db.num_rolls();
+  ViewIndex index;
+  index.dims_ = options.dims;
+  index.grid_ = grid;
+  index.num_views_ = n;
+  index.num_rolls_ = rolls;
+  index.fingerprint_ = DatabaseFingerprint(db.manifest());
+  index.nlist_ =
+      options.nlist > 0
+          ? std::min<int>(options.nlist, static_cast<int>(n))
+          : std::clamp(
+                static_cast<int>(4 * std::sqrt(static_cast<double>(n))), 1, static_cast<int>(n));
+
+  // 1. The training sample: view vectors e (w = 1 first, to choose w) and query vectors u of the
+  //    same views at a roll and hand picked by a fixed rule (the index sees no real queries).
+  const std::vector<view_id_t> sample = EvenSample(n, static_cast<size_t>(options.train_views));
+  const auto m = static_cast<Eigen::Index>(sample.size());
+  Eigen::MatrixXd x(m, D);
+  std::vector<std::vector<float>> rolled_u(sample.size());
+  {
+    std::vector<std::vector<float>> rows(sample.size());
+    ParallelFor(sample.size(), threads, [&](size_t i, int) {
+      const view_id_t v = sample[i];
+      rows[i].resize(D);
+      ViewVector(grid, db.points(v), 1.0f, rows[i].data());
+      std::vector<Point2f> pts;
+      RollPoints(db.points(v), RollAngle(static_cast<roll_id_t>((7 * i + 3) % rolls), rolls), &pts);
+      if (i % 2 == 1) {
+        for (Point2f& p : pts) p.x = -p.x;
+      }
+      rolled_u[i].resize(D);
+      QueryVector(grid, Quantise(pts), 1.0f, rolled_u[i].data());
+      return true;
+    });
+    for (Eigen::Index i = 0; i < m; ++i) {
+      for (int j = 0; j < D; ++j) x(i, j) = rows[static_cast<size_t>(i)][j];
+    }
+  }
+  double var_g = 0, var_h = 0;
+  for (int j = 0; j < D; ++j) {
+    const double mu = x.col(j).mean();
+    (j < H ? var_g : var_h) += (x.col(j).array() - mu).square().mean();
+  }
+  index.weight_ = var_h > 0 && var_g > 0 ? static_cast<float>(std::sqrt(var_g / var_h)) : 1.0f;
+  const double w = index.weight_;
+  x.rightCols(H) *= w;
+  Eigen::MatrixXd u(m, D);
+  for (Eigen::Index i = 0; i < m; ++i) {
+    const std::vector<float>& r = rolled_u[static_cast<size_t>(i)];
+    for (int j = 0; j < D; ++j) u(i, j) = j < H ? r[j] : r[j] / w;
+  }
+  rolled_u.clear();
+
+  // 2. W = E[u u^T]^(1/2) (eigenvalues clipped at 1e-6 of the largest), the PCA of W (e - mu),
+  //    eigenvector signs fixed (largest entry > 0).
+  const Eigen::MatrixXd cu = (u.transpose() * u) / static_cast<double>(m);
+  u.resize(0, 0);
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> whiten(cu);
+  if (whiten.info() != Eigen::Success) {
+    return Status(StatusCode::kInvalidArgument, db.path().string() + ": PCA did not converge");
+  }
+  const double lmax = std::max(whiten.eigenvalues().maxCoeff(), 1e-300);
+  const Eigen::VectorXd root = whiten.eigenvalues().cwiseMax(1e-6 * lmax).cwiseSqrt();
+  const Eigen::MatrixXd wm =
+      whiten.eigenvectors() * root.asDiagonal() * whiten.eigenvectors().transpose();
+  const Eigen::MatrixXd wi =
+      whiten.eigenvectors() * root.cwiseInverse().asDiagonal() * whiten.eigenvectors().transpose();
+  const Eigen::RowVectorXd mean = x.colwise().mean();
+  x.rowwise() -= mean;
+  const Eigen::MatrixXd xw = x * wm;
+  x.resize(0, 0);
+  const Eigen::MatrixXd cov = (xw.transpose() * xw) / static_cast<double>(m);
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(cov);
+  if (eig.info() != Eigen::Success) {
+    return Status(StatusCode::kInvalidArgument, db.path().string() + ": PCA did not converge");
+  }
+  const int d = options.dims;
+  Eigen::MatrixXd v(D, d);
+  for (int k = 0; k < d; ++k) {
+    Eigen::VectorXd c = eig.eigenvectors().col(D - 1 - k);  // ascending eigenvalues
+    Eigen::Index arg = 0;
+    c.cwiseAbs().maxCoeff(&arg);
+    if (c(arg) < 0) c = -c;
+    v.col(k) = c;
+  }
+  const Eigen::MatrixXd encode = v.transpose() * wm;  // d x D
+  const Eigen::MatrixXd project = v.transpose() * wi;
+  index.mean_.resize(D);
+  for (int j = 0; j < D; ++j) index.mean_[j] = static_cast<float>(mean(j));
+  index.query_projection_.resize(static_cast<size_t>(d) * D);
+  std::vector<float> enc(static_cast<size_t>(d) * D);
+  for (int k = 0; k < d; ++k) {
+    for (int j = 0; j < D; ++j) {
+      index.query_projection_[static_cast<size_t>(k) * D + j] = static_cast<float>(project(k, j));
+      enc[static_cast<size_t>(k) * D + j] = static_cast<float>(encode(k, j));
+    }
+  }
+
+  // Every view encoded (in parallel, each view on its own: deterministic).
+  std::vector<float> z(n * static_cast<size_t>(d));
+  {
+    Progress progress("index embed", n, options.progress, "views");
+    ParallelFor(n, threads, [&](size_t vi, int) {
+      std::vector<float> e(D);
+      ViewVector(grid, db.points(static_cast<view_id_t>(vi)), index.weight_, e.data());
+      for (int j = 0; j < D; ++j) e[j] -= index.mean_[j];
+      float* out = z.data() + vi * static_cast<size_t>(d);
+      for (int k = 0; k < d; ++k) {
+        const float* row = enc.data() + static_cast<size_t>(k) * D;
+        double s = 0;
+        for (int j = 0; j < D; ++j) s += static_cast<double>(row[j]) * e[j];
+        out[k] = static_cast<float>(s);
+      }
+      progress.Add();
+      return true;
+    });
+  }
+
+  // 3. FAISS IVF: k-means (L2, fixed seed) on the sample, every view in the list of its nearest
+  //    centroid, lists chosen at query time by inner product with the centroids and scanned by
+  //    inner product. (Turning the inner product into L2 with an extra coordinate sqrt(M^2 -
+  //    |z|^2) was tried first: M^2 dwarfs the differences that matter, and the quantizer's
+  //    |x|^2 + |y|^2 - 2<x, y> in float lost them: recall@10 0.02-0.12 at nprobe = lists / 8.)
+  // FAISS's k-means sums in OpenMP chunks: one thread keeps the result independent of --threads.
+  omp_set_num_threads(1);
+  try {
+    std::vector<float> train(sample.size() * static_cast<size_t>(d));
+    for (size_t i = 0; i < sample.size(); ++i) {
+      std::memcpy(
+          train.data() + i * d, z.data() + static_cast<size_t>(sample[i]) * d, sizeof(float) * d);
+    }
+    faiss::ClusteringParameters cp;
+    cp.seed = kFaissSeed;
+    cp.verbose = false;
+    cp.min_points_per_centroid = 1;  // small databases: no "provide more points" warning
+    faiss::Clustering clustering(d, index.nlist_, cp);
+    faiss::IndexFlatL2 assign(d);
+    clustering.train(static_cast<faiss::Index::idx_t>(sample.size()), train.data(), assign);
+    std::vector<faiss::Index::idx_t> list(n);
+    std::vector<float> dist(n);
+    assign.search(static_cast<faiss::Index::idx_t>(n), z.data(), 1, dist.data(), list.data());
+    auto* quantizer = new faiss::IndexFlatIP(d);
+    quantizer->add(index.nlist_, clustering.centroids.data());
+    auto ivf = std::make_unique<faiss::IndexIVFFlat>(
+        quantizer, d, index.nlist_, faiss::METRIC_INNER_PRODUCT);
+    ivf->own_fields = true;
+    ivf->add_core(static_cast<faiss::Index::idx_t>(n), z.data(), nullptr, list.data());
+    index.ivf_ = std::move(ivf);
+  } catch (const faiss::FaissException& e) {
+    return Status(StatusCode::kInvalidArgument,
+                  db.path().string() + ": building the IVF index failed: " + e.what());
+  }
+  index.build_seconds_ =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return index;
+}
+
+// Payload (docs/index.md, "File layout"), little-endian, sizes fixed by the header:
+//   mean               D f32
+//   query_projection   dims x D f32
+//   centroids          nlist x dims f32
+//   list_sizes         nlist u32 (summing to num_views)
+//   ids                num_views u32, list by list (each view exactly once)
+//   codes              num_views x dims f32, in the order of ids
+std::string ViewIndex::Serialize() const {
+  const size_t d = static_cast<size_t>(dims_);
+  std::string payload;
+  auto append = [&](const void* p, size_t bytes) {
+    payload.append(static_cast<const char*>(p), bytes);
+  };
+  append(mean_.data(), sizeof(float) * mean_.size());
+  append(query_projection_.data(), sizeof(float) * query_projection_.size());
+  const auto* quantizer = dynamic_cast<const faiss::IndexFlat*>(ivf_->quantizer);
+  THROW_CHECK(quantizer != nullptr);
+  append(quantizer->get_xb(), sizeof(float) * d * static_cast<size_t>(nlist_));
+  std::vector<uint32_t> sizes(static_cast<size_t>(nlist_));
+  std::vector<uint32_t> ids;
+  std::vector<float> codes;
+  ids.reserve(num_views_);
+  codes.reserve(num_views_ * d);
+  for (size_t l = 0; l < sizes.size(); ++l) {
+    const size_t count = ivf_->invlists->list_size(l);
+    sizes[l] = static_cast<uint32_t>(count);
+    const faiss::Index::idx_t* list_ids = ivf_->invlists->get_ids(l);
+    const auto* list_codes = reinterpret_cast<const float*>(ivf_->invlists->get_codes(l));
+    for (size_t i = 0; i < count; ++i) ids.push_back(static_cast<uint32_t>(list_ids[i]));
+    codes.insert(codes.end(), list_codes, list_codes + count * d);
+    ivf_->invlists->release_ids(l, list_ids);
+    ivf_->invlists->release_codes(l, reinterpret_cast<const uint8_t*>(list_codes));
+  }
+  append(sizes.data(), sizeof(uint32_t) * sizes.size());
+  append(ids.data(), sizeof(uint32_t) * ids.size());
+  append(codes.data(), sizeof(float) * codes.size());
+  std::string out(kHeaderSize, '\0');
+  std::memcpy(out.data(), kMagic, sizeof(kMagic));
+  Put<uint16_t>(&out, kOffMajor, kMajor);
+  Put<uint16_t>(&out, kOffMinor, kMinor);
+  Put<uint32_t>(&out, kOffHeaderSize, kHeaderSize);
+  Put<uint64_t>(&out, kOffFileSize, kHeaderSize + payload.size());
+  Put<uint64_t>(&out, kOffFingerprint, fingerprint_);
+  Put<uint64_t>(&out, kOffViews, num_views_);
+  Put<uint32_t>(&out, kOffRolls, num_rolls_);
+  Put<uint32_t>(&out, kOffCellUnits, static_cast<uint32_t>(grid_.cell_units));
+  Put<uint32_t>(&out, kOffDims, static_cast<uint32_t>(dims_));
+  Put<uint32_t>(&out, kOffNlist, static_cast<uint32_t>(nlist_));
+  Put<float>(&out, kOffWeight, weight_);
+  Put<uint32_t>(&out, kOffSide, static_cast<uint32_t>(grid_.side));
+  Put<uint64_t>(&out, kOffPayloadOffset, kHeaderSize);
+  Put<uint64_t>(&out, kOffPayloadSize, payload.size());
+  Put<uint64_t>(&out, kOffPayloadChecksum, XXH3_64bits(payload.data(), payload.size()));
+  Put<uint64_t>(&out, kOffHeaderChecksum, XXH3_64bits(out.data(), kOffHeaderChecksum));
+  return out + payload;
+}
+
+Result<ViewIndex> ViewIndex::Parse(std::string_view bytes,
+                                   uint64_t database_fingerprint,
+                                   uint64_t num_views,
+                                   uint32_t num_rolls,
+                                   const std::string& what) {
+  if (bytes.size() < kHeaderSize) {
+    return Corrupt(StatusCode::kTruncated,
+                   what,
+                   std::to_string(bytes.size()) + " bytes, shorter than the " +
+                       std::to_string(kHeaderSize) + "-byte index header");
+  }
+  if (std::memcmp(bytes.data(), kMagic, sizeof(kMagic)) != 0) {
+    return Corrupt(StatusCode::kBadMagic, what, "not a handdb index (bad magic)");
+  }
+  const uint16_t major = Get<uint16_t>(bytes, kOffMajor);
+  if (major != kMajor) {
+    return Corrupt(StatusCode::kUnsupportedVersion,
+                   what,
+                   "index format version " + std::to_string(major) + "." +
+                       std::to_string(Get<uint16_t>(bytes, kOffMinor)) + ", this reader knows " +
+                       std::to_string(kMajor) + ".x");
+  }
+  const uint64_t stored_header_sum = Get<uint64_t>(bytes, kOffHeaderChecksum);
+  const uint64_t header_sum = XXH3_64bits(bytes.data(), kOffHeaderChecksum);
+  if (stored_header_sum != header_sum) {
+    return Corrupt(StatusCode::kChecksumMismatch,
+                   what,
+                   "offset " + std::to_string(kOffHeaderChecksum) + ": header checksum " +
+                       Hex64(stored_header_sum) + ", computed " + Hex64(header_sum));
+  }
+  for (size_t off = kOffReserved; off < kOffHeaderChecksum; ++off) {
+    if (bytes[off] != 0) {
+      return Corrupt(StatusCode::kNonZeroReserved,
+                     what,
+                     "offset " + std::to_string(off) + ": reserved header byte is not zero");
+    }
+  }
+  const uint64_t file_size = Get<uint64_t>(bytes, kOffFileSize);
+  const uint64_t payload_offset = Get<uint64_t>(bytes, kOffPayloadOffset);
+  const uint64_t payload_size = Get<uint64_t>(bytes, kOffPayloadSize);
+  if (file_size != bytes.size()) {
+    return Corrupt(
+        file_size > bytes.size() ? StatusCode::kTruncated : StatusCode::kSizeMismatch,
+        what,
+        std::to_string(bytes.size()) + " bytes but the header says " + std::to_string(file_size));
+  }
+  if (Get<uint32_t>(bytes, kOffHeaderSize) != kHeaderSize || payload_offset != kHeaderSize ||
+      payload_size != file_size - kHeaderSize) {
+    return Corrupt(StatusCode::kBadLayout,
+                   what,
+                   "header size " + std::to_string(Get<uint32_t>(bytes, kOffHeaderSize)) +
+                       ", payload at " + std::to_string(payload_offset) + " of " +
+                       std::to_string(payload_size) + " bytes: not the layout of version 1");
+  }
+  const std::string_view payload = bytes.substr(payload_offset);
+  const uint64_t stored_sum = Get<uint64_t>(bytes, kOffPayloadChecksum);
+  const uint64_t sum = XXH3_64bits(payload.data(), payload.size());
+  if (stored_sum != sum) {
+    return Corrupt(StatusCode::kChecksumMismatch,
+                   what,
+                   "offset " + std::to_string(payload_offset) + ": payload checksum " +
+                       Hex64(stored_sum) + ", computed " + Hex64(sum));
+  }
+  if (Get<uint64_t>(bytes, kOffFingerprint) != database_fingerprint) {
+    return Corrupt(StatusCode::kSizeMismatch,
+                   what,
+                   "built for other shards (database fingerprint " +
+                       Hex64(Get<uint64_t>(bytes, kOffFingerprint)) + ", this database " +
+                       Hex64(database_fingerprint) + "): rebuild it with `handdb index`");
+  }
+  ViewIndex index;
+  index.fingerprint_ = database_fingerprint;
+  index.num_views_ = Get<uint64_t>(bytes, kOffViews);
+  index.num_rolls_ = Get<uint32_t>(bytes, kOffRolls);
+  index.dims_ = static_cast<int>(Get<uint32_t>(bytes, kOffDims));
+  index.nlist_ = static_cast<int>(Get<uint32_t>(bytes, kOffNlist));
+  index.weight_ = Get<float>(bytes, kOffWeight);
+  index.grid_.cell_units = static_cast<int>(Get<uint32_t>(bytes, kOffCellUnits));
+  index.grid_.side = static_cast<int>(Get<uint32_t>(bytes, kOffSide));
+  if (index.num_views_ != num_views || index.num_rolls_ != num_rolls) {
+    return Corrupt(StatusCode::kSizeMismatch,
+                   what,
+                   "indexes " + std::to_string(index.num_views_) + " views x " +
+                       std::to_string(index.num_rolls_) + " rolls, the database has " +
+                       std::to_string(num_views) + " x " + std::to_string(num_rolls));
+  }
+  std::string grid_error;
+  if (!index.grid_.Check(&grid_error) || Get<uint32_t>(bytes, kOffDims) < 1 ||
+      Get<uint32_t>(bytes, kOffDims) > static_cast<uint32_t>(index.grid_.dims()) ||
+      Get<uint32_t>(bytes, kOffNlist) < 1 || Get<uint32_t>(bytes, kOffNlist) > num_views ||
+      !(std::isfinite(index.weight_) && index.weight_ > 0)) {
+    return Corrupt(StatusCode::kOutOfRange,
+                   what,
+                   "embedding parameters out of range (cell " +
+                       std::to_string(Get<uint32_t>(bytes, kOffCellUnits)) + ", side " +
+                       std::to_string(Get<uint32_t>(bytes, kOffSide)) + ", dims " +
+                       std::to_string(Get<uint32_t>(bytes, kOffDims)) + ", lists " +
+                       std::to_string(Get<uint32_t>(bytes, kOffNlist)) + ", weight " +
+                       std::to_string(index.weight_) + ")");
+  }
+  // Every size below is small (dims <= 20,402, lists <= views): no overflow in 64 bits.
+  const uint64_t D = static_cast<uint64_t>(index.grid_.dims());
+  const uint64_t d = static_cast<uint64_t>(index.dims_);
+  const uint64_t lists = static_cast<uint64_t>(index.nlist_);
+  const uint64_t expected = 4 * (D + d * D + lists * d + lists + num_views + num_views * d);
+  if (payload.size() != expected) {
+    return Corrupt(payload.size() < expected ? StatusCode::kTruncated : StatusCode::kSizeMismatch,
+                   what,
+                   "payload of " + std::to_string(payload.size()) +
+                       " bytes, the header's sizes "
+                       "need " +
+                       std::to_string(expected));
+  }
+  size_t at = 0;
+  auto take_floats = [&](std::vector<float>* out, uint64_t count) {
+    out->resize(count);
+    std::memcpy(out->data(), payload.data() + at, 4 * count);
+    at += 4 * count;
+  };
+  std::vector<float> centroids, codes;
+  std::vector<uint32_t> sizes(lists), ids(num_views);
+  take_floats(&index.mean_, D);
+  take_floats(&index.query_projection_, d * D);
+  take_floats(&centroids, lists * d);
+  std::memcpy(sizes.data(), payload.data() + at, 4 * lists);
+  at += 4 * lists;
+  std::memcpy(ids.data(), payload.data() + at, 4 * num_views);
+  at += 4 * num_views;
+  take_floats(&codes, num_views * d);
+  for (const std::vector<float>* floats :
+       {&index.mean_, &index.query_projection_, &centroids, &codes}) {
+    for (size_t i = 0; i < floats->size(); ++i) {
+      if (!std::isfinite((*floats)[i])) {
+        return Corrupt(StatusCode::kOutOfRange, what, "a non-finite value in the payload");
+      }
+    }
+  }
+  uint64_t total = 0;
+  for (uint32_t s : sizes) total += s;
+  if (total != num_views) {
+    return Corrupt(StatusCode::kBadLayout,
+                   what,
+                   "the lists hold " + std::to_string(total) + " views, the database has " +
+                       std::to_string(num_views));
+  }
+  std::vector<bool> seen(num_views, false);
+  for (uint32_t id : ids) {
+    if (id >= num_views || seen[id]) {
+      return Corrupt(StatusCode::kBadLayout,
+                     what,
+                     "view " + std::to_string(id) +
+                         (id >= num_views ? " is out of range" : " is listed twice"));
+    }
+    seen[id] = true;
+  }
+  try {
+    auto* quantizer = new faiss::IndexFlatIP(static_cast<int>(d));
+    quantizer->add(static_cast<faiss::Index::idx_t>(lists), centroids.data());
+    auto ivf = std::make_unique<faiss::IndexIVFFlat>(
+        quantizer, static_cast<size_t>(d), static_cast<size_t>(lists), faiss::METRIC_INNER_PRODUCT);
+    ivf->own_fields = true;
+    size_t start = 0;
+    std::vector<faiss::Index::idx_t> list_ids;
+    for (uint64_t l = 0; l < lists; ++l) {
+      list_ids.assign(ids.begin() + static_cast<std::ptrdiff_t>(start),
+                      ids.begin() + static_cast<std::ptrdiff_t>(start + sizes[l]));
+      ivf->invlists->add_entries(
+          l, sizes[l], list_ids.data(), reinterpret_cast<const uint8_t*>(codes.data() + start * d));
+      start += sizes[l];
+    }
+    ivf->ntotal = static_cast<faiss::Index::idx_t>(num_views);
+    index.ivf_ = std::move(ivf);
+  } catch (const faiss::FaissException& e) {
+    return Corrupt(StatusCode::kBadLayout, what, std::string("unusable IVF part: ") + e.what());
+  }
+  return index;
+}
+
+Result<ViewIndex> ViewIndex::Open(const std::filesystem::path& db_dir, const Manifest& manifest) {
+  if (!manifest.index) {
+    return Status(StatusCode::kNotFound,
+                  db_dir.string() + ": the manifest lists no index (build one: handdb index " +
+                      db_dir.string() + ")");
+  }
+  const std::filesystem::path file = db_dir / manifest.index->file;
+  auto bytes = ReadFileToString(file);
+  if (!bytes.ok()) return bytes.status();
+  if (bytes->size() != manifest.index->bytes) {
+    return Status(StatusCode::kSizeMismatch,
+                  file.string() + ": " + std::to_string(bytes->size()) +
+                      " bytes, the manifest says " + std::to_string(manifest.index->bytes));
+  }
+  const std::string sum = Hex64(XXH3_64bits(bytes->data(), bytes->size()));
+  if (sum != manifest.index->xxh3) {
+    return Status(
+        StatusCode::kChecksumMismatch,
+        file.string() + ": checksum " + sum + ", the manifest says " + manifest.index->xxh3);
+  }
+  return Parse(
+      *bytes, DatabaseFingerprint(manifest), manifest.num_views, manifest.rolls, file.string());
+}
+
+std::vector<Candidate> ViewIndex::Candidates(std::span<const Point2f> query_px,
+                                             const IndexSearchOptions& options) const {
+  const int D = grid_.dims();
+  const int d = dims_;
+  const int threads = Threads(options.num_threads);
+  const uint32_t rolls = num_rolls_;
+  const int64_t k =
+      std::min<int64_t>(std::max(1, options.candidates), static_cast<int64_t>(num_views_));
+  faiss::SearchParametersIVF params;
+  params.nprobe =
+      static_cast<size_t>(options.nprobe > 0 ? std::min(options.nprobe, nlist_) : default_nprobe());
+  std::vector<std::vector<Candidate>> per_roll(rolls);
+  // One FAISS search per roll on our own workers, FAISS itself single-threaded: OpenMP workers
+  // spinning after a parallel region took the cores the refine step needs.
+  ParallelFor(rolls, threads, [&](size_t r, int) {
+    omp_set_num_threads(1);
+    const std::vector<PointQ> rolled =
+        RotateAndQuantise(query_px, -RollAngle(static_cast<roll_id_t>(r), rolls));
+    std::vector<float> u(D);
+    QueryVector(grid_, rolled, weight_, u.data());
+    double offset = 0;
+    for (int j = 0; j < D; ++j) offset += static_cast<double>(u[j]) * mean_[j];
+    std::vector<float> w(d);
+    for (int c = 0; c < d; ++c) {
+      const float* row = query_projection_.data() + static_cast<size_t>(c) * D;
+      double s = 0;
+      for (int j = 0; j < D; ++j) s += static_cast<double>(row[j]) * u[j];
+      w[c] = static_cast<float>(-s);
+    }
+    std::vector<float> ip(k);
+    std::vector<faiss::Index::idx_t> ids(k);
+    ivf_->search(1, w.data(), k, ip.data(), ids.data(), &params);
+    for (int64_t j = 0; j < k; ++j) {
+      if (ids[j] < 0) continue;
+      // s(v, r) = <u, mu> + <P u, z_v> = offset - <w, z_v>.
+      per_roll[r].push_back({static_cast<view_id_t>(ids[j]),
+                             static_cast<roll_id_t>(r),
+                             static_cast<float>(offset - ip[j])});
+    }
+    return true;
+  });
+  std::vector<Candidate> all;
+  for (const auto& c : per_roll) all.insert(all.end(), c.begin(), c.end());
+  auto before = [](const Candidate& x, const Candidate& y) {
+    if (x.score != y.score) return x.score < y.score;
+    if (x.view != y.view) return x.view < y.view;
+    return x.roll < y.roll;
+  };
+  const size_t keep = std::min(all.size(), static_cast<size_t>(std::max(1, options.candidates)));
+  std::partial_sort(
+      all.begin(), all.begin() + static_cast<std::ptrdiff_t>(keep), all.end(), before);
+  all.resize(keep);
+  return all;
+}
+
+}  // namespace handdb
