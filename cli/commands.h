@@ -20,5 +20,6 @@ int RunValidate(int argc, char** argv);  // cli/format_commands.cc
 int RunTestset(int argc, char** argv);   // cli/evaluate_commands.cc
 int RunEvaluate(int argc, char** argv);  // cli/evaluate_commands.cc
 int RunQuery(int argc, char** argv);     // cli/query_commands.cc
+int RunIndex(int argc, char** argv);     // cli/index_commands.cc
 
 }  // namespace handdb::cli

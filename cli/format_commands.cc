@@ -15,6 +15,7 @@
 #include "format/shard_layout.h"
 #include "format/shard_reader.h"
 #include "format/validator.h"
+#include "query/index/view_index.h"
 
 namespace handdb::cli {
 namespace {
@@ -171,6 +172,19 @@ int InfoDatabase(const fs::path& dir, bool as_json) {
               with_fields == m.shards.size()
                   ? ""
                   : " (v1.0 shards: the search computes their fields on open, ~0.1 ms per view)");
+  if (m.index) {
+    std::printf("  index         %s (%s, %" PRIu64
+                " bytes, %.2f per virtual view): `handdb query` "
+                "searches indexed by default (--search exact for every pair)\n",
+                m.index->file.c_str(),
+                m.index->kind.c_str(),
+                m.index->bytes,
+                m.num_virtual_views
+                    ? static_cast<double>(m.index->bytes) / static_cast<double>(m.num_virtual_views)
+                    : 0.0);
+  } else {
+    std::printf("  index         none (exact search; `handdb index` builds one)\n");
+  }
   std::printf("  labels       ");
   for (const auto& l : m.labels) {
     std::printf(" %s[%u]%s%s", l.name.c_str(), l.count, l.unit.empty() ? "" : ":", l.unit.c_str());
@@ -189,6 +203,24 @@ int InfoDatabase(const fs::path& dir, bool as_json) {
 }
 
 }  // namespace
+
+// A database's search index, when its manifest lists one: the file the manifest names, its size
+// and checksum, its header and payload checksums, and that it was built for these shards
+// (ViewIndex::Open).
+void AppendIndexProblems(const std::string& path, ValidationReport* report) {
+  std::error_code ec;
+  if (!fs::is_directory(path, ec)) return;
+  auto manifest = ReadManifest(path);
+  if (!manifest.ok() || !manifest->index) return;  // manifest problems are reported already
+  ++report->files;
+  auto index = ViewIndex::Open(path, *manifest);
+  if (!index.ok()) {
+    report->problems.push_back({index.status().code(),
+                                (fs::path(path) / manifest->index->file).string(),
+                                0,
+                                index.status().message()});
+  }
+}
 
 int RunInfo(int argc, char** argv) {
   CLI::App app(
@@ -237,6 +269,7 @@ int RunValidate(int argc, char** argv) {
   json reports = json::array();
   for (const auto& path : paths) {
     ValidationReport r = ValidatePath(path, options);
+    AppendIndexProblems(path, &r);
     ok = ok && r.ok();
     if (as_json) {
       json problems = json::array();

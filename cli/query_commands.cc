@@ -89,6 +89,14 @@ void PrintTable(const std::vector<Match>& matches,
           ? 100.0 * static_cast<double>(st.refined) / static_cast<double>(st.virtual_views)
           : 0.0,
       st.seconds_total * 1e3);
+  if (st.candidates > 0) {
+    std::printf(
+        "indexed search: %llu candidate pairs from the index (%.1f ms), the top %s exact "
+        "among them (--search exact: every pair)\n\n",
+        static_cast<unsigned long long>(st.candidates),
+        st.seconds_index * 1e3,
+        "k");
+  }
   // Key joint angles: the flexion of each finger's base joint (thumb CMC, index..pinky MCP).
   std::printf("%4s  %8s  %-16s  %-5s  %7s %7s  %6s  %29s\n",
               "rank",
@@ -124,6 +132,7 @@ void PrintTable(const std::vector<Match>& matches,
 struct QueryFlags {
   std::string db_dir, image, sheet;
   HandFlag hand;
+  std::string search_mode = "auto";  // auto: indexed when the manifest lists an index
   std::string kdtree = std::string(KdTreeBackendName(SearchOptions{}.kdtree));
   bool as_json = false, verify = false, quiet = false;
   SearchOptions search;
@@ -160,6 +169,24 @@ void QueryFlags::Add(CLI::App& app) {
       "comparison: the results are identical)");
   picture.Add(app, PhotoInputFlags::Which{});
   app.add_flag("--verify", verify, "hash every shard section before searching");
+  app.add_option("--search",
+                 search_mode,
+                 "exact: every (view, roll) pair; indexed: candidates from the database's index "
+                 "(handdb index), then exact D_c of those only (docs/index.md); auto: indexed "
+                 "when the database has an index")
+      ->check(CLI::IsMember({"auto", "exact", "indexed"}))
+      ->capture_default_str();
+  app.add_option("--candidates",
+                 search.index.candidates,
+                 "indexed search: (view, roll) pairs refined exactly, per hand searched")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--nprobe",
+                 search.index.nprobe,
+                 "indexed search: IVF lists searched per rolled query (0: the index's default, "
+                 "lists / 8)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   app.add_flag("--quiet,-q",
                quiet,
                "no progress line (otherwise one on stderr once a search runs 1 s on a "
@@ -276,7 +303,10 @@ json ResultJson(const QueryFlags& flags,
             {"hand", flags.hand.name},
             {"kdtree", flags.kdtree},
             {"dt_cell_px", search.dt_cell_px},
-            {"coarse_bound", search.coarse_bound}}},
+            {"coarse_bound", search.coarse_bound},
+            {"search", std::string(SearchModeName(search.mode))},
+            {"candidates", search.index.candidates},
+            {"nprobe", search.index.nprobe}}},
           {"stats",
            {{"virtual_views", stats.virtual_views},
             {"canonical_views", db.num_views()},
@@ -286,6 +316,8 @@ json ResultJson(const QueryFlags& flags,
             {"view_kdtrees", stats.view_trees},
             {"scan_abandoned", stats.probe_abandoned},
             {"searches", stats.searches},
+            {"candidates", stats.candidates},
+            {"seconds_index", stats.seconds_index},
             {"seconds", stats.seconds_total},
             {"seconds_bounds", stats.seconds_bounds},
             {"seconds_refine", stats.seconds_refine}}},
@@ -316,7 +348,15 @@ int RunQuery(int argc, char** argv) {
   if (db->num_views() == 0)
     return Fail("query", Status(StatusCode::kNotFound, db_dir + ": the database has no views"));
   auto shared_db = std::make_shared<const Database>(std::move(db).value());
-  const Searcher searcher(shared_db);
+  Searcher searcher(shared_db);
+  // Indexed search when asked, or by default when the manifest lists an index.
+  if (flags.search_mode != "exact" && !flags.search.brute_force &&
+      (flags.search_mode == "indexed" || shared_db->manifest().index)) {
+    auto index = ViewIndex::Open(db_dir, shared_db->manifest());
+    if (!index.ok()) return Fail("query", index.status());
+    searcher.SetIndex(std::make_shared<const ViewIndex>(std::move(index).value()));
+    flags.search.mode = SearchMode::kIndexed;
+  }
 
   // A label EXR is converted with the edge options the database was made with.
   const Status recorded = flags.picture.UseDatabaseConversion(*shared_db, db_dir);
