@@ -184,7 +184,7 @@ void QueryFlags::Add(CLI::App& app) {
   app.add_option("--nprobe",
                  search.index.nprobe,
                  "indexed search: IVF lists searched per rolled query (0: the index's default, "
-                 "lists / 8)")
+                 "lists / 3)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   app.add_flag("--quiet,-q",
