@@ -12,6 +12,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <random>
 
 #include "base/atomic_file.h"
@@ -355,7 +356,10 @@ Result<ViewIndex> ViewIndex::Parse(std::string_view bytes,
                    "offset " + std::to_string(kOffHeaderChecksum) + ": header checksum " +
                        Hex64(stored_header_sum) + ", computed " + Hex64(header_sum));
   }
-  for (size_t off = kOffReserved; off < kOffHeaderChecksum; ++off) {
+  // As for shards (docs/format.md, "Versioning"): any minor of our major is read; reserved bytes
+  // must be zero only up to the minor this reader knows, since a newer minor may give them meaning.
+  const bool know_minor = Get<uint16_t>(bytes, kOffMinor) <= kMinor;
+  for (size_t off = kOffReserved; know_minor && off < kOffHeaderChecksum; ++off) {
     if (bytes[off] != 0) {
       return Corrupt(StatusCode::kNonZeroReserved,
                      what,
@@ -411,6 +415,11 @@ Result<ViewIndex> ViewIndex::Parse(std::string_view bytes,
                        std::to_string(index.num_rolls_) + " rolls, the database has " +
                        std::to_string(num_views) + " x " + std::to_string(num_rolls));
   }
+  if (num_views > std::numeric_limits<uint32_t>::max()) {  // ids are u32
+    return Corrupt(StatusCode::kOutOfRange,
+                   what,
+                   std::to_string(num_views) + " views: more than 32-bit view ids can name");
+  }
   std::string grid_error;
   if (!index.grid_.Check(&grid_error) || Get<uint32_t>(bytes, kOffDims) < 1 ||
       Get<uint32_t>(bytes, kOffDims) > static_cast<uint32_t>(index.grid_.dims()) ||
@@ -425,7 +434,7 @@ Result<ViewIndex> ViewIndex::Parse(std::string_view bytes,
                        std::to_string(Get<uint32_t>(bytes, kOffNlist)) + ", weight " +
                        std::to_string(index.weight_) + ")");
   }
-  // Every size below is small (dims <= 20,402, lists <= views): no overflow in 64 bits.
+  // Every size below is small (dims <= 20,402, lists <= views < 2^32): no overflow in 64 bits.
   const uint64_t D = static_cast<uint64_t>(index.grid_.dims());
   const uint64_t d = static_cast<uint64_t>(index.dims_);
   const uint64_t lists = static_cast<uint64_t>(index.nlist_);

@@ -1,11 +1,14 @@
 #include "query/index/view_index.h"
 
 #include <gtest/gtest.h>
+#include <xxhash.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <random>
 #include <set>
+#include <string>
 #include <vector>
 
 #include "query/chamfer.h"
@@ -165,6 +168,31 @@ TEST(ViewIndex, ParseRefusesDamagedOrForeignFiles) {
   EXPECT_EQ(code(bad), StatusCode::kChecksumMismatch);
   EXPECT_EQ(code(good, fp ^ 1), StatusCode::kSizeMismatch);
   EXPECT_EQ(code(good, 0, kViews + 1), StatusCode::kSizeMismatch);
+}
+
+// Like shards (docs/format.md, "Versioning"): a newer minor of our major is read, and its reserved
+// bytes may carry meaning; in a file of our own minor they must be zero.
+TEST(ViewIndex, ParseReadsANewerMinorAndChecksReservedBytesOnlyForItsOwn) {
+  const Database& db = *TestDatabase();
+  const uint64_t fp = DatabaseFingerprint(db.manifest());
+  auto with_header = [](std::string bytes, size_t off, uint8_t value) {
+    bytes[off] = static_cast<char>(value);
+    const uint64_t sum = XXH3_64bits(bytes.data(), 120);
+    std::memcpy(bytes.data() + 120, &sum, 8);
+    return bytes;
+  };
+  const std::string good = TestIndex().Serialize();
+  const std::string reserved = with_header(good, 100, 7);
+  auto r = ViewIndex::Parse(reserved, fp, kViews, kRolls, "x.hdbi");
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), StatusCode::kNonZeroReserved);
+  const std::string newer = with_header(reserved, 10, 3);  // version 1.3
+  r = ViewIndex::Parse(newer, fp, kViews, kRolls, "x.hdbi");
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(r->Serialize(), good);  // written back as the version this writer knows
+  r = ViewIndex::Parse(with_header(good, 8, 2), fp, kViews, kRolls, "x.hdbi");  // version 2.0
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), StatusCode::kUnsupportedVersion);
 }
 
 SearchOptions Options(SearchMode mode, int candidates) {

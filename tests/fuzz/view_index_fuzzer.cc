@@ -26,7 +26,9 @@ void ParseOnce(const std::string& bytes) {
                                         Get<uint64_t>(bytes, 32),
                                         Get<uint32_t>(bytes, 40),
                                         "fuzz.hdbi");
-  if (index.ok() && index->Serialize() != bytes) std::abort();  // what we accept, we write back
+  // What we accept, we write back byte for byte, in the minor version this writer writes (0); a
+  // newer minor is read (docs/index.md) but written back as ours, so it cannot round-trip.
+  if (index.ok() && Get<uint16_t>(bytes, 10) == 0 && index->Serialize() != bytes) std::abort();
 }
 
 }  // namespace
