@@ -11,6 +11,11 @@
 
 namespace handdb {
 
+// Seconds of steady-clock time since `since`: how long work took (reports, query statistics).
+inline double SecondsSince(std::chrono::steady_clock::time_point since) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+
 class Progress {
  public:
   Progress(std::string label, uint64_t total, bool enabled = true, std::string unit = "items");

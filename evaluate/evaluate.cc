@@ -7,6 +7,7 @@
 #include <limits>
 #include <sstream>
 
+#include "base/json_number.h"
 #include "base/json_schema.h"
 #include "base/progress.h"
 #include "base/thread_pool.h"
@@ -18,10 +19,6 @@ namespace {
 
 constexpr int64_t kNotApplicable = -1;
 
-double Seconds(std::chrono::steady_clock::time_point since) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
-}
-
 Vec3 Vec3From(const nlohmann::json& j) {
   return {j.at(0).get<double>(), j.at(1).get<double>(), j.at(2).get<double>()};
 }
@@ -30,10 +27,6 @@ std::string FormatDouble(const char* fmt, double v) {
   char buf[64];
   std::snprintf(buf, sizeof buf, fmt, v);
   return buf;
-}
-
-nlohmann::json NumberOrNull(double v) {
-  return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
 }
 
 nlohmann::json SummaryToJson(const Summary& s) {
@@ -316,7 +309,7 @@ Result<std::vector<ViewOutcome>> EvaluateViews(const Searcher& searcher,
     out.correct_pairs = correct_pairs;
     const auto t_input = std::chrono::steady_clock::now();
     auto points = query_points(view);
-    out.input_seconds = Seconds(t_input);
+    out.input_seconds = SecondsSince(t_input);
     if (!points.ok()) {
       out.error = points.status().message();
       outcomes.push_back(std::move(out));
@@ -326,7 +319,7 @@ Result<std::vector<ViewOutcome>> EvaluateViews(const Searcher& searcher,
     out.num_query_points = points->size();
     const auto t_search = std::chrono::steady_clock::now();
     auto matches = searcher.Search(*points, first);
-    out.search_seconds = Seconds(t_search);
+    out.search_seconds = SecondsSince(t_search);
     if (!matches.ok()) {
       out.error = matches.status().message();
       outcomes.push_back(std::move(out));
@@ -472,7 +465,7 @@ Result<EvaluationReport> Evaluate(const Searcher& searcher,
   if (!views.ok()) return views.status();
   report.views = std::move(*views);
   FinishReport(&report);
-  report.wall_seconds = Seconds(wall_start);
+  report.wall_seconds = SecondsSince(wall_start);
   return report;
 }
 

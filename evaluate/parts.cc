@@ -6,6 +6,7 @@
 #include <functional>
 #include <limits>
 
+#include "base/json_number.h"
 #include "base/json_schema.h"
 #include "cluster/slurm.h"
 #include "format/shard_layout.h"
@@ -15,12 +16,6 @@ namespace fs = std::filesystem;
 using json = nlohmann::json;
 
 namespace {
-
-json NumberOrNull(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
-
-double NumberOrNaN(const json& j) {
-  return j.is_null() ? std::numeric_limits<double>::quiet_NaN() : j.get<double>();
-}
 
 json ViewToJson(const ViewOutcome& v) {
   json j = {{"index", v.testset_index},

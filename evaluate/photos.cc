@@ -9,6 +9,7 @@
 #include <set>
 #include <sstream>
 
+#include "base/json_number.h"
 #include "base/progress.h"
 #include "base/thread_pool.h"
 #include "evaluate/evaluate.h"
@@ -32,20 +33,10 @@ std::string Fmt(const char* fmt, double v) {
   return buf;
 }
 
-double Seconds(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
-
 // The top-1 shape of an outcome as the confusion matrix names it.
 std::string Top1Label(const PhotoOutcome& o) {
   if (!o.error.empty() || o.match_shapes.empty()) return kNoHandLabel;
   return o.match_shapes[0];
-}
-
-json NumberOrNull(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
-
-double NumberOrNaN(const json& j) {
-  return j.is_null() ? std::numeric_limits<double>::quiet_NaN() : j.get<double>();
 }
 
 json DistancesToJson(const std::array<double, kNumKeypoints>& d) {
@@ -430,7 +421,7 @@ Result<std::vector<PhotoOutcome>> ScorePhotos(const Searcher& searcher,
     if (item.keypoints) o.annotated_keypoints = item.keypoints->NumVisible();
     auto t = std::chrono::steady_clock::now();
     auto query = query_fn(item);
-    o.input_seconds = Seconds(t);
+    o.input_seconds = SecondsSince(t);
     if (!query.ok()) {
       o.error = query.status().message();
       progress.Add();
@@ -439,7 +430,7 @@ Result<std::vector<PhotoOutcome>> ScorePhotos(const Searcher& searcher,
     std::vector<Point2f> points = query->points_px();
     t = std::chrono::steady_clock::now();
     auto matches = searcher.Search(points, search);
-    o.search_seconds = Seconds(t);
+    o.search_seconds = SecondsSince(t);
     if (!matches.ok()) {
       // A query that the search rejects (e.g. empty) is a failed input like "no hand".
       o.error = item.path.string() + ": " + matches.status().message();
@@ -496,7 +487,7 @@ Result<PhotoReport> EvaluatePhotos(const Searcher& searcher,
   if (!outcomes.ok()) return outcomes.status();
   report.outcomes = std::move(*outcomes);
   FinishPhotoReport(&report);
-  report.wall_seconds = Seconds(t0);
+  report.wall_seconds = SecondsSince(t0);
   return report;
 }
 

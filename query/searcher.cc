@@ -28,10 +28,6 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 // the k-th best (abandoning is only ever allowed for pairs strictly worse than it).
 constexpr double kAbandonSlack = 1e-12;
 
-double Seconds(std::chrono::steady_clock::time_point since) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
-}
-
 struct Scored {
   double distance = 0;
   double a = 0;
@@ -652,7 +648,7 @@ class QueryRun {
           return true;
         },
         pool_);
-    stats->seconds_bounds = Seconds(start);
+    stats->seconds_bounds = SecondsSince(start);
     const auto refine_start = std::chrono::steady_clock::now();
     const auto progress = MakeProgress("brute force", num_views_ * num_slots(), "pairs");
     ParallelFor(
@@ -671,7 +667,7 @@ class QueryRun {
           return true;
         },
         pool_);
-    stats->seconds_refine = Seconds(refine_start);
+    stats->seconds_refine = SecondsSince(refine_start);
   }
 
   // Step 1: lower bounds of every pair, L = L_A + L_B (docs/query.md).
@@ -1163,23 +1159,23 @@ Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
       }
       first_slot += db_->num_rolls();
     }
-    local.seconds_index = Seconds(start);
+    local.seconds_index = SecondsSince(start);
     const auto bounds_start = std::chrono::steady_clock::now();
     run.BoundCandidates(std::move(pairs));
-    local.seconds_bounds = Seconds(bounds_start);
+    local.seconds_bounds = SecondsSince(bounds_start);
     const auto refine_start = std::chrono::steady_clock::now();
     run.Refine();
-    local.seconds_refine = Seconds(refine_start);
+    local.seconds_refine = SecondsSince(refine_start);
   } else {
     run.Bounds();
-    local.seconds_bounds = Seconds(start);
+    local.seconds_bounds = SecondsSince(start);
     const auto refine_start = std::chrono::steady_clock::now();
     run.Refine();
-    local.seconds_refine = Seconds(refine_start);
+    local.seconds_refine = SecondsSince(refine_start);
   }
   run.AddInto(&local);
   std::vector<Match> matches = run.Matches();
-  local.seconds_total = Seconds(start);
+  local.seconds_total = SecondsSince(start);
   if (stats != nullptr) *stats = local;
   return matches;
 }

@@ -35,12 +35,6 @@ std::array<double, 3> Vec3FromJson(const nlohmann::json& j) {
   return {j.at(0).get<double>(), j.at(1).get<double>(), j.at(2).get<double>()};
 }
 
-nlohmann::json JointsToJson(const JointVector& joints) {
-  nlohmann::json out = nlohmann::json::array();
-  for (double v : joints) out.push_back(v);
-  return out;
-}
-
 Status Invalid(const std::string& what, const std::string& message) {
   return Status(StatusCode::kInvalidArgument, what + ": " + message);
 }
@@ -195,14 +189,14 @@ Result<nlohmann::json> MakeTestSetPlan(const nlohmann::json& config,
       const ShapeSample& s = (*basic)[basic_order[i]];
       item["basic"] = true;
       item["shape_name"] = s.name;
-      item["joints"] = JointsToJson(s.joints);
+      item["joints"] = nlohmann::json(s.joints);
       item["coeffs"] = nlohmann::json::array();
       item["clamped"] = false;
     } else {
       const ShapeSample& s = pca_shapes[i - num_basic];
       item["basic"] = false;
       item["shape_name"] = Numbered("pca-", i - num_basic, 5);
-      item["joints"] = JointsToJson(s.joints);
+      item["joints"] = nlohmann::json(s.joints);
       item["coeffs"] = s.coeffs;
       item["clamped"] = s.clamped;
     }

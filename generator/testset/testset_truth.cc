@@ -14,15 +14,6 @@
 
 namespace handdb {
 namespace fs = std::filesystem;
-namespace {
-
-nlohmann::json JointsToJson(const JointVector& joints) {
-  nlohmann::json out = nlohmann::json::array();
-  for (double v : joints) out.push_back(v);
-  return out;
-}
-
-}  // namespace
 
 Status WriteTestSetGroundTruth(const fs::path& dir, int num_threads, bool progress_enabled) {
   auto plan = ReadTestSetPlan(dir / "testset_plan.json");
@@ -77,7 +68,7 @@ Status WriteTestSetGroundTruth(const fs::path& dir, int num_threads, bool progre
         {"unit", item.unit},
         {"basic", item.basic},
         {"shape_name", item.shape_name},
-        {"joint_angles", JointsToJson(item.joints)},
+        {"joint_angles", nlohmann::json(item.joints)},
         {"view_direction", item.direction},
         {"view_theta", item.theta},
         {"view_phi", item.phi},
