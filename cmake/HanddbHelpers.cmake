@@ -21,7 +21,7 @@ endfunction()
 
 function(handdb_add_test)
   cmake_parse_arguments(ARG "" "NAME;TIMEOUT" "SRCS;DEPS;LABELS" ${ARGN})
-  if(NOT HANDDB_BUILD_TESTS)
+  if(NOT HANDDB_BUILD_TESTS OR (NOT HANDDB_INTEGRATION_TESTS AND "integration" IN_LIST ARG_LABELS))
     return()
   endif()
   string(REPLACE "/" "_" target ${ARG_NAME})

@@ -10,7 +10,7 @@ build="$here/build-fuzz"
 targets=()
 for src in "$here"/tests/fuzz/*_fuzzer.cc; do targets+=("$(basename "${src%.cc}")"); done
 CC=clang CXX=clang++ cmake -S "$here" -B "$build" -G Ninja -DHANDDB_FUZZ=ON -DHANDDB_BUILD_TESTS=OFF \
-  -DHANDDB_BUILD_BENCH=OFF -DCMAKE_BUILD_TYPE=RelWithDebInfo > "$build.cmake.log" 2>&1 \
+  -DHANDDB_BUILD_BENCH=OFF -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_UNITY_BUILD=ON > "$build.cmake.log" 2>&1 \
   || { cat "$build.cmake.log"; exit 1; }
 cmake --build "$build" -j "$(nproc)" --target "${targets[@]}"
 count=0
@@ -25,8 +25,18 @@ for target in "$build"/tests/fuzz/*_fuzzer; do
   corpus="$here/tests/fuzz/corpus/${name%_fuzzer}"
   work="$(mktemp -d)"
   echo "fuzz: $name for ${seconds}s"
-  "$target" -max_total_time="$seconds" -rss_limit_mb=2048 -timeout=10 -print_final_stats=1 "$work" \
-    $( [ -d "$corpus" ] && echo "$corpus" ) 2>&1 | tail -5
-  rm -rf "$work"
+  # A finding writes the input to $here/crash-* (or oom-/timeout-): show the report, not just stats.
+  status=0
+  ( cd "$here" && "$target" -max_total_time="$seconds" -rss_limit_mb=2048 -timeout=10 \
+      -print_final_stats=1 "$work" $( [ -d "$corpus" ] && echo "$corpus" ) ) > "$work.log" 2>&1 \
+    || status=$?
+  if [ "$status" != 0 ]; then
+    grep -v '^#[0-9]' "$work.log" | tail -60
+    echo "fuzz: $name failed (exit $status); the input is in $here as crash-*/oom-*/timeout-*" >&2
+    rm -rf "$work" "$work.log"
+    exit "$status"
+  fi
+  tail -5 "$work.log"
+  rm -rf "$work" "$work.log"
 done
 [ "$found" = 1 ] || { echo "fuzz: no fuzz targets were built" >&2; exit 1; }
