@@ -28,6 +28,11 @@ function(handdb_add_test)
   add_executable(${target} ${ARG_SRCS})
   target_link_libraries(${target} PRIVATE ${ARG_DEPS} GTest::gtest GTest::gtest_main)
   target_compile_options(${target} PRIVATE ${HANDDB_WARNINGS})
+  # A test's own code is not where it spends its time (the libraries it links are): -O1 compiles
+  # a gtest file in half the time of -O2 in the optimised builds.
+  if(CMAKE_BUILD_TYPE MATCHES "^Rel")
+    target_compile_options(${target} PRIVATE -O1)
+  endif()
   add_test(NAME ${ARG_NAME} COMMAND ${target})
   set_tests_properties(${ARG_NAME} PROPERTIES
     ENVIRONMENT "HANDDB_SOURCE_DIR=${PROJECT_SOURCE_DIR};HANDDB_BINARY_DIR=${PROJECT_BINARY_DIR}")
