@@ -2,6 +2,14 @@
 // Exit codes: 0 success, 1 user error (one clear line on stderr), 2 bad usage.
 #pragma once
 
+#include <filesystem>
+
+#include "base/status.h"
+
+namespace handdb {
+struct IndexBuildOptions;  // query/index/view_index.h
+}  // namespace handdb
+
 namespace handdb::cli {
 
 constexpr int kExitOk = 0;
@@ -21,5 +29,13 @@ int RunTestset(int argc, char** argv);   // cli/evaluate_commands.cc
 int RunEvaluate(int argc, char** argv);  // cli/evaluate_commands.cc
 int RunQuery(int argc, char** argv);     // cli/query_commands.cc
 int RunIndex(int argc, char** argv);     // cli/index_commands.cc
+
+// What `handdb index DB` does once it holds DB's lock (also `handdb generate --index`, which holds
+// it already): builds the index, writes DB/index-<xxh3>.hdbi atomically, lists it in the manifest
+// and removes the file it replaces; with `print_summary`, one line on stdout led by `cmd`.
+Status WriteDatabaseIndex(const std::filesystem::path& db_dir,
+                          const IndexBuildOptions& options,
+                          bool print_summary,
+                          const char* cmd);
 
 }  // namespace handdb::cli

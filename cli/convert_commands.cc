@@ -23,6 +23,7 @@
 #include "cli/commands.h"
 #include "cli/slurm_cli.h"
 #include "cli/slurm_commands.h"
+#include "format/manifest.h"
 #include "format/roll.h"
 #include "format/validator.h"
 #include "format/view.h"
@@ -30,6 +31,7 @@
 #include "generator/plan/plan.h"
 #include "generator/render/render_driver.h"
 #include "query/database.h"
+#include "query/index/view_index.h"
 
 namespace handdb::cli {
 namespace {
@@ -167,6 +169,11 @@ int RunGenerate(int argc, char** argv) {
       ->capture_default_str();
   app.add_flag("--skip-bad", convert.skip_bad, "leave bad views out instead of failing");
   edges.Add(app, kDepthJumpHelp);
+  bool build_index = false;
+  app.add_flag("--index",
+               build_index,
+               "then build the search index (handdb index DB with its defaults; on Slurm, in the "
+               "final job)");
   app.add_flag("--quiet,-q", quiet, "no progress display");
   app.add_flag("--json", as_json, "print the summary as JSON on stdout");
   SlurmFlags slurm;  // --slurm and its options (cli/slurm_cli.h)
@@ -174,13 +181,14 @@ int RunGenerate(int argc, char** argv) {
   if (int rc = ParseArgs(app, argc, argv); rc >= 0) return rc;
   jobs = ResolveNumThreads(jobs);
   if (work_dir.empty()) work_dir = db_dir / "render";
-  auto stage = [&](const char* what) {
-    if (!quiet) std::fprintf(stderr, "handdb generate: %s\n", what);
-  };
 
   // 1. Plan. An existing plan must be the one this config makes (else the work dir belongs to
   // another database).
-  stage("[1/4] plan");
+  const int stages = build_index ? 5 : 4;
+  auto numbered = [&](int k, const char* what) {
+    if (!quiet) std::fprintf(stderr, "handdb generate: [%d/%d] %s\n", k, stages, what);
+  };
+  numbered(1, "plan");
   std::error_code ec;
   const fs::path plan_path = work_dir / "plan.json";
   // Held until the run ends: a second generate or convert into this --out (or --work) is refused
@@ -224,12 +232,12 @@ int RunGenerate(int argc, char** argv) {
     // The tasks convert with the edge flags as typed here, so they convert as this run would.
     std::vector<std::string> convert_args = edges.Typed();
     if (convert.skip_bad) convert_args.push_back("--skip-bad");
-    return RunGenerateOnSlurm({db_dir, work_dir, blender, convert, convert_args, quiet, as_json},
-                              slurm);
+    return RunGenerateOnSlurm(
+        {db_dir, work_dir, blender, convert, convert_args, build_index, quiet, as_json}, slurm);
   }
 
   // 2. Render.
-  stage("[2/4] render");
+  numbered(2, "render");
   render.jobs = jobs;
   render.blender = blender;
   render.progress = !quiet;
@@ -237,7 +245,7 @@ int RunGenerate(int argc, char** argv) {
   if (!rendered.ok()) return Fail("generate", rendered.status());
 
   // 3. Convert.
-  stage("[3/4] convert");
+  numbered(3, "convert");
   convert.num_threads = jobs;
   convert.edges = edges.Get();
   convert.progress = !quiet;
@@ -249,7 +257,7 @@ int RunGenerate(int argc, char** argv) {
   }
 
   // 4. Validate what was written, as `handdb validate` would.
-  stage("[4/4] validate");
+  numbered(4, "validate");
   ValidateOptions vopt;
   vopt.show_progress = !quiet;
   const ValidationReport report = ValidateDatabase(db_dir, vopt);
@@ -262,6 +270,16 @@ int RunGenerate(int argc, char** argv) {
                        db_dir.string() + ": validation found " +
                            std::to_string(report.num_problems()) + " problem(s)"));
   }
+
+  // 5. Index (--index), as `handdb index DB` would; this run already holds DB's lock.
+  if (build_index) {
+    numbered(5, "index");
+    IndexBuildOptions index_options;
+    index_options.num_threads = jobs;
+    index_options.progress = !quiet;
+    Status s = WriteDatabaseIndex(db_dir, index_options, !as_json, "handdb generate");
+    if (!s.ok()) return Fail("generate", s);
+  }
   if (as_json) {
     json out = SummaryJson(*summary, db_dir);
     out["render"] = {{"units", rendered->units_total},
@@ -270,6 +288,12 @@ int RunGenerate(int argc, char** argv) {
                      {"renders", rendered->renders_total},
                      {"seconds", rendered->seconds}};
     out["validated_views"] = report.views;
+    if (build_index) {
+      auto manifest = ReadManifest(db_dir);
+      if (manifest.ok() && manifest->index) {
+        out["index"] = {{"file", manifest->index->file}, {"bytes", manifest->index->bytes}};
+      }
+    }
     std::printf("%s\n", out.dump(2).c_str());
   } else {
     std::printf("rendered %u units (%u already done) in %.1f s\n",

@@ -21,6 +21,55 @@
 namespace handdb::cli {
 namespace fs = std::filesystem;
 
+Status WriteDatabaseIndex(const fs::path& db_dir,
+                          const IndexBuildOptions& options,
+                          bool print_summary,
+                          const char* cmd) {
+  auto db = Database::Open(db_dir);
+  if (!db.ok()) return db.status();
+  auto index = ViewIndex::Build(*db, options);
+  if (!index.ok()) return index.status();
+  const std::string bytes = index->Serialize();
+  const std::string sum = Hex64(XXH3_64bits(bytes.data(), bytes.size()));
+  // A new name per content: a reader holding the previous manifest still finds its own index.
+  const std::string file = "index-" + sum + ".hdbi";
+  const fs::path path = db_dir / file;
+  if (Status s = WriteFileAtomic(path, bytes); !s.ok()) return s;
+
+  Manifest manifest = db->manifest();
+  const std::optional<ManifestIndex> previous = manifest.index;
+  manifest.index = ManifestIndex{file,
+                                 kIndexKind,
+                                 bytes.size(),
+                                 sum,
+                                 {{"dims", index->dims()},
+                                  {"nlist", index->nlist()},
+                                  {"train_views", options.train_views},
+                                  {"cell_px", options.grid.cell_units / 16},
+                                  {"grid_side", options.grid.side}}};
+  if (Status s = WriteManifest(db_dir, manifest); !s.ok()) return s;
+  if (previous && previous->file != file) {
+    std::error_code ec;
+    fs::remove(db_dir / previous->file, ec);  // no longer listed; best effort
+  }
+  if (print_summary) {
+    std::printf("%s: %s: %zu views x %u rolls, %d dims, %d lists, %" PRIu64
+                " bytes (%.2f per canonical view, %.3f per virtual view) in %.1f s -> %s\n",
+                cmd,
+                db_dir.c_str(),
+                db->num_views(),
+                db->num_rolls(),
+                index->dims(),
+                index->nlist(),
+                static_cast<uint64_t>(bytes.size()),
+                static_cast<double>(bytes.size()) / static_cast<double>(db->num_views()),
+                static_cast<double>(bytes.size()) / static_cast<double>(db->num_virtual_views()),
+                index->build_seconds(),
+                path.c_str());
+  }
+  return Status();
+}
+
 int RunIndex(int argc, char** argv) {
   CLI::App app(
       "Build the search index of a database for indexed search (handdb query --search indexed, "
@@ -67,46 +116,8 @@ int RunIndex(int argc, char** argv) {
   // One writer at a time: generate/convert hold the same lock while they write the manifest.
   auto lock = DirectoryLock::Acquire(db_dir);
   if (!lock.ok()) return Fail("index", lock.status());
-  auto db = Database::Open(db_dir);
-  if (!db.ok()) return Fail("index", db.status());
-  auto index = ViewIndex::Build(*db, options);
-  if (!index.ok()) return Fail("index", index.status());
-  const std::string bytes = index->Serialize();
-  const std::string sum = Hex64(XXH3_64bits(bytes.data(), bytes.size()));
-  // A new name per content: a reader holding the previous manifest still finds its own index.
-  const std::string file = "index-" + sum + ".hdbi";
-  const fs::path path = fs::path(db_dir) / file;
-  if (Status s = WriteFileAtomic(path, bytes); !s.ok()) return Fail("index", s);
-
-  Manifest manifest = db->manifest();
-  const std::optional<ManifestIndex> previous = manifest.index;
-  manifest.index = ManifestIndex{file,
-                                 kIndexKind,
-                                 bytes.size(),
-                                 sum,
-                                 {{"dims", index->dims()},
-                                  {"nlist", index->nlist()},
-                                  {"train_views", options.train_views},
-                                  {"cell_px", cell_px},
-                                  {"grid_side", options.grid.side}}};
-  if (Status s = WriteManifest(db_dir, manifest); !s.ok()) return Fail("index", s);
-  if (previous && previous->file != file) {
-    std::error_code ec;
-    fs::remove(fs::path(db_dir) / previous->file, ec);  // no longer listed; best effort
-  }
-  if (!quiet) {
-    std::printf("handdb index: %s: %zu views x %u rolls, %d dims, %d lists, %" PRIu64
-                " bytes (%.2f per canonical view, %.3f per virtual view) in %.1f s -> %s\n",
-                db_dir.c_str(),
-                db->num_views(),
-                db->num_rolls(),
-                index->dims(),
-                index->nlist(),
-                static_cast<uint64_t>(bytes.size()),
-                static_cast<double>(bytes.size()) / static_cast<double>(db->num_views()),
-                static_cast<double>(bytes.size()) / static_cast<double>(db->num_virtual_views()),
-                index->build_seconds(),
-                path.c_str());
+  if (Status s = WriteDatabaseIndex(db_dir, options, !quiet, "handdb index"); !s.ok()) {
+    return Fail("index", s);
   }
   return kExitOk;
 }

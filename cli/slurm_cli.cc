@@ -129,6 +129,10 @@ SlurmArrayJob SlurmGenerateLayout::Job() const {
        "handdb unit convert"}};
   job.final_command =
       R"("$HANDDB" unit finalize "$RUN_DIR" --out "$DB_DIR" --quiet "${CONVERT_ARGS[@]}")";
+  if (build_index) {
+    job.final_comment = "writes the manifest, validates the database and builds its index.";
+    job.final_command += " --index";
+  }
   return job;
 }
 

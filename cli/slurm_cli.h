@@ -50,6 +50,9 @@ struct SlurmGenerateLayout {
   // converts exactly as a local `handdb generate` with the same options would.
   std::vector<std::string> render_args;
   std::vector<std::string> convert_args;
+  // `handdb generate --index`: the final job also builds the search index (`unit finalize
+  // --index`: `handdb index DB`'s work with its defaults, on the job's CPUs) once it validates.
+  bool build_index = false;
 
   // slurm/generate-array.sbatch, generate-final.sbatch, logs/u00007.log, logs/final.log, ...
   SlurmArrayLayout Files() const;

@@ -12,6 +12,7 @@
 #include "cli/slurm_cli.h"
 #include "cluster/slurm.h"
 #include "format/manifest.h"
+#include "query/index/view_index.h"
 #include "format/validator.h"
 #include "generator/plan/plan.h"
 #include "generator/render/render_driver.h"
@@ -83,6 +84,7 @@ Result<SlurmGenerateLayout> MakeGenerateLayout(const SlurmGenerateRequest& reque
     layout.render_args = {"--blender", blender.string()};
   }
   layout.convert_args = request.convert_args;
+  layout.build_index = request.build_index;
   return layout;
 }
 
@@ -92,6 +94,10 @@ bool ReportAlreadyComplete(const SlurmGenerateRequest& request,
                            size_t num_units) {
   const ValidationReport report = ValidateDatabase(layout.db_dir, ValidateOptions{});
   if (!report.ok()) return false;
+  if (request.build_index) {  // complete, but the index asked for is missing: the final job runs
+    auto manifest = ReadManifest(layout.db_dir);
+    if (!manifest.ok() || !manifest->index) return false;
+  }
   if (request.as_json) {
     std::printf("%s\n",
                 json({{"db", layout.db_dir.string()},
@@ -310,6 +316,7 @@ struct UnitArgs {
   int64_t unit = -1;
   int threads = 0;
   ConvertFlags convert;
+  bool build_index = false;  // unit finalize --index
   bool quiet = false;
   bool as_json = false;
 };
@@ -397,6 +404,17 @@ int RunUnitFinalize(const UnitArgs& args) {
                 Status(StatusCode::kSchemaViolation,
                        db_dir.string() + ": validation found " +
                            std::to_string(report.num_problems()) + " problem(s)"));
+  }
+  // --index (generate --slurm --index): as `handdb index DB` does. No lock here, as for the
+  // manifest above: the submitting `generate --wait` may hold DB's lock while this job runs.
+  if (args.build_index) {
+    IndexBuildOptions index_options;
+    index_options.num_threads = args.threads > 0 ? args.threads : TaskThreads();
+    index_options.progress = !args.quiet;
+    if (Status s = WriteDatabaseIndex(db_dir, index_options, false, "handdb unit finalize");
+        !s.ok()) {
+      return Fail(cmd, s);
+    }
   }
   if (args.as_json) {
     std::printf("%s\n",
@@ -495,6 +513,7 @@ int RunUnit(int argc, char** argv) {
   finalize->add_option("--threads,-j", args.threads, "threads (default: $SLURM_CPUS_PER_TASK or 1)")
       ->check(CLI::PositiveNumber);
   args.convert.Add(*finalize);
+  finalize->add_flag("--index", args.build_index, "then build the search index (handdb index DB)");
   finalize->add_flag("--quiet,-q", args.quiet, "no progress display");
   finalize->add_flag("--json", args.as_json, "print the summary as JSON on stdout");
 

@@ -19,6 +19,7 @@ struct SlurmGenerateRequest {
   // The edge flags and --skip-bad of generate as typed: every task's `handdb unit convert` and
   // the final `handdb unit finalize` get them verbatim, so they convert as `convert` does.
   std::vector<std::string> convert_args;
+  bool build_index = false;  // --index: the final job also runs `handdb index`
   bool quiet = false;
   bool as_json = false;
 };

@@ -5,7 +5,8 @@
 #   1. a tiny plan built on Slurm is byte-identical to the same config built locally;
 #   2. a unit whose task fails is reported with its unit and log path; the re-run submits only
 #      that unit and completes the database;
-#   3. an array task killed while it runs (scancel) is reported; the re-run completes only it.
+#   3. an array task killed while it runs (scancel) is reported; the re-run completes only it;
+#   4. --index: the final job builds the search index, byte-identical to a local --index build.
 # Usage: generate_test.sh HANDDB_EXE SOURCE_DIR   (exit 77 = skipped)
 set -euo pipefail
 # shellcheck source=tests/slurm/lib.sh
@@ -99,5 +100,26 @@ grep -q "^unit 2: .*CANCELLED.*; log: $log3$" "$work/s3.status" || die "case 3: 
   >"$work/s3b.json" 2>/dev/null
 [ "$(json_field "$work/s3b.json" submitted_units)" = "[2]" ] || die "case 3: re-run submitted more than unit 2"
 same_as_local "$work/s3"
+
+step "case 4: --index builds the search index in the final job, as a local --index does"
+# Case 1's renders again (--work): the reference builds locally with 2 threads, the final job with
+# the job's 1 CPU; the index must not depend on either.
+"$HANDDB" generate "$work/config.json" --out "$work/local-idx" --work "$work/local/render" \
+  --jobs 2 --index --quiet >/dev/null
+idx="$(json_field "$work/local-idx/manifest.json" index | "$PY" -c 'import json,sys; print(json.load(sys.stdin)["file"])')"
+[ -s "$work/local-idx/$idx" ] || die "case 4: the local build lists no index file"
+"$HANDDB" generate "$work/config.json" --out "$work/s4" --work "$work/s1/render" --slurm --index \
+  --wait --poll 0.5 --quiet >/dev/null
+grep -q 'unit finalize .* --index' "$work/s1/render/slurm/generate-final.sbatch" || die "case 4: no index in the final job"
+for f in "$idx" manifest.json; do
+  cmp "$work/local-idx/$f" "$work/s4/$f" || die "case 4: $f differs from the local --index build"
+done
+# A complete database without an index: --index submits the final job alone, which adds it.
+"$HANDDB" generate "$work/config.json" --out "$work/s1" --slurm --index --wait --poll 0.5 --quiet \
+  --json >"$work/s1i.json"
+[ "$(json_field "$work/s1i.json" submitted_units)" = "[]" ] || die "case 4: re-run submitted units"
+cmp "$work/local-idx/$idx" "$work/s1/$idx" || die "case 4: the index added to s1 differs"
+"$HANDDB" validate "$work/s1" >/dev/null || die "case 4: s1 with its index does not validate"
+echo "case 4: $idx identical locally, in the final job, and added to a complete database"
 
 step "all Slurm cases passed"
