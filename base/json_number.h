@@ -2,10 +2,9 @@
 // written as null and null is read back as NaN (the reports of evaluate/, docs/evaluation.md).
 #pragma once
 
-#include <nlohmann/json.hpp>
-
 #include <cmath>
 #include <limits>
+#include <nlohmann/json.hpp>
 
 namespace handdb {
 

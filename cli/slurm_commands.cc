@@ -12,10 +12,10 @@
 #include "cli/slurm_cli.h"
 #include "cluster/slurm.h"
 #include "format/manifest.h"
-#include "query/index/view_index.h"
 #include "format/validator.h"
 #include "generator/plan/plan.h"
 #include "generator/render/render_driver.h"
+#include "query/index/view_index.h"
 
 namespace handdb::cli {
 namespace {
