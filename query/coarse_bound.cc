@@ -17,12 +17,35 @@ void CellHistogram::Build(std::span<const PointQ> points) {
   }
   cells_.clear();
   counts_.clear();
+  std::vector<uint32_t> first(CoarseGrid::kCells, 0);  // each cell's first entry
   for (int c = 0; c < CoarseGrid::kCells; ++c) {
+    first[static_cast<size_t>(c)] = static_cast<uint32_t>(cells_.size());
     for (uint32_t left = count[static_cast<size_t>(c)]; left > 0;) {
       const uint32_t n = std::min(left, kMaxCount);
       cells_.push_back(static_cast<uint16_t>(c));
       counts_.push_back(static_cast<uint16_t>(n));
       left -= n;
+    }
+  }
+  // The gap sums per entry: a cell's points fill its entries in order, kMaxCount each.
+  std::vector<uint32_t> gap_sums(8 * cells_.size(), 0);
+  std::vector<uint32_t> seen(CoarseGrid::kCells, 0);
+  for (const PointQ& p : points) {
+    const int c = CoarseGrid::CellOf(p);
+    if (c < 0) continue;
+    const size_t entry = first[static_cast<size_t>(c)] + seen[static_cast<size_t>(c)]++ / kMaxCount;
+    uint8_t g[8];
+    NeighbourGaps(p, g);
+    for (int k = 0; k < 8; ++k) gap_sums[8 * entry + static_cast<size_t>(k)] += g[k];
+  }
+  gaps_.assign(8 * cells_.size(), kNoNeighbour);
+  constexpr int kSide = CoarseGrid::kSide;
+  for (size_t i = 0; i < cells_.size(); ++i) {
+    const int ix = cells_[i] % kSide;
+    const int iy = cells_[i] / kSide;
+    if (ix == 0 || iy == 0 || ix == kSide - 1 || iy == kSide - 1) continue;
+    for (size_t k = 0; k < 8; ++k) {  // ceil(sum / n): at most the largest gap, 23 units
+      gaps_[8 * i + k] = static_cast<uint8_t>((gap_sums[8 * i + k] + counts_[i] - 1) / counts_[i]);
     }
   }
 }
@@ -75,43 +98,71 @@ const DiagonalGaps& Diagonals() {
 // ceil(g / 8): a gap along one axis rounded up to 1/2 px.
 int AxisGap(int g) { return (g + 7) >> 3; }
 
+// Row offsets (in cells) of the eight neighbours, in NeighbourGaps' order.
+constexpr ptrdiff_t kNeighbourOffsets[8] = {-CoarseGrid::kSide - 1,
+                                            -CoarseGrid::kSide,
+                                            -CoarseGrid::kSide + 1,
+                                            -1,
+                                            1,
+                                            CoarseGrid::kSide - 1,
+                                            CoarseGrid::kSide,
+                                            CoarseGrid::kSide + 1};
+
 #ifdef HANDDB_HAVE_AVX2_PATH
-// Two cells at a time: their bytes interleaved per view and multiplied by their counts with one
-// madd (int16 x int16 -> int32, counts <= 128 and values <= 255), 16 views per step.
+// Entry i's term for 32 views of a block: max(F(c), F(n_k) -sat g_ik) per view, bytes.
+__attribute__((target("avx2"))) inline __m256i EntryValues(const uint8_t* plane,
+                                                           const CellHistogram& h,
+                                                           size_t i,
+                                                           size_t j) {
+  constexpr auto kBlock = static_cast<ptrdiff_t>(CoarseFields::kBlock);
+  const uint8_t* row = plane + static_cast<size_t>(h.cells()[i]) * CoarseFields::kBlock + j;
+  __m256i best = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(row));
+  if (!h.interior(i)) return best;
+  const uint8_t* g = h.gaps(i);
+  for (int k = 0; k < 8; ++k) {
+    const __m256i n =
+        _mm256_loadu_si256(reinterpret_cast<const __m256i*>(row + kNeighbourOffsets[k] * kBlock));
+    best = _mm256_max_epu8(best, _mm256_subs_epu8(n, _mm256_set1_epi8(static_cast<char>(g[k]))));
+  }
+  return best;
+}
+
+// Adds count_a * a + count_b * b for 16 views (bytes of a and b) into lo (views 0-7), hi (8-15):
+// the bytes interleaved per view and multiplied with one madd (int16 x int16 -> int32, counts <=
+// 128 and values <= 255).
+__attribute__((target("avx2"))) inline void AddWeighted(
+    __m128i a, __m128i b, __m256i counts, __m256i* lo, __m256i* hi) {
+  *lo = _mm256_add_epi32(*lo,
+                         _mm256_madd_epi16(_mm256_cvtepu8_epi16(_mm_unpacklo_epi8(a, b)), counts));
+  *hi = _mm256_add_epi32(*hi,
+                         _mm256_madd_epi16(_mm256_cvtepu8_epi16(_mm_unpackhi_epi8(a, b)), counts));
+}
+
+// Two entries at a time, 32 views per step.
 __attribute__((target("avx2"))) void BlockSumsAvx2(const uint8_t* plane,
-                                                   const uint16_t* cells,
-                                                   const uint16_t* counts,
-                                                   size_t num_cells,
+                                                   const CellHistogram& h,
                                                    uint32_t* out) {
   constexpr size_t kBlock = CoarseFields::kBlock;
-  for (size_t j = 0; j < kBlock; j += 16) {
-    __m256i lo = _mm256_setzero_si256();
-    __m256i hi = _mm256_setzero_si256();
-    size_t i = 0;
-    for (; i + 2 <= num_cells; i += 2) {
-      const __m128i a =
-          _mm_loadu_si128(reinterpret_cast<const __m128i*>(plane + cells[i] * kBlock + j));
-      const __m128i b =
-          _mm_loadu_si128(reinterpret_cast<const __m128i*>(plane + cells[i + 1] * kBlock + j));
-      const __m256i n =
-          _mm256_set1_epi32(static_cast<int>(counts[i]) | (static_cast<int>(counts[i + 1]) << 16));
-      lo =
-          _mm256_add_epi32(lo, _mm256_madd_epi16(_mm256_cvtepu8_epi16(_mm_unpacklo_epi8(a, b)), n));
-      hi =
-          _mm256_add_epi32(hi, _mm256_madd_epi16(_mm256_cvtepu8_epi16(_mm_unpackhi_epi8(a, b)), n));
+  const uint16_t* counts = h.counts().data();
+  const size_t num_cells = h.num_cells();
+  for (size_t j = 0; j < kBlock; j += 32) {
+    __m256i acc[4] = {_mm256_setzero_si256(),
+                      _mm256_setzero_si256(),
+                      _mm256_setzero_si256(),
+                      _mm256_setzero_si256()};
+    for (size_t i = 0; i < num_cells; i += 2) {
+      const bool pair = i + 1 < num_cells;
+      const __m256i a = EntryValues(plane, h, i, j);
+      const __m256i b = pair ? EntryValues(plane, h, i + 1, j) : _mm256_setzero_si256();
+      const __m256i n = _mm256_set1_epi32(static_cast<int>(counts[i]) |
+                                          (pair ? static_cast<int>(counts[i + 1]) << 16 : 0));
+      AddWeighted(_mm256_castsi256_si128(a), _mm256_castsi256_si128(b), n, &acc[0], &acc[1]);
+      AddWeighted(
+          _mm256_extracti128_si256(a, 1), _mm256_extracti128_si256(b, 1), n, &acc[2], &acc[3]);
     }
-    if (i < num_cells) {
-      const __m128i a =
-          _mm_loadu_si128(reinterpret_cast<const __m128i*>(plane + cells[i] * kBlock + j));
-      const __m256i n = _mm256_set1_epi32(static_cast<int>(counts[i]));
-      const __m128i zero = _mm_setzero_si128();
-      lo = _mm256_add_epi32(lo,
-                            _mm256_madd_epi16(_mm256_cvtepu8_epi16(_mm_unpacklo_epi8(a, zero)), n));
-      hi = _mm256_add_epi32(hi,
-                            _mm256_madd_epi16(_mm256_cvtepu8_epi16(_mm_unpackhi_epi8(a, zero)), n));
+    for (int q = 0; q < 4; ++q) {
+      _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + j + 8 * static_cast<size_t>(q)), acc[q]);
     }
-    _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + j), lo);
-    _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + j + 8), hi);
   }
 }
 #endif
@@ -165,21 +216,45 @@ int CoarseFields::PointLowerBound(size_t v, PointQ q) const {
   return best;
 }
 
+uint64_t CoarseFields::PairSum(const CellHistogram& histogram, size_t v) const {
+  uint64_t sum = 0;
+  for (size_t i = 0; i < histogram.num_cells(); ++i) {
+    uint8_t values[9];
+    NeighbourValues(v, histogram.cells()[i], values);
+    int best = values[8];
+    if (histogram.interior(i)) {
+      for (int k = 0; k < 8; ++k) best = std::max(best, values[k] - histogram.gaps(i)[k]);
+    }
+    sum += static_cast<uint64_t>(histogram.counts()[i]) * static_cast<uint64_t>(best);
+  }
+  return sum;
+}
+
 void CoarseFields::BlockSums(const CellHistogram& histogram, size_t block, uint32_t* out) const {
   THROW_CHECK_LT(block, num_blocks());
   const uint8_t* plane = planes_.data() + block * CoarseGrid::kCells * kBlock;
-  const std::span<const uint16_t> cells = histogram.cells();
-  const std::span<const uint16_t> counts = histogram.counts();
 #ifdef HANDDB_HAVE_AVX2_PATH
   if (HaveAvx2()) {
-    BlockSumsAvx2(plane, cells.data(), counts.data(), cells.size(), out);
+    BlockSumsAvx2(plane, histogram, out);
     return;
   }
 #endif
   std::fill(out, out + kBlock, 0u);
-  for (size_t i = 0; i < cells.size(); ++i) {
-    const uint8_t* row = plane + static_cast<size_t>(cells[i]) * kBlock;
-    for (size_t j = 0; j < kBlock; ++j) out[j] += static_cast<uint32_t>(counts[i]) * row[j];
+  for (size_t i = 0; i < histogram.num_cells(); ++i) {
+    const uint8_t* row = plane + static_cast<size_t>(histogram.cells()[i]) * kBlock;
+    const uint8_t* g = histogram.gaps(i);
+    for (size_t j = 0; j < kBlock; ++j) {
+      int best = row[j];
+      if (histogram.interior(i)) {
+        for (int k = 0; k < 8; ++k) {
+          best = std::max(best,
+                          row[kNeighbourOffsets[k] * static_cast<ptrdiff_t>(kBlock) +
+                              static_cast<ptrdiff_t>(j)] -
+                              g[k]);
+        }
+      }
+      out[j] += static_cast<uint32_t>(histogram.counts()[i]) * static_cast<uint32_t>(best);
+    }
   }
 }
 

@@ -10,7 +10,9 @@
 // valid for every roll. A hand's ~600 points occupy ~150-250 of the 1,849 cells, so per pair it
 // is a short dot product; per rolled query and every view at once it is a matrix-vector product,
 // which CoarseFields computes from a cell-major copy of the fields (views side by side, so one
-// cell's values for 16 views are one 16-byte load) instead of one gather per cell and pair.
+// cell's values for 32 views are one 32-byte load) instead of one gather per cell and pair. The
+// search uses a tighter form that also reads each cell's eight neighbours (CoarseFields::PairSum;
+// docs/query.md, "Neighbour terms in L_A").
 #pragma once
 
 #include <cstddef>
@@ -27,10 +29,14 @@ class Database;
 
 // The rolled query's occupied cells and their point counts. A cell holding more than kMaxCount
 // points is listed more than once (the sum is the same), so every product count x field value
-// fits 16 bits in the vector kernel.
+// fits 16 bits in the vector kernel. Per entry also the mean gap from its points to each of the
+// eight neighbouring cells' boxes, rounded up (the neighbour term of L_A, CoarseFields::BlockSums).
 class CellHistogram {
  public:
   static constexpr uint32_t kMaxCount = 128;
+  // An entry's gap to a neighbour that is off the grid, or that the bound does not read (cells
+  // on the grid's border): larger than any field value, so the neighbour's term is 0.
+  static constexpr uint8_t kNoNeighbour = 255;
   void Build(std::span<const PointQ> points);
   // L_A in px for a row-major field (kCells bytes): sum_c n(c) F(c) / |Q| / 2, rounded down by a
   // relative 1e-12 (so it never exceeds the exact value), given the number of query points.
@@ -50,10 +56,16 @@ class CellHistogram {
   size_t num_cells() const { return cells_.size(); }
   std::span<const uint16_t> cells() const { return cells_; }
   std::span<const uint16_t> counts() const { return counts_; }
+  // Entry i's gaps: ceil(sum_q gap(q, box_k) / n_i) in 1/2 px over its points q, for the eight
+  // neighbours k in NeighbourGaps' order; kNoNeighbour for every k if the cell is on the grid's
+  // border.
+  const uint8_t* gaps(size_t i) const { return gaps_.data() + 8 * i; }
+  bool interior(size_t i) const { return gaps_[8 * i] != kNoNeighbour; }
 
  private:
   std::vector<uint16_t> cells_;
   std::vector<uint16_t> counts_;  // each <= kMaxCount
+  std::vector<uint8_t> gaps_;     // 8 per entry
 };
 
 // The gaps (rounded up to 1/2 px) from a point q on the coarse grid to the boxes of its cell's
@@ -79,8 +91,17 @@ class CoarseFields {
     return planes_[((v / kBlock) * CoarseGrid::kCells + static_cast<size_t>(cell)) * kBlock +
                    v % kBlock];
   }
-  // For the views of block b: out[i] = sum_c n(c) F_{b kBlock + i}(c) (1/2 px units, exact), for
-  // i < kBlock (views past the end get 0).
+  // L_A's sum for view v and the query of `histogram` (1/2 px units, exact integer): over the
+  // histogram's entries i (cell c, n_i points, mean gaps g_ik),
+  //   n_i * max(F_v(c), max_k F_v(n_k) - g_ik)
+  // (a negative neighbour term counts 0; border cells use F_v(c) alone). It is <= the sum of
+  // the entry's points' PointLowerBound, hence <= the sum of their distances to Y_v
+  // (docs/query.md): each point's bound is >= F_v(c) and >= F_v(n_k) - its gap to box k, and
+  // summed over the entry's points the latter is n_i F_v(n_k) - sum of gaps >= n_i (F_v(n_k) -
+  // g_ik). It is >= sum_c n(c) F_v(c), the cell-only bound.
+  uint64_t PairSum(const CellHistogram& histogram, size_t v) const;
+  // PairSum for the views of block b: out[i] for view b kBlock + i, i < kBlock (views past the
+  // end get 0).
   void BlockSums(const CellHistogram& histogram, size_t block, uint32_t* out) const;
   // A lower bound of d(q, Y_v) in 1/2 px from q's cell c and its eight neighbours n:
   //   max_n F_v(n) - gap(q, box_n)   (n = c: gap 0)

@@ -83,33 +83,49 @@ TEST(CoarseBound, PointBoundIsBelowTheExactDistanceAndAboveTheCellValue) {
   EXPECT_GT(better, total / 4);
 }
 
-// L_A's streaming product is the plain sum of n(c) F_v(c) over the query's points, exactly, for
-// every view of a full and a partial block; a cell holding more than kMaxCount points (listed
-// more than once) adds up the same, and views past the end get 0.
-TEST(CoarseBound, BlockSumsAreTheExactSumsOverTheQueryPoints) {
+// L_A's streaming product is PairSum exactly, for every view of a full and a partial block (views
+// past the end get 0); PairSum lies between the cell-only sum of n(c) F_v(c) and the sum of the
+// points' own bounds (CoarseFields::PointLowerBound), which the exact distances exceed
+// (PointBoundIsBelowTheExactDistanceAndAboveTheCellValue). A cell holding more than kMaxCount
+// points (listed more than once) is covered, and so are points on the grid's border cells and
+// off the grid.
+TEST(CoarseBound, BlockSumsArePairSumsBetweenTheCellAndThePointBounds) {
   const auto db = testing::SyntheticDatabase(150, 300, 4, /*views_per_shape=*/10);
   const CoarseFields fields(db, 2);
   ASSERT_EQ(fields.num_blocks(), 2u);
   std::mt19937 rng(11);
   std::vector<PointQ> query = RandomPoints(&rng, 3000, 120 * 16);
   query.insert(query.end(), 300, PointQ{5 * 16, -7 * 16});  // one cell far above kMaxCount
+  const std::vector<PointQ> border = RandomPoints(&rng, 200, 180 * 16);  // border and off-grid
+  query.insert(query.end(), border.begin(), border.end());
   CellHistogram hist;
   hist.Build(query);
   std::vector<uint32_t> sums(CoarseFields::kBlock);
+  uint64_t tighter = 0;
   for (size_t b = 0; b < fields.num_blocks(); ++b) {
     fields.BlockSums(hist, b, sums.data());
     for (size_t i = 0; i < CoarseFields::kBlock; ++i) {
       const size_t v = b * CoarseFields::kBlock + i;
-      uint64_t want = 0;
-      if (v < fields.num_views()) {
-        for (const PointQ& q : query) {
-          const int c = CoarseGrid::CellOf(q);
-          if (c >= 0) want += fields.value(v, c);
-        }
+      if (v >= fields.num_views()) {
+        ASSERT_EQ(sums[i], 0u) << "view " << v;
+        continue;
       }
-      ASSERT_EQ(sums[i], want) << "view " << v;
+      uint64_t cell_only = 0;
+      uint64_t point_bounds = 0;
+      for (const PointQ& q : query) {
+        const int c = CoarseGrid::CellOf(q);
+        if (c >= 0) cell_only += fields.value(v, c);
+        point_bounds += static_cast<uint64_t>(fields.PointLowerBound(v, q));
+      }
+      const uint64_t pair = fields.PairSum(hist, v);
+      ASSERT_EQ(sums[i], pair) << "view " << v;
+      ASSERT_GE(pair, cell_only) << "view " << v;
+      ASSERT_LE(pair, point_bounds) << "view " << v;
+      ASSERT_EQ(hist.Sum([&](int c) { return fields.value(v, c); }), cell_only);
+      tighter += pair > cell_only;
     }
   }
+  EXPECT_GT(tighter, fields.num_views() / 2);  // the neighbour terms do tighten the bound
 }
 
 // Queries with edges the views lack (clutter) are where the A bound matters: pruned search with

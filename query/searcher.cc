@@ -810,7 +810,7 @@ class QueryRun {
   Bound PairCoarseBound(size_t v, size_t s) const {
     if (db_.points(static_cast<view_id_t>(v)).empty()) return kNoBound;
     if (coarse_ == nullptr) return 0;
-    const uint64_t sum = ctx_.histogram(s).Sum([&](int c) { return coarse_->value(v, c); });
+    const uint64_t sum = coarse_->PairSum(ctx_.histogram(s), v);
     const uint64_t nq = ctx_.rolled(s).size();
     const uint64_t units = sum * static_cast<uint64_t>(kBoundUnitsPerPx / 2) / nq;
     return static_cast<Bound>(std::min<uint64_t>(units, kBoundMax));

@@ -146,10 +146,14 @@ TEST(Searcher, ViewQueriedWithItsOwnEdgesIsRankOneAtDistanceZero) {
 // phase on stderr with its final count; a fast one prints nothing; the result is the same.
 TEST(Searcher, LongSearchesShowProgressOnStderrFastOnesNothing) {
   const Searcher searcher(TestDatabase());
-  // Turned, shifted and thinned, so that the refine step has pairs left to visit.
-  const auto query = Transform(RolledView(*TestDatabase(), 7, 3), 0.2f, 3, -2, 0.7, 5);
+  // Turned, shifted, thinned and cluttered, so that the refine step has pairs left to visit.
+  auto query = Transform(RolledView(*TestDatabase(), 7, 3), 0.2f, 3, -2, 0.7, 5);
+  std::mt19937 rng(6);
+  std::uniform_real_distribution<float> clutter(-100, 100);
+  for (int i = 0; i < 60; ++i) query.push_back({clutter(rng), clutter(rng)});
   SearchOptions options = Options();
   options.hand = Hand::kEither;
+  options.top_k = 40;  // more pairs near the k-th best than the bounds step scores
   auto quiet = searcher.Search(query, options);
   ASSERT_TRUE(quiet.ok());
 
