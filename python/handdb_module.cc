@@ -505,6 +505,8 @@ py::dict StatsDict(const SearchStats& st, const Database& db) {
   d["abandoned"] = st.abandoned;
   d["view_kdtrees"] = st.view_trees;
   d["scan_abandoned"] = st.probe_abandoned;
+  d["grids"] = st.grids;
+  d["grid_bounded"] = st.grid_bounded;
   d["searches"] = st.searches;
   d["seconds"] = st.seconds_total;
   d["seconds_bounds"] = st.seconds_bounds;

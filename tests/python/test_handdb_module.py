@@ -113,6 +113,10 @@ def test_search_equals_query_json(handdb, db, db_dir, view_image):
         # (the counters of pruning depend on the threads' timing; the matches do not)
         assert stats["searches"] == cli["stats"]["searches"] == (2 if hand == "either" else 1)
         assert stats["virtual_views"] == cli["stats"]["virtual_views"]
+        # The module's counters are named as the CLI's (it adds the threads used), and both say
+        # how the bounds pruned.
+        assert set(stats) - {"threads"} <= set(cli["stats"])
+        assert {"grids", "grid_bounded"} <= set(stats)
     top = matches[0]
     assert (top.view_id, top.roll, top.rank) == (5, 3, 1)
     assert top.keypoints.shape == (21, 3) and top.keypoints_image_px.shape == (21, 2)
