@@ -1,10 +1,13 @@
 #include "query/coarse_bound.h"
 
 #include <algorithm>
+#include <array>
+#include <cmath>
 
 #include "base/status.h"
 #include "base/thread_pool.h"
 #include "query/database.h"
+#include "query/distance_transform.h"
 #include "query/simd.h"
 
 namespace handdb {
@@ -165,6 +168,36 @@ __attribute__((target("avx2"))) void BlockSumsAvx2(const uint8_t* plane,
     }
   }
 }
+
+// ViewHistograms::Sums: two entries at a time, 32 slots per step.
+__attribute__((target("avx2"))) void ViewSumsAvx2(const uint16_t* cells,
+                                                  const uint8_t* counts,
+                                                  size_t num_entries,
+                                                  const SlotFields& fields,
+                                                  uint32_t* out) {
+  for (size_t j = 0; j < fields.stride(); j += 32) {
+    __m256i acc[4] = {_mm256_setzero_si256(),
+                      _mm256_setzero_si256(),
+                      _mm256_setzero_si256(),
+                      _mm256_setzero_si256()};
+    for (size_t i = 0; i < num_entries; i += 2) {
+      const bool pair = i + 1 < num_entries;
+      const __m256i a =
+          _mm256_loadu_si256(reinterpret_cast<const __m256i*>(fields.row(cells[i]) + j));
+      const __m256i b =
+          pair ? _mm256_loadu_si256(reinterpret_cast<const __m256i*>(fields.row(cells[i + 1]) + j))
+               : _mm256_setzero_si256();
+      const __m256i n = _mm256_set1_epi32(static_cast<int>(counts[i]) |
+                                          (pair ? static_cast<int>(counts[i + 1]) << 16 : 0));
+      AddWeighted(_mm256_castsi256_si128(a), _mm256_castsi256_si128(b), n, &acc[0], &acc[1]);
+      AddWeighted(
+          _mm256_extracti128_si256(a, 1), _mm256_extracti128_si256(b, 1), n, &acc[2], &acc[3]);
+    }
+    for (int q = 0; q < 4; ++q) {
+      _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + j + 8 * static_cast<size_t>(q)), acc[q]);
+    }
+  }
+}
 #endif
 
 }  // namespace
@@ -254,6 +287,145 @@ void CoarseFields::BlockSums(const CellHistogram& histogram, size_t block, uint3
         }
       }
       out[j] += static_cast<uint32_t>(histogram.counts()[i]) * static_cast<uint32_t>(best);
+    }
+  }
+}
+
+void SlotFields::Reset(size_t num_slots) {
+  num_slots_ = num_slots;
+  stride_ = (num_slots + 31) / 32 * 32;
+  values_.assign(static_cast<size_t>(CoarseGrid::kCells) * stride_, 0);
+}
+
+void SlotFields::Compute(size_t s, std::span<const PointQ> rolled) {
+  THROW_CHECK_LT(s, num_slots_);
+  std::array<uint8_t, CoarseGrid::kCells> field;
+  ComputeCoarseField(rolled, field.data());
+  for (int c = 0; c < CoarseGrid::kCells; ++c) {
+    values_[static_cast<size_t>(c) * stride_ + s] = field[static_cast<size_t>(c)];
+  }
+}
+
+template <typename From>
+void SlotFields::CopyMapped(size_t base, size_t s, double gap_px, From from) {
+  THROW_CHECK_LT(base, num_slots_);
+  THROW_CHECK_LT(s, num_slots_);
+  constexpr int kSide = CoarseGrid::kSide;
+  // ceil(2 gap): the gap in 1/2 px rounded up (a gap beyond the byte range zeroes every value).
+  const double units = std::ceil(gap_px * CoarseGrid::kValueUnitsPerPx);
+  const int minus = units > 255 ? 255 : static_cast<int>(units);
+  for (int iy = 0; iy < kSide; ++iy) {
+    for (int ix = 0; ix < kSide; ++ix) {
+      const int value = values_[static_cast<size_t>(from(ix, iy)) * stride_ + base] - minus;
+      values_[static_cast<size_t>(iy * kSide + ix) * stride_ + s] =
+          static_cast<uint8_t>(std::max(value, 0));
+    }
+  }
+}
+
+void SlotFields::CopyFlipped(size_t base, size_t s, GridFlip flip, double gap_px) {
+  constexpr int kSide = CoarseGrid::kSide;
+  const bool fx = flip == GridFlip::kX || flip == GridFlip::kXY;
+  const bool fy = flip == GridFlip::kY || flip == GridFlip::kXY;
+  CopyMapped(base, s, gap_px, [fx, fy](int ix, int iy) {
+    return (fy ? kSide - 1 - iy : iy) * kSide + (fx ? kSide - 1 - ix : ix);
+  });
+}
+
+void SlotFields::CopyQuarterTurned(size_t base, size_t s, double gap_px) {
+  constexpr int kSide = CoarseGrid::kSide;
+  CopyMapped(base, s, gap_px, [](int ix, int iy) { return ix * kSide + (kSide - 1 - iy); });
+}
+
+ViewHistograms::ViewHistograms(const Database& db, int num_threads) {
+  const size_t num_views = db.num_views();
+  // Per view its entries, built in parallel into per-chunk lists, then concatenated.
+  constexpr size_t kChunk = 1024;
+  const size_t num_chunks = (num_views + kChunk - 1) / kChunk;
+  std::vector<std::vector<uint16_t>> chunk_cells(num_chunks);
+  std::vector<std::vector<uint8_t>> chunk_counts(num_chunks);
+  std::vector<std::vector<uint32_t>> chunk_sizes(num_chunks);
+  ParallelFor(num_chunks, ResolveNumThreads(num_threads), [&](size_t k, int) {
+    // Plain arrays and local pointers: the byte stores below may alias anything, so members of
+    // vectors would be reloaded after each one.
+    std::array<uint32_t, CoarseGrid::kCells + 1> count{};
+    std::vector<uint16_t> ids;
+    std::vector<uint16_t> entry_cells;
+    std::vector<uint32_t> entry_counts;
+    std::vector<uint16_t> cells;
+    std::vector<uint8_t> counts;
+    std::vector<uint32_t> sizes;
+    for (size_t v = k * kChunk; v < std::min(num_views, (k + 1) * kChunk); ++v) {
+      // Every point's cell (an off-grid point goes to a spare counter), then the counts, then
+      // the cells in the order first met (the sums do not care about the order).
+      const std::span<const PointQ> pts = db.points(static_cast<view_id_t>(v));
+      ids.resize(pts.size());
+      uint16_t* id = ids.data();
+      uint32_t* cnt = count.data();
+      for (size_t i = 0; i < pts.size(); ++i) {
+        const int c = CoarseGrid::CellOf(pts[i]);
+        id[i] = static_cast<uint16_t>(c < 0 ? CoarseGrid::kCells : c);
+      }
+      for (size_t i = 0; i < pts.size(); ++i) ++cnt[id[i]];
+      cnt[CoarseGrid::kCells] = 0;
+      // Each cell once, where it is first met (its count is then cleared), without a branch:
+      // every point writes a slot and advances only if its cell was not yet written.
+      entry_cells.resize(pts.size() + 1);
+      entry_counts.resize(pts.size() + 1);
+      size_t m = 0;
+      for (size_t i = 0; i < pts.size(); ++i) {
+        const uint16_t c = id[i];
+        entry_cells[m] = c;
+        entry_counts[m] = cnt[c];
+        m += cnt[c] != 0;
+        cnt[c] = 0;
+      }
+      const size_t before = cells.size();
+      for (size_t e = 0; e < m; ++e) {
+        for (uint32_t left = entry_counts[e]; left > 0;) {  // a cell over kMaxCount: split
+          const uint32_t n = std::min(left, kMaxCount);
+          cells.push_back(entry_cells[e]);
+          counts.push_back(static_cast<uint8_t>(n));
+          left -= n;
+        }
+      }
+      sizes.push_back(static_cast<uint32_t>(cells.size() - before));
+    }
+    chunk_cells[k] = std::move(cells);
+    chunk_counts[k] = std::move(counts);
+    chunk_sizes[k] = std::move(sizes);
+    return true;
+  });
+  begin_.assign(num_views + 1, 0);
+  size_t v = 0;
+  for (size_t k = 0; k < num_chunks; ++k) {
+    for (uint32_t n : chunk_sizes[k]) {
+      begin_[v + 1] = begin_[v] + n;
+      ++v;
+    }
+    cells_.insert(cells_.end(), chunk_cells[k].begin(), chunk_cells[k].end());
+    counts_.insert(counts_.end(), chunk_counts[k].begin(), chunk_counts[k].end());
+    std::vector<uint16_t>().swap(chunk_cells[k]);
+    std::vector<uint8_t>().swap(chunk_counts[k]);
+  }
+}
+
+void ViewHistograms::Sums(size_t v, const SlotFields& fields, uint32_t* out) const {
+  THROW_CHECK_LT(v, num_views());
+  const uint16_t* cells = cells_.data() + begin_[v];
+  const uint8_t* counts = counts_.data() + begin_[v];
+  const size_t n = num_entries(v);
+#ifdef HANDDB_HAVE_AVX2_PATH
+  if (HaveAvx2()) {
+    ViewSumsAvx2(cells, counts, n, fields, out);
+    return;
+  }
+#endif
+  std::fill(out, out + fields.stride(), 0u);
+  for (size_t i = 0; i < n; ++i) {
+    const uint8_t* row = fields.row(cells[i]);
+    for (size_t j = 0; j < fields.stride(); ++j) {
+      out[j] += static_cast<uint32_t>(counts[i]) * row[j];
     }
   }
 }

@@ -26,6 +26,7 @@
 namespace handdb {
 
 class Database;
+enum class GridFlip;  // query/distance_transform.h
 
 // The rolled query's occupied cells and their point counts. A cell holding more than kMaxCount
 // points is listed more than once (the sum is the same), so every product count x field value
@@ -143,6 +144,71 @@ class CoarseFields {
   size_t num_views_ = 0;
   size_t computed_views_ = 0;
   std::vector<uint8_t> planes_;  // [block][cell][view in block]
+};
+
+// The coarse bound of the view -> query term B (docs/query.md, "The coarse B bound"). For slot
+// s's rolled query Q_s, G_s(c) is Q_s's coarse field (format/coarse_field.h: the distance from
+// the closed box of cell c to Q_s, rounded down to 1/2 px); every view point y in c lies in the
+// box, so d(y, Q_s) >= G_s(c) and
+//
+//   B(v, s) = mean_y d(y, Q_s) >= sum_c n_v(c) G_s(c) / |Y_v|  =: L_Bc(v, s)
+//
+// with n_v(c) the view's points in c (points off the grid count 0). SlotFields holds every
+// slot's G_s cell-major (one cell's values for 32 slots are one 32-byte load), ViewHistograms
+// every view's cells and counts, so L_Bc of one view for all slots is ~150 short vector madds.
+class SlotFields {
+ public:
+  // Room for `num_slots` slots, all values 0 (a valid bound) until set.
+  void Reset(size_t num_slots);
+  size_t num_slots() const { return num_slots_; }
+  // Slots per cell row: num_slots rounded up to a multiple of 32.
+  size_t stride() const { return stride_; }
+  // Sets slot s's values from its own rolled query's points.
+  void Compute(size_t s, std::span<const PointQ> rolled);
+  // Sets slot s's values from slot `base`'s, for a rolled query within `gap_px` per point of
+  // flip(base's): G_s(c) >= G_base(flip(c)) - gap, since flip maps the closed box of c onto the
+  // closed box of flip(c) (the grid is symmetric about the origin) and d(p, Q_s) >= d(p,
+  // flip(Q_base)) - gap. The gap is rounded up to 1/2 px and subtracted saturating at 0.
+  void CopyFlipped(size_t base, size_t s, GridFlip flip, double gap_px);
+  // The same for a rolled query within `gap_px` of T(base's) for the quarter turn T(x, y) =
+  // (y, -x) (roll r + R/4 of roll r): T^-1 maps the closed box of cell (ix, iy) onto that of
+  // (42 - iy, ix), so G_s(ix, iy) >= G_base(42 - iy, ix) - gap.
+  void CopyQuarterTurned(size_t base, size_t s, double gap_px);
+  uint8_t value(size_t s, int cell) const {
+    return values_[static_cast<size_t>(cell) * stride_ + s];
+  }
+  const uint8_t* row(int cell) const {
+    return values_.data() + static_cast<size_t>(cell) * stride_;
+  }
+
+ private:
+  // values(s, cell (ix, iy)) = max(0, values(base, from(ix, iy)) - ceil(2 gap_px)).
+  template <typename From>
+  void CopyMapped(size_t base, size_t s, double gap_px, From from);
+  size_t num_slots_ = 0;
+  size_t stride_ = 0;
+  std::vector<uint8_t> values_;  // [cell][slot]
+};
+
+class ViewHistograms {
+ public:
+  static constexpr uint32_t kMaxCount = 255;  // a fuller cell is listed more than once
+  ViewHistograms() = default;
+  // Every view's histogram, computed from its points in parallel (~2 us per view).
+  ViewHistograms(const Database& db, int num_threads);
+  bool empty() const { return begin_.empty(); }
+  size_t num_views() const { return begin_.empty() ? 0 : begin_.size() - 1; }
+  // Bytes held: 3 per entry and 8 per view.
+  size_t bytes() const { return begin_.size() * 8 + cells_.size() * 3; }
+  size_t num_entries(size_t v) const { return begin_[v + 1] - begin_[v]; }
+  // sum_c n_v(c) G_s(c) in 1/2 px (exact integer) for every slot: out[s] for s < fields.stride()
+  // (padding slots get 0).
+  void Sums(size_t v, const SlotFields& fields, uint32_t* out) const;
+
+ private:
+  std::vector<uint64_t> begin_;  // num_views + 1 entry offsets
+  std::vector<uint16_t> cells_;
+  std::vector<uint8_t> counts_;
 };
 
 }  // namespace handdb

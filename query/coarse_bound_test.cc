@@ -9,6 +9,7 @@
 #include "format/shard_testing.h"
 #include "query/chamfer.h"
 #include "query/database.h"
+#include "query/distance_transform.h"
 #include "query/search_testing.h"
 #include "query/searcher.h"
 
@@ -48,6 +49,83 @@ TEST(CoarseBound, HistogramBoundIsBelowTheExactQueryToViewTerm) {
   ComputeCoarseField(view, field.data());
   hist.Build(far);
   EXPECT_GE(hist.LowerBound(field.data(), far.size()), 100 - 8 * std::sqrt(2.0));
+}
+
+// Reflects points in x, y or both (the flips of one distance grid's slots).
+std::vector<PointQ> Flipped(std::span<const PointQ> points, GridFlip flip) {
+  std::vector<PointQ> out(points.begin(), points.end());
+  for (PointQ& p : out) {
+    if (flip == GridFlip::kX || flip == GridFlip::kXY) p.x = static_cast<int16_t>(-p.x);
+    if (flip == GridFlip::kY || flip == GridFlip::kXY) p.y = static_cast<int16_t>(-p.y);
+  }
+  return out;
+}
+
+// L_Bc: every view's sums for every slot are sum_c n_v(c) G_s(c) (the plain formula), below the
+// exact view -> query term B, and not vacuous; a flipped or quarter-turned copy of a slot's field
+// is the field of the flipped or turned query (the grid is symmetric), and a gap lowers every
+// value by its ceiling.
+TEST(CoarseBound, ViewHistogramSumsAreBelowTheExactViewToQueryTerm) {
+  const auto db = testing::SyntheticDatabase(60, 300, 4, /*views_per_shape=*/10);
+  const ViewHistograms histograms(db, 2);
+  ASSERT_EQ(histograms.num_views(), 60u);
+  std::mt19937 rng(5);
+  constexpr size_t kSlots = 37;  // not a multiple of 32: the padding slots must read 0
+  SlotFields fields;
+  fields.Reset(kSlots);
+  EXPECT_EQ(fields.stride(), 64u);
+  std::vector<std::vector<PointQ>> queries;
+  for (size_t s = 0; s < kSlots; ++s) {
+    queries.push_back(RandomPoints(&rng, 30 + 7 * s, 200 + 40 * s));
+    fields.Compute(s, queries.back());
+  }
+  std::vector<uint8_t> field(CoarseGrid::kCells);
+  for (size_t s = 0; s < kSlots; ++s) {  // Compute stores ComputeCoarseField's values
+    ComputeCoarseField(queries[s], field.data());
+    for (int c = 0; c < CoarseGrid::kCells; ++c) ASSERT_EQ(fields.value(s, c), field[c]);
+  }
+  std::vector<uint32_t> sums(fields.stride());
+  double worst_gap = 0;
+  for (view_id_t v = 0; v < db.num_views(); ++v) {
+    const std::span<const PointQ> view = db.points(v);
+    histograms.Sums(v, fields, sums.data());
+    for (size_t s = kSlots; s < fields.stride(); ++s) ASSERT_EQ(sums[s], 0u);
+    for (size_t s = 0; s < kSlots; ++s) {
+      uint64_t plain = 0;
+      for (const PointQ& y : view) {
+        const int c = CoarseGrid::CellOf(y);
+        if (c >= 0) plain += fields.value(s, c);
+      }
+      ASSERT_EQ(sums[s], plain) << "view " << v << " slot " << s;
+      const double bound = static_cast<double>(plain) / CoarseGrid::kValueUnitsPerPx /
+                           static_cast<double>(view.size());
+      const double b = ChamferBruteForce(queries[s], view).b;
+      ASSERT_LE(bound, b) << "view " << v << " slot " << s;
+      worst_gap = std::max(worst_gap, b - bound);
+    }
+  }
+  EXPECT_GT(worst_gap, 0);
+  EXPECT_LE(worst_gap, 8 * std::sqrt(2.0) + 0.5);
+
+  for (GridFlip flip : {GridFlip::kX, GridFlip::kY, GridFlip::kXY}) {
+    fields.CopyFlipped(3, 4, flip, 0.0);
+    ComputeCoarseField(Flipped(queries[3], flip), field.data());
+    for (int c = 0; c < CoarseGrid::kCells; ++c) ASSERT_EQ(fields.value(4, c), field[c]);
+    fields.CopyFlipped(3, 5, flip, 1.2);  // 2.4 half px: 3 off, saturating at 0
+    for (int c = 0; c < CoarseGrid::kCells; ++c) {
+      ASSERT_EQ(fields.value(5, c), std::max(0, field[c] - 3));
+    }
+  }
+  // The quarter turn T(x, y) = (y, -x): roll r + R/4 of roll r.
+  std::vector<PointQ> turned = queries[6];
+  for (PointQ& p : turned) p = PointQ{p.y, static_cast<int16_t>(-p.x)};
+  fields.CopyQuarterTurned(6, 7, 0.0);
+  ComputeCoarseField(turned, field.data());
+  for (int c = 0; c < CoarseGrid::kCells; ++c) ASSERT_EQ(fields.value(7, c), field[c]);
+  fields.CopyQuarterTurned(6, 8, 0.3);  // 0.6 half px: 1 off
+  for (int c = 0; c < CoarseGrid::kCells; ++c) {
+    ASSERT_EQ(fields.value(8, c), std::max(0, field[c] - 1));
+  }
 }
 
 // The neighbour bound of one point is below its exact distance to the view, never below the own

@@ -315,6 +315,21 @@ class QueryContext {
     return worst == 0 ? 0.0 : std::sqrt(static_cast<double>(worst)) / kPointScale * (1 + 1e-12);
   }
 
+  // max_i |rolled(member)[i] - T(rolled(base)[i])| (px) for the quarter turn T(x, y) = (y, -x),
+  // rounded up: roll r + R/4 is roll r turned by T up to the two quantisations.
+  double QuarterTurnGap(size_t base, size_t member) const {
+    const std::vector<PointQ>& a = rolled_[base];
+    const std::vector<PointQ>& b = rolled_[member];
+    THROW_CHECK_EQ(a.size(), b.size());
+    int64_t worst = 0;
+    for (size_t i = 0; i < a.size(); ++i) {
+      const int64_t dx = b[i].x - a[i].y;
+      const int64_t dy = b[i].y + a[i].x;
+      worst = std::max(worst, dx * dx + dy * dy);
+    }
+    return worst == 0 ? 0.0 : std::sqrt(static_cast<double>(worst)) / kPointScale * (1 + 1e-12);
+  }
+
   // The kd-tree over view v's points from worker `worker`'s cache (a small LRU: pairs are
   // visited in increasing bound and the rolls of one view have similar bounds). Only brute force
   // and views beyond the linear scans' coordinate range build them.
@@ -539,6 +554,7 @@ Searcher::Searcher(std::shared_ptr<const Database> db) : db_(std::move(db)) {
   grid_half_extent_px_ =
       std::clamp(static_cast<float>(db_max_abs) / kPointScale + 1.0f, 8.0f, 2000.0f);
   coarse_ = CoarseFields(*db_, -1);
+  view_histograms_ = ViewHistograms(*db_, -1);
 }
 
 Searcher::~Searcher() = default;
@@ -611,6 +627,7 @@ class QueryRun {
            std::span<const uint8_t> y_sorted,
            float grid_half_extent_px,
            const CoarseFields* coarse,
+           const ViewHistograms* view_histograms,
            std::span<const Point2f> query_px,
            const SearchOptions& options,
            int threads,
@@ -620,6 +637,7 @@ class QueryRun {
         max_abs_(max_abs),
         grid_half_extent_px_(grid_half_extent_px),
         coarse_(coarse),
+        view_histograms_(coarse != nullptr ? view_histograms : nullptr),
         options_(options),
         threads_(threads),
         pool_(pool),
@@ -671,13 +689,16 @@ class QueryRun {
   }
 
   // Step 1: lower bounds of every pair, L = L_A + L_B (docs/query.md).
-  //  a. Every slot's rolled query and coarse histogram.
-  //  b. L_A of every pair: per block of views, one streaming product per slot (CoarseFields).
-  //  c. The threshold seeded: the pairs with the smallest L_A scored exactly, so that it is
-  //     near the final k-th best before any distance grid is built.
+  //  a. Every slot's rolled query, coarse histogram and coarse field.
+  //  b. L_A of every pair: per block of views, one streaming product per slot (CoarseFields);
+  //     and the coarse B bound L_Bc of the same views, one product per view for all slots
+  //     (ViewHistograms), into lb_.
+  //  c. The threshold seeded: the pairs with the smallest L_A + L_Bc scored exactly, so that it
+  //     is near the final k-th best before any distance grid is built.
   //  d. Per grid group (up to four slots sharing one distance transform), most promising first:
-  //     L_B for the pairs whose L_A is still <= the k-th best, stopped as soon as L exceeds it,
-  //     then each slot's best two pairs scored. A group with no such pair builds no grid.
+  //     L_B for the pairs whose L_A + L_Bc is still <= the k-th best, stopped as soon as L_A +
+  //     L_B exceeds it (lb_ keeps the larger of L_Bc and L_B), then each slot's best two pairs
+  //     scored. A group with no such pair builds no grid.
   void Bounds() {
     const size_t n = num_views_ * num_slots();
     la_.assign(n, 0);
@@ -692,6 +713,7 @@ class QueryRun {
           return true;
         },
         pool_);
+    if (view_histograms_ != nullptr) PrepareSlotFields();
     CoarseBounds();
     if (coarse_ != nullptr) Seed();
     FineBounds();
@@ -846,9 +868,60 @@ class QueryRun {
                            : static_cast<Bound>(std::min<uint64_t>(units, kBoundMax));
             }
           }
+          if (view_histograms_ != nullptr) CoarseBBounds(v0, v1);
           return true;
         },
         pool_);
+  }
+
+  // Every slot's coarse field (SlotFields), one ComputeCoarseField per R/4 rolls: with R a
+  // multiple of 4 the grid groups' bases are rolls r < R/2 of the right hand (or of the one
+  // hand searched), and base r + R/4 is base r quarter-turned (CopyQuarterTurned); each group's
+  // members are its base flipped (CopyFlipped). Every copy subtracts its measured gap.
+  void PrepareSlotFields() {
+    const std::vector<std::vector<GridMember>> groups = MakeGridGroups(num_slots(), num_rolls_);
+    slot_fields_.Reset(num_slots());
+    const size_t quarter = num_rolls_ % 4 == 0 ? num_rolls_ / 4 : 0;
+    const size_t computed = quarter > 0 ? quarter : groups.size();
+    auto copy_members = [&](const std::vector<GridMember>& group) {
+      const size_t base = group[0].slot;
+      for (size_t i = 1; i < group.size(); ++i) {
+        const GridMember& m = group[i];
+        slot_fields_.CopyFlipped(base, m.slot, m.flip, ctx_.FlipGap(base, m.slot, m.flip));
+      }
+    };
+    ParallelFor(
+        computed,
+        threads_,
+        [&](size_t g, int) {
+          const size_t base = groups[g][0].slot;
+          slot_fields_.Compute(base, ctx_.rolled(base));
+          copy_members(groups[g]);
+          if (quarter > 0) {
+            const size_t turned = groups[g + quarter][0].slot;
+            slot_fields_.CopyQuarterTurned(base, turned, ctx_.QuarterTurnGap(base, turned));
+            copy_members(groups[g + quarter]);
+          }
+          return true;
+        },
+        pool_);
+  }
+
+  // L_Bc of views [v0, v1) for every slot into lb_: sum_c n_v(c) G_s(c) / 2 / |Y_v| px, an exact
+  // integer sum, so floor(64 L_Bc) is an integer division (coarse_bound.h).
+  void CoarseBBounds(size_t v0, size_t v1) {
+    thread_local std::vector<uint32_t> sums;
+    sums.resize(slot_fields_.stride());
+    for (size_t v = v0; v < v1; ++v) {
+      const size_t ny = db_.points(static_cast<view_id_t>(v)).size();
+      if (ny == 0) continue;
+      view_histograms_->Sums(v, slot_fields_, sums.data());
+      for (size_t s = 0; s < num_slots(); ++s) {
+        const uint64_t units =
+            static_cast<uint64_t>(sums[s]) * static_cast<uint64_t>(kBoundUnitsPerPx / 2) / ny;
+        lb_[s * num_views_ + v] = static_cast<Bound>(std::min<uint64_t>(units, kBoundMax));
+      }
+    }
   }
 
   // Pairs by their bound L_A + L_B, then by index.
@@ -881,7 +954,7 @@ class QueryRun {
 
   // Scores the pairs with the smallest L_A (a few times k), best first, and marks them scored.
   void Seed() {
-    auto less = [&](uint32_t x, uint32_t y) { return la_[x] != la_[y] ? la_[x] < la_[y] : x < y; };
+    auto less = [&](uint32_t x, uint32_t y) { return ByBound(x, y); };
     const std::vector<uint32_t> best = SmallestPairs(0, la_.size(), 2 * k_ + 8, less);
     ParallelFor(
         best.size(),
@@ -904,8 +977,11 @@ class QueryRun {
       for (GridMember& m : groups[g]) {
         m.gap_px = ctx_.FlipGap(groups[g][0].slot, m.slot, m.flip);
         if (SlotEntries(m.slot) == 0) continue;
-        const Bound* la = la_.data() + slot_begin_[m.slot];
-        best = std::min(best, *std::min_element(la, la + SlotEntries(m.slot)));
+        for (size_t e = slot_begin_[m.slot]; e < slot_begin_[m.slot + 1]; ++e) {
+          if (la_[e] == kNoBound) continue;
+          best = static_cast<Bound>(
+              std::min<uint32_t>(best, std::min<uint32_t>(kNoBound - 1, la_[e] + lb_[e])));
+        }
       }
       order.emplace_back(best, g);
     }
@@ -943,7 +1019,7 @@ class QueryRun {
     for (size_t e = slot_begin_[m.slot]; e < slot_begin_[m.slot + 1]; ++e) {
       const Bound la = la_[e];
       const double threshold = top_.threshold();
-      if (la == kNoBound || BoundPx(la) > threshold) continue;
+      if (la == kNoBound || TotalPx(e) > threshold) continue;
       const auto v = static_cast<view_id_t>(PairOf(e) % num_views_);
       const std::span<const PointQ> pts = db_.points(v);
       const double n = static_cast<double>(pts.size());
@@ -955,7 +1031,9 @@ class QueryRun {
         sum += fast ? grid.SumLowerBoundsFast(chunk, m.flip) : grid.SumLowerBounds(chunk, m.flip);
       }
       const double mean = sum / n;
-      lb_[e] = BoundBelow(mean - DistanceGrid::MeanLowerBoundMargin(pts.size(), mean) - m.gap_px);
+      lb_[e] = std::max(
+          lb_[e],
+          BoundBelow(mean - DistanceGrid::MeanLowerBoundMargin(pts.size(), mean) - m.gap_px));
       ++bounded;
     }
     grid_bounded_.fetch_add(bounded, std::memory_order_relaxed);
@@ -1032,6 +1110,8 @@ class QueryRun {
   std::span<const int32_t> max_abs_;
   float grid_half_extent_px_;
   const CoarseFields* coarse_;
+  const ViewHistograms* view_histograms_;  // nullptr: no coarse B bound
+  SlotFields slot_fields_;
   const SearchOptions& options_;
   const int threads_;
   ThreadPool* const pool_;
@@ -1129,6 +1209,7 @@ Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
                y_sorted_,
                grid_half_extent_px_,
                options.coarse_bound && !coarse_.empty() ? &coarse_ : nullptr,
+               options.coarse_bound && !view_histograms_.empty() ? &view_histograms_ : nullptr,
                query_px,
                options,
                threads,

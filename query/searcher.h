@@ -150,7 +150,8 @@ class Searcher {
   // Half extent of the per-roll distance grids: the largest |x|, |y| of any view (px), so every
   // view's points are on the grid (the fast path) and no node is computed that no view reads.
   float grid_half_extent_px_ = 0;
-  CoarseFields coarse_;  // per view: the A bound's coarse field
+  CoarseFields coarse_;             // per view: the A bound's coarse field
+  ViewHistograms view_histograms_;  // per view: its points per coarse cell (the coarse B bound)
   std::shared_ptr<const ViewIndex> index_;
 };
 
