@@ -721,9 +721,9 @@ class QueryRun {
 
   // Step 1 of indexed search (SearchMode::kIndexed): Bounds() over the candidate pairs only
   // (s * num_views + v, any order, repeats allowed), each an entry of la_ / lb_ in increasing
-  // pair order: the slots of the grid groups holding candidates prepared, L_A per pair (the same
-  // exact integer sum as the streaming product, so the same bound), the threshold seeded from
-  // them, then L_B from the groups' grids. Refine() then gives the exact top-k among the
+  // pair order: the slots of the grid groups holding candidates prepared with their coarse
+  // fields, L_A and L_Bc per pair (the same exact integer sums as the streaming products, so the
+  // same bounds), the threshold seeded from them, then L_B from the groups' grids. Refine() then gives the exact top-k among the
   // candidates; with every pair a candidate, exactly the result of Bounds() and Refine().
   void BoundCandidates(std::vector<uint32_t> pairs) {
     std::sort(pairs.begin(), pairs.end());
@@ -737,9 +737,11 @@ class QueryRun {
     // Every slot of a group holding a candidate: FineBounds builds the grid from the group's base
     // and measures each member's gap to it.
     std::vector<size_t> prepare;
+    std::vector<std::vector<GridMember>> used_groups;
     for (const std::vector<GridMember>& group : MakeGridGroups(num_slots(), num_rolls_)) {
       if (GroupEntries(group) == 0) continue;
       for (const GridMember& m : group) prepare.push_back(m.slot);
+      used_groups.push_back(group);
     }
     ParallelFor(
         prepare.size(),
@@ -749,11 +751,29 @@ class QueryRun {
           return true;
         },
         pool_);
+    if (view_histograms_ != nullptr) {
+      slot_fields_.Reset(num_slots());
+      ParallelFor(
+          used_groups.size(),
+          threads_,
+          [&](size_t j, int) {
+            const std::vector<GridMember>& group = used_groups[j];
+            slot_fields_.Compute(group[0].slot, ctx_.rolled(group[0].slot));
+            CopyMembers(group);
+            return true;
+          },
+          pool_);
+    }
     ParallelFor(
         pairs_.size(),
         threads_,
         [&](size_t e, int) {
-          la_[e] = PairCoarseBound(pairs_[e] % num_views_, pairs_[e] / num_views_);
+          const size_t v = pairs_[e] % num_views_;
+          const size_t s = pairs_[e] / num_views_;
+          la_[e] = PairCoarseBound(v, s);
+          if (view_histograms_ != nullptr && la_[e] != kNoBound) {
+            lb_[e] = CoarseBBound(view_histograms_->PairSum(v, slot_fields_, s), v);
+          }
           return true;
         },
         pool_);
@@ -883,28 +903,37 @@ class QueryRun {
     slot_fields_.Reset(num_slots());
     const size_t quarter = num_rolls_ % 4 == 0 ? num_rolls_ / 4 : 0;
     const size_t computed = quarter > 0 ? quarter : groups.size();
-    auto copy_members = [&](const std::vector<GridMember>& group) {
-      const size_t base = group[0].slot;
-      for (size_t i = 1; i < group.size(); ++i) {
-        const GridMember& m = group[i];
-        slot_fields_.CopyFlipped(base, m.slot, m.flip, ctx_.FlipGap(base, m.slot, m.flip));
-      }
-    };
     ParallelFor(
         computed,
         threads_,
         [&](size_t g, int) {
           const size_t base = groups[g][0].slot;
           slot_fields_.Compute(base, ctx_.rolled(base));
-          copy_members(groups[g]);
+          CopyMembers(groups[g]);
           if (quarter > 0) {
             const size_t turned = groups[g + quarter][0].slot;
             slot_fields_.CopyQuarterTurned(base, turned, ctx_.QuarterTurnGap(base, turned));
-            copy_members(groups[g + quarter]);
+            CopyMembers(groups[g + quarter]);
           }
           return true;
         },
         pool_);
+  }
+
+  // The fields of a grid group's members from its base's: flipped, less their gaps.
+  void CopyMembers(const std::vector<GridMember>& group) {
+    const size_t base = group[0].slot;
+    for (size_t i = 1; i < group.size(); ++i) {
+      const GridMember& m = group[i];
+      slot_fields_.CopyFlipped(base, m.slot, m.flip, ctx_.FlipGap(base, m.slot, m.flip));
+    }
+  }
+
+  // L_Bc from its exact integer sum (1/2 px) for view v: floor(64 sum / 2 / |Y_v|).
+  Bound CoarseBBound(uint64_t sum, size_t v) const {
+    const uint64_t ny = db_.points(static_cast<view_id_t>(v)).size();
+    const uint64_t units = sum * static_cast<uint64_t>(kBoundUnitsPerPx / 2) / ny;
+    return static_cast<Bound>(std::min<uint64_t>(units, kBoundMax));
   }
 
   // L_Bc of views [v0, v1) for every slot into lb_: sum_c n_v(c) G_s(c) / 2 / |Y_v| px, an exact
@@ -916,11 +945,7 @@ class QueryRun {
       const size_t ny = db_.points(static_cast<view_id_t>(v)).size();
       if (ny == 0) continue;
       view_histograms_->Sums(v, slot_fields_, sums.data());
-      for (size_t s = 0; s < num_slots(); ++s) {
-        const uint64_t units =
-            static_cast<uint64_t>(sums[s]) * static_cast<uint64_t>(kBoundUnitsPerPx / 2) / ny;
-        lb_[s * num_views_ + v] = static_cast<Bound>(std::min<uint64_t>(units, kBoundMax));
-      }
+      for (size_t s = 0; s < num_slots(); ++s) lb_[s * num_views_ + v] = CoarseBBound(sums[s], v);
     }
   }
 
