@@ -113,6 +113,7 @@ constexpr ptrdiff_t kNeighbourOffsets[8] = {-CoarseGrid::kSide - 1,
 
 #ifdef HANDDB_HAVE_AVX2_PATH
 // Entry i's term for 32 views of a block: max(F(c), F(n_k) -sat g_ik) per view, bytes.
+template <bool kNeighbours>
 __attribute__((target("avx2"))) inline __m256i EntryValues(const uint8_t* plane,
                                                            const CellHistogram& h,
                                                            size_t i,
@@ -120,7 +121,7 @@ __attribute__((target("avx2"))) inline __m256i EntryValues(const uint8_t* plane,
   constexpr auto kBlock = static_cast<ptrdiff_t>(CoarseFields::kBlock);
   const uint8_t* row = plane + static_cast<size_t>(h.cells()[i]) * CoarseFields::kBlock + j;
   __m256i best = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(row));
-  if (!h.interior(i)) return best;
+  if (!kNeighbours || !h.interior(i)) return best;
   const uint8_t* g = h.gaps(i);
   for (int k = 0; k < 8; ++k) {
     const __m256i n =
@@ -141,61 +142,76 @@ __attribute__((target("avx2"))) inline void AddWeighted(
                          _mm256_madd_epi16(_mm256_cvtepu8_epi16(_mm_unpackhi_epi8(a, b)), counts));
 }
 
-// Two entries at a time, 32 views per step.
-__attribute__((target("avx2"))) void BlockSumsAvx2(const uint8_t* plane,
-                                                   const CellHistogram& h,
-                                                   uint32_t* out) {
-  constexpr size_t kBlock = CoarseFields::kBlock;
-  const uint16_t* counts = h.counts().data();
-  const size_t num_cells = h.num_cells();
-  for (size_t j = 0; j < kBlock; j += 32) {
-    __m256i acc[4] = {_mm256_setzero_si256(),
-                      _mm256_setzero_si256(),
-                      _mm256_setzero_si256(),
-                      _mm256_setzero_si256()};
-    for (size_t i = 0; i < num_cells; i += 2) {
-      const bool pair = i + 1 < num_cells;
-      const __m256i a = EntryValues(plane, h, i, j);
-      const __m256i b = pair ? EntryValues(plane, h, i + 1, j) : _mm256_setzero_si256();
-      const __m256i n = _mm256_set1_epi32(static_cast<int>(counts[i]) |
-                                          (pair ? static_cast<int>(counts[i + 1]) << 16 : 0));
-      AddWeighted(_mm256_castsi256_si128(a), _mm256_castsi256_si128(b), n, &acc[0], &acc[1]);
-      AddWeighted(
-          _mm256_extracti128_si256(a, 1), _mm256_extracti128_si256(b, 1), n, &acc[2], &acc[3]);
-    }
-    for (int q = 0; q < 4; ++q) {
-      _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + j + 8 * static_cast<size_t>(q)), acc[q]);
-    }
+// out[l] = sum_i count_i * byte l of entries.Values(i), for the 32 lanes l, over `n` entries:
+// two entries per madd.
+template <typename Entries>
+__attribute__((target("avx2"))) inline void WeightedSums32(const Entries& entries,
+                                                           size_t n,
+                                                           uint32_t* out) {
+  __m256i acc[4] = {_mm256_setzero_si256(),
+                    _mm256_setzero_si256(),
+                    _mm256_setzero_si256(),
+                    _mm256_setzero_si256()};
+  for (size_t i = 0; i < n; i += 2) {
+    const bool pair = i + 1 < n;
+    const __m256i a = entries.Values(i);
+    const __m256i b = pair ? entries.Values(i + 1) : _mm256_setzero_si256();
+    const __m256i counts =
+        _mm256_set1_epi32(static_cast<int>(entries.Count(i)) |
+                          (pair ? static_cast<int>(entries.Count(i + 1)) << 16 : 0));
+    AddWeighted(_mm256_castsi256_si128(a), _mm256_castsi256_si128(b), counts, &acc[0], &acc[1]);
+    AddWeighted(
+        _mm256_extracti128_si256(a, 1), _mm256_extracti128_si256(b, 1), counts, &acc[2], &acc[3]);
+  }
+  for (int q = 0; q < 4; ++q) {
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + 8 * static_cast<size_t>(q)), acc[q]);
   }
 }
 
-// ViewHistograms::Sums: two entries at a time, 32 slots per step.
+// L_A's entries for 32 views (from view j of the block).
+template <bool kNeighbours>
+struct BlockEntries {
+  const uint8_t* plane;
+  const CellHistogram& h;
+  size_t j;
+  __attribute__((target("avx2"))) __m256i Values(size_t i) const {
+    return EntryValues<kNeighbours>(plane, h, i, j);
+  }
+  uint32_t Count(size_t i) const { return h.counts()[i]; }
+};
+
+// 32 views per step (the steps whose bit is set in `groups`).
+template <bool kNeighbours>
+__attribute__((target("avx2"))) void BlockSumsAvx2(const uint8_t* plane,
+                                                   const CellHistogram& h,
+                                                   unsigned groups,
+                                                   uint32_t* out) {
+  for (size_t j = 0; j < CoarseFields::kBlock; j += 32) {
+    if ((groups >> (j / 32) & 1) == 0) continue;
+    WeightedSums32(BlockEntries<kNeighbours>{plane, h, j}, h.num_cells(), out + j);
+  }
+}
+
+// L_Bc's entries (a view's cells and counts) for 32 slots (from slot j).
+struct ViewEntries {
+  const uint16_t* cells;
+  const uint8_t* counts;
+  const SlotFields& fields;
+  size_t j;
+  __attribute__((target("avx2"))) __m256i Values(size_t i) const {
+    return _mm256_loadu_si256(reinterpret_cast<const __m256i*>(fields.row(cells[i]) + j));
+  }
+  uint32_t Count(size_t i) const { return counts[i]; }
+};
+
+// ViewHistograms::Sums: 32 slots per step.
 __attribute__((target("avx2"))) void ViewSumsAvx2(const uint16_t* cells,
                                                   const uint8_t* counts,
                                                   size_t num_entries,
                                                   const SlotFields& fields,
                                                   uint32_t* out) {
   for (size_t j = 0; j < fields.stride(); j += 32) {
-    __m256i acc[4] = {_mm256_setzero_si256(),
-                      _mm256_setzero_si256(),
-                      _mm256_setzero_si256(),
-                      _mm256_setzero_si256()};
-    for (size_t i = 0; i < num_entries; i += 2) {
-      const bool pair = i + 1 < num_entries;
-      const __m256i a =
-          _mm256_loadu_si256(reinterpret_cast<const __m256i*>(fields.row(cells[i]) + j));
-      const __m256i b =
-          pair ? _mm256_loadu_si256(reinterpret_cast<const __m256i*>(fields.row(cells[i + 1]) + j))
-               : _mm256_setzero_si256();
-      const __m256i n = _mm256_set1_epi32(static_cast<int>(counts[i]) |
-                                          (pair ? static_cast<int>(counts[i + 1]) << 16 : 0));
-      AddWeighted(_mm256_castsi256_si128(a), _mm256_castsi256_si128(b), n, &acc[0], &acc[1]);
-      AddWeighted(
-          _mm256_extracti128_si256(a, 1), _mm256_extracti128_si256(b, 1), n, &acc[2], &acc[3]);
-    }
-    for (int q = 0; q < 4; ++q) {
-      _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + j + 8 * static_cast<size_t>(q)), acc[q]);
-    }
+    WeightedSums32(ViewEntries{cells, counts, fields, j}, num_entries, out + j);
   }
 }
 #endif
@@ -263,22 +279,33 @@ uint64_t CoarseFields::PairSum(const CellHistogram& histogram, size_t v) const {
   return sum;
 }
 
-void CoarseFields::BlockSums(const CellHistogram& histogram, size_t block, uint32_t* out) const {
+void CoarseFields::BlockSums(const CellHistogram& histogram,
+                             size_t block,
+                             uint32_t* out,
+                             bool neighbours,
+                             unsigned groups) const {
   THROW_CHECK_LT(block, num_blocks());
   const uint8_t* plane = planes_.data() + block * CoarseGrid::kCells * kBlock;
 #ifdef HANDDB_HAVE_AVX2_PATH
   if (HaveAvx2()) {
-    BlockSumsAvx2(plane, histogram, out);
+    if (neighbours) {
+      BlockSumsAvx2<true>(plane, histogram, groups, out);
+    } else {
+      BlockSumsAvx2<false>(plane, histogram, groups, out);
+    }
     return;
   }
 #endif
-  std::fill(out, out + kBlock, 0u);
+  for (size_t j = 0; j < kBlock; ++j) {
+    if ((groups >> (j / 32) & 1) != 0) out[j] = 0;
+  }
   for (size_t i = 0; i < histogram.num_cells(); ++i) {
     const uint8_t* row = plane + static_cast<size_t>(histogram.cells()[i]) * kBlock;
     const uint8_t* g = histogram.gaps(i);
     for (size_t j = 0; j < kBlock; ++j) {
+      if ((groups >> (j / 32) & 1) == 0) continue;
       int best = row[j];
-      if (histogram.interior(i)) {
+      if (neighbours && histogram.interior(i)) {
         for (int k = 0; k < 8; ++k) {
           best = std::max(best,
                           row[kNeighbourOffsets[k] * static_cast<ptrdiff_t>(kBlock) +

@@ -162,8 +162,9 @@ TEST(CoarseBound, PointBoundIsBelowTheExactDistanceAndAboveTheCellValue) {
 }
 
 // L_A's streaming product is PairSum exactly, for every view of a full and a partial block (views
-// past the end get 0); PairSum lies between the cell-only sum of n(c) F_v(c) and the sum of the
-// points' own bounds (CoarseFields::PointLowerBound), which the exact distances exceed
+// past the end get 0), and without the neighbour terms the cell-only sum; only the groups of 32
+// views asked for are written; PairSum lies between the cell-only sum of n(c) F_v(c) and the sum of
+// the points' own bounds (CoarseFields::PointLowerBound), which the exact distances exceed
 // (PointBoundIsBelowTheExactDistanceAndAboveTheCellValue). A cell holding more than kMaxCount
 // points (listed more than once) is covered, and so are points on the grid's border cells and
 // off the grid.
@@ -179,9 +180,17 @@ TEST(CoarseBound, BlockSumsArePairSumsBetweenTheCellAndThePointBounds) {
   CellHistogram hist;
   hist.Build(query);
   std::vector<uint32_t> sums(CoarseFields::kBlock);
+  std::vector<uint32_t> cell_sums(CoarseFields::kBlock);
+  std::vector<uint32_t> some(CoarseFields::kBlock, 7);
   uint64_t tighter = 0;
   for (size_t b = 0; b < fields.num_blocks(); ++b) {
     fields.BlockSums(hist, b, sums.data());
+    fields.BlockSums(hist, b, cell_sums.data(), /*neighbours=*/false);
+    // Only the groups of 32 views asked for are written.
+    fields.BlockSums(hist, b, some.data(), /*neighbours=*/true, /*groups=*/0b0101);
+    for (size_t i = 0; i < CoarseFields::kBlock; ++i) {
+      ASSERT_EQ(some[i], (i / 32) % 2 == 0 ? sums[i] : 7u) << "block " << b << " view " << i;
+    }
     for (size_t i = 0; i < CoarseFields::kBlock; ++i) {
       const size_t v = b * CoarseFields::kBlock + i;
       if (v >= fields.num_views()) {
@@ -200,6 +209,7 @@ TEST(CoarseBound, BlockSumsArePairSumsBetweenTheCellAndThePointBounds) {
       ASSERT_GE(pair, cell_only) << "view " << v;
       ASSERT_LE(pair, point_bounds) << "view " << v;
       ASSERT_EQ(hist.Sum([&](int c) { return fields.value(v, c); }), cell_only);
+      ASSERT_EQ(cell_sums[i], cell_only) << "view " << v;
       tighter += pair > cell_only;
     }
   }

@@ -690,11 +690,12 @@ class QueryRun {
 
   // Step 1: lower bounds of every pair, L = L_A + L_B (docs/query.md).
   //  a. Every slot's rolled query, coarse histogram and coarse field.
-  //  b. L_A of every pair: per block of views, one streaming product per slot (CoarseFields);
-  //     and the coarse B bound L_Bc of the same views, one product per view for all slots
-  //     (ViewHistograms), into lb_.
+  //  b. The cell-only L_A of every pair: per block of views, one streaming product per slot
+  //     (CoarseFields); and the coarse B bound L_Bc of the same views, one product per view for
+  //     all slots (ViewHistograms), into lb_.
   //  c. The threshold seeded: the pairs with the smallest L_A + L_Bc scored exactly, so that it
-  //     is near the final k-th best before any distance grid is built.
+  //     is near the final k-th best before any distance grid is built. Then L_A with the
+  //     neighbour terms, only for the groups of 32 views that hold a pair still at or below it.
   //  d. Per grid group (up to four slots sharing one distance transform), most promising first:
   //     L_B for the pairs whose L_A + L_Bc is still <= the k-th best, stopped as soon as L_A +
   //     L_B exceeds it (lb_ keeps the larger of L_Bc and L_B), then each slot's best two pairs
@@ -715,7 +716,10 @@ class QueryRun {
         pool_);
     if (view_histograms_ != nullptr) PrepareSlotFields();
     CoarseBounds();
-    if (coarse_ != nullptr) Seed();
+    if (coarse_ != nullptr) {
+      Seed();
+      NeighbourBounds();
+    }
     FineBounds();
   }
 
@@ -723,8 +727,9 @@ class QueryRun {
   // (s * num_views + v, any order, repeats allowed), each an entry of la_ / lb_ in increasing
   // pair order: the slots of the grid groups holding candidates prepared with their coarse
   // fields, L_A and L_Bc per pair (the same exact integer sums as the streaming products, so the
-  // same bounds), the threshold seeded from them, then L_B from the groups' grids. Refine() then gives the exact top-k among the
-  // candidates; with every pair a candidate, exactly the result of Bounds() and Refine().
+  // same bounds), the threshold seeded from them, then L_B from the groups' grids. Refine() then
+  // gives the exact top-k among the candidates; with every pair a candidate, exactly the result of
+  // Bounds() and Refine().
   void BoundCandidates(std::vector<uint32_t> pairs) {
     std::sort(pairs.begin(), pairs.end());
     pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
@@ -847,15 +852,19 @@ class QueryRun {
     return n;
   }
 
+  // L_A of a slot from its exact integer sum (1/2 px): floor(64 sum / 2 / |Q_s|).
+  Bound CoarseABound(uint64_t sum, size_t s) const {
+    const uint64_t nq = ctx_.rolled(s).size();
+    const uint64_t units = sum * static_cast<uint64_t>(kBoundUnitsPerPx / 2) / nq;
+    return static_cast<Bound>(std::min<uint64_t>(units, kBoundMax));
+  }
+
   // L_A of one pair as CoarseBounds() computes it (kNoBound for a view without points, 0 without
   // coarse fields): sum_c n(c) F_v(c) is the same exact integer as the streaming product's.
   Bound PairCoarseBound(size_t v, size_t s) const {
     if (db_.points(static_cast<view_id_t>(v)).empty()) return kNoBound;
     if (coarse_ == nullptr) return 0;
-    const uint64_t sum = coarse_->PairSum(ctx_.histogram(s), v);
-    const uint64_t nq = ctx_.rolled(s).size();
-    const uint64_t units = sum * static_cast<uint64_t>(kBoundUnitsPerPx / 2) / nq;
-    return static_cast<Bound>(std::min<uint64_t>(units, kBoundMax));
+    return CoarseABound(coarse_->PairSum(ctx_.histogram(s), v), s);
   }
 
   // L_A of every pair into la_ (kNoBound for views without points), or 0 without coarse fields.
@@ -869,29 +878,57 @@ class QueryRun {
       }
       return;
     }
+    ForEachViewBlock([&](size_t b, size_t v0, size_t v1, uint32_t* sums) {
+      for (size_t s = 0; s < num_slots(); ++s) {
+        coarse_->BlockSums(ctx_.histogram(s), b, sums, /*neighbours=*/false);
+        for (size_t v = v0; v < v1; ++v) {
+          la_[s * num_views_ + v] = db_.points(static_cast<view_id_t>(v)).empty()
+                                        ? kNoBound
+                                        : CoarseABound(sums[v - v0], s);
+        }
+      }
+      if (view_histograms_ != nullptr) CoarseBBounds(v0, v1);
+    });
+  }
+
+  // fn(block, v0, v1, sums) for every block of views [v0, v1) of the coarse fields, in
+  // parallel, with a scratch array of kBlock sums.
+  template <typename Fn>
+  void ForEachViewBlock(Fn fn) {
     ParallelFor(
         coarse_->num_blocks(),
         threads_,
         [&](size_t b, int) {
           std::array<uint32_t, CoarseFields::kBlock> sums;
           const size_t v0 = b * CoarseFields::kBlock;
-          const size_t v1 = std::min(num_views_, v0 + CoarseFields::kBlock);
-          for (size_t s = 0; s < num_slots(); ++s) {
-            coarse_->BlockSums(ctx_.histogram(s), b, sums.data());
-            const uint64_t nq = ctx_.rolled(s).size();
-            Bound* out = la_.data() + s * num_views_;
-            for (size_t v = v0; v < v1; ++v) {
-              const uint64_t units = static_cast<uint64_t>(sums[v - v0]) *
-                                     static_cast<uint64_t>(kBoundUnitsPerPx / 2) / nq;
-              out[v] = db_.points(static_cast<view_id_t>(v)).empty()
-                           ? kNoBound
-                           : static_cast<Bound>(std::min<uint64_t>(units, kBoundMax));
-            }
-          }
-          if (view_histograms_ != nullptr) CoarseBBounds(v0, v1);
+          fn(b, v0, std::min(num_views_, v0 + CoarseFields::kBlock), sums.data());
           return true;
         },
         pool_);
+  }
+
+  // L_A with the neighbour terms for the groups of 32 views of each block and slot that hold a
+  // pair still at or below the k-th best after the seed; the others keep the cell-only L_A of
+  // CoarseBounds (a smaller bound, and their pairs are already above the k-th best, which only
+  // falls). On real photos ~70-90% of the groups are skipped.
+  void NeighbourBounds() {
+    ForEachViewBlock([&](size_t b, size_t v0, size_t v1, uint32_t* sums) {
+      for (size_t s = 0; s < num_slots(); ++s) {
+        const double threshold = top_.threshold();
+        unsigned groups = 0;
+        for (size_t v = v0; v < v1; ++v) {
+          const size_t e = s * num_views_ + v;
+          if (la_[e] != kNoBound && TotalPx(e) <= threshold) groups |= 1u << ((v - v0) / 32);
+        }
+        if (groups == 0) continue;
+        coarse_->BlockSums(ctx_.histogram(s), b, sums, /*neighbours=*/true, groups);
+        for (size_t v = v0; v < v1; ++v) {
+          const size_t e = s * num_views_ + v;
+          if (la_[e] == kNoBound || (groups >> ((v - v0) / 32) & 1) == 0) continue;
+          la_[e] = std::max(la_[e], CoarseABound(sums[v - v0], s));
+        }
+      }
+    });
   }
 
   // Every slot's coarse field (SlotFields), one ComputeCoarseField per R/4 rolls: with R a
