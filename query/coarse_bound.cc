@@ -437,16 +437,6 @@ ViewHistograms::ViewHistograms(const Database& db, int num_threads) {
   }
 }
 
-uint64_t ViewHistograms::PairSum(size_t v, const SlotFields& fields, size_t s) const {
-  THROW_CHECK_LT(v, num_views());
-  THROW_CHECK_LT(s, fields.num_slots());
-  uint64_t sum = 0;
-  for (size_t i = begin_[v]; i < begin_[v + 1]; ++i) {
-    sum += static_cast<uint64_t>(counts_[i]) * fields.value(s, cells_[i]);
-  }
-  return sum;
-}
-
 void ViewHistograms::Sums(size_t v, const SlotFields& fields, uint32_t* out) const {
   THROW_CHECK_LT(v, num_views());
   const uint16_t* cells = cells_.data() + begin_[v];

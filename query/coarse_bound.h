@@ -210,8 +210,6 @@ class ViewHistograms {
   // sum_c n_v(c) G_s(c) in 1/2 px (exact integer) for every slot: out[s] for s < fields.stride()
   // (padding slots get 0).
   void Sums(size_t v, const SlotFields& fields, uint32_t* out) const;
-  // The same sum for one slot (scalar; indexed search's few thousand candidate pairs).
-  uint64_t PairSum(size_t v, const SlotFields& fields, size_t s) const;
 
  private:
   std::vector<uint64_t> begin_;  // num_views + 1 entry offsets

@@ -725,9 +725,10 @@ class QueryRun {
 
   // Step 1 of indexed search (SearchMode::kIndexed): Bounds() over the candidate pairs only
   // (s * num_views + v, any order, repeats allowed), each an entry of la_ / lb_ in increasing
-  // pair order: the slots of the grid groups holding candidates prepared with their coarse
-  // fields, L_A and L_Bc per pair (the same exact integer sums as the streaming products, so the
-  // same bounds), the threshold seeded from them, then L_B from the groups' grids. Refine() then
+  // pair order: the slots of the grid groups holding candidates prepared, L_A per pair (the same
+  // exact integer sum as the streaming product, so the same bound), the threshold seeded from
+  // them, then L_B from the groups' grids. (No L_Bc: measured no faster on a few thousand
+  // candidates, docs/query.md.) Refine() then
   // gives the exact top-k among the candidates; with every pair a candidate, exactly the result of
   // Bounds() and Refine().
   void BoundCandidates(std::vector<uint32_t> pairs) {
@@ -742,11 +743,9 @@ class QueryRun {
     // Every slot of a group holding a candidate: FineBounds builds the grid from the group's base
     // and measures each member's gap to it.
     std::vector<size_t> prepare;
-    std::vector<std::vector<GridMember>> used_groups;
     for (const std::vector<GridMember>& group : MakeGridGroups(num_slots(), num_rolls_)) {
       if (GroupEntries(group) == 0) continue;
       for (const GridMember& m : group) prepare.push_back(m.slot);
-      used_groups.push_back(group);
     }
     ParallelFor(
         prepare.size(),
@@ -756,29 +755,11 @@ class QueryRun {
           return true;
         },
         pool_);
-    if (view_histograms_ != nullptr) {
-      slot_fields_.Reset(num_slots());
-      ParallelFor(
-          used_groups.size(),
-          threads_,
-          [&](size_t j, int) {
-            const std::vector<GridMember>& group = used_groups[j];
-            slot_fields_.Compute(group[0].slot, ctx_.rolled(group[0].slot));
-            CopyMembers(group);
-            return true;
-          },
-          pool_);
-    }
     ParallelFor(
         pairs_.size(),
         threads_,
         [&](size_t e, int) {
-          const size_t v = pairs_[e] % num_views_;
-          const size_t s = pairs_[e] / num_views_;
-          la_[e] = PairCoarseBound(v, s);
-          if (view_histograms_ != nullptr && la_[e] != kNoBound) {
-            lb_[e] = CoarseBBound(view_histograms_->PairSum(v, slot_fields_, s), v);
-          }
+          la_[e] = PairCoarseBound(pairs_[e] % num_views_, pairs_[e] / num_views_);
           return true;
         },
         pool_);
