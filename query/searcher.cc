@@ -301,30 +301,32 @@ class QueryContext {
   // rolled query is from the base's, flipped, point by point (both are the query's points in the
   // same order). 0 unless a coordinate sits on a rounding tie.
   double FlipGap(size_t base, size_t member, GridFlip flip) const {
-    const std::vector<PointQ>& a = rolled_[base];
-    const std::vector<PointQ>& b = rolled_[member];
-    THROW_CHECK_EQ(a.size(), b.size());
     const int64_t sx = flip == GridFlip::kX || flip == GridFlip::kXY ? -1 : 1;
     const int64_t sy = flip == GridFlip::kY || flip == GridFlip::kXY ? -1 : 1;
-    int64_t worst = 0;
-    for (size_t i = 0; i < a.size(); ++i) {
-      const int64_t dx = b[i].x - sx * a[i].x;
-      const int64_t dy = b[i].y - sy * a[i].y;
-      worst = std::max(worst, dx * dx + dy * dy);
-    }
-    return worst == 0 ? 0.0 : std::sqrt(static_cast<double>(worst)) / kPointScale * (1 + 1e-12);
+    return MappedGap(base, member, [sx, sy](PointQ p) {
+      return std::pair<int64_t, int64_t>{sx * p.x, sy * p.y};
+    });
   }
 
-  // max_i |rolled(member)[i] - T(rolled(base)[i])| (px) for the quarter turn T(x, y) = (y, -x),
-  // rounded up: roll r + R/4 is roll r turned by T up to the two quantisations.
+  // The same for the quarter turn T(x, y) = (y, -x): roll r + R/4 is roll r turned by T up to
+  // the two quantisations.
   double QuarterTurnGap(size_t base, size_t member) const {
+    return MappedGap(base, member, [](PointQ p) {
+      return std::pair<int64_t, int64_t>{p.y, -static_cast<int64_t>(p.x)};
+    });
+  }
+
+  // max_i |rolled(member)[i] - map(rolled(base)[i])| in px, rounded up.
+  template <typename Map>
+  double MappedGap(size_t base, size_t member, Map map) const {
     const std::vector<PointQ>& a = rolled_[base];
     const std::vector<PointQ>& b = rolled_[member];
     THROW_CHECK_EQ(a.size(), b.size());
     int64_t worst = 0;
     for (size_t i = 0; i < a.size(); ++i) {
-      const int64_t dx = b[i].x - a[i].y;
-      const int64_t dy = b[i].y + a[i].x;
+      const auto [mx, my] = map(a[i]);
+      const int64_t dx = b[i].x - mx;
+      const int64_t dy = b[i].y - my;
       worst = std::max(worst, dx * dx + dy * dy);
     }
     return worst == 0 ? 0.0 : std::sqrt(static_cast<double>(worst)) / kPointScale * (1 + 1e-12);
@@ -554,7 +556,11 @@ Searcher::Searcher(std::shared_ptr<const Database> db) : db_(std::move(db)) {
   grid_half_extent_px_ =
       std::clamp(static_cast<float>(db_max_abs) / kPointScale + 1.0f, 8.0f, 2000.0f);
   coarse_ = CoarseFields(*db_, -1);
-  view_histograms_ = ViewHistograms(*db_, -1);
+}
+
+const ViewHistograms& Searcher::view_histograms() const {
+  std::call_once(view_histograms_once_, [this] { view_histograms_ = ViewHistograms(*db_, -1); });
+  return view_histograms_;
 }
 
 Searcher::~Searcher() = default;
@@ -727,10 +733,9 @@ class QueryRun {
   // (s * num_views + v, any order, repeats allowed), each an entry of la_ / lb_ in increasing
   // pair order: the slots of the grid groups holding candidates prepared, L_A per pair (the same
   // exact integer sum as the streaming product, so the same bound), the threshold seeded from
-  // them, then L_B from the groups' grids. (No L_Bc: measured no faster on a few thousand
-  // candidates, docs/query.md.) Refine() then
-  // gives the exact top-k among the candidates; with every pair a candidate, exactly the result of
-  // Bounds() and Refine().
+  // them, then L_B from the groups' grids (no L_Bc: measured no faster on a few thousand
+  // candidates, docs/query.md). Refine() then gives the exact top-k among the candidates; with
+  // every pair a candidate, exactly the result of Bounds() and Refine().
   void BoundCandidates(std::vector<uint32_t> pairs) {
     std::sort(pairs.begin(), pairs.end());
     pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
@@ -1252,7 +1257,9 @@ Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
                y_sorted_,
                grid_half_extent_px_,
                options.coarse_bound && !coarse_.empty() ? &coarse_ : nullptr,
-               options.coarse_bound && !view_histograms_.empty() ? &view_histograms_ : nullptr,
+               options.coarse_bound && !coarse_.empty() && !indexed && !options.brute_force
+                   ? &view_histograms()
+                   : nullptr,
                query_px,
                options,
                threads,

@@ -16,6 +16,7 @@
 #include <chrono>
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <span>
 #include <string>
 #include <string_view>
@@ -150,8 +151,12 @@ class Searcher {
   // Half extent of the per-roll distance grids: the largest |x|, |y| of any view (px), so every
   // view's points are on the grid (the fast path) and no node is computed that no view reads.
   float grid_half_extent_px_ = 0;
-  CoarseFields coarse_;             // per view: the A bound's coarse field
-  ViewHistograms view_histograms_;  // per view: its points per coarse cell (the coarse B bound)
+  CoarseFields coarse_;  // per view: the A bound's coarse field
+  // Per view: its points per coarse cell (the coarse B bound), built by the first exact pruned
+  // search (indexed and brute-force searches never read them).
+  const ViewHistograms& view_histograms() const;
+  mutable std::once_flag view_histograms_once_;
+  mutable ViewHistograms view_histograms_;
   std::shared_ptr<const ViewIndex> index_;
 };
 
