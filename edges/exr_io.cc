@@ -1,10 +1,21 @@
 #include "edges/exr_io.h"
 
-#include <OpenImageIO/filesystem.h>
-#include <OpenImageIO/imageio.h>
+#include <Imath/half.h>
+#include <OpenEXR/ImfChannelList.h>
+#include <OpenEXR/ImfCompression.h>
+#include <OpenEXR/ImfFrameBuffer.h>
+#include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfIO.h>
+#include <OpenEXR/ImfInputPart.h>
+#include <OpenEXR/ImfMultiPartInputFile.h>
+#include <OpenEXR/ImfOutputFile.h>
+#include <OpenEXR/ImfTestFile.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <exception>
+#include <fstream>
 #include <memory>
 #include <sstream>
 #include <system_error>
@@ -22,6 +33,10 @@ bool EndsWith(const std::string& s, const std::string& suffix) {
          s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
 
+// Far above any label render (256-1024 px); a header claiming more is refused before any
+// allocation.
+constexpr int64_t kMaxExrSide = 8192;
+
 std::string OneLine(std::string s) {
   std::replace(s.begin(), s.end(), '\n', ' ');
   while (!s.empty() && s.back() == ' ') s.pop_back();
@@ -32,10 +47,68 @@ Status Error(StatusCode code, const fs::path& path, const std::string& what) {
   return Status(code, path.string() + ": " + what);
 }
 
+// An OpenEXR output stream into memory: the file is encoded first, then written atomically.
+class MemoryOStream : public Imf::OStream {
+ public:
+  MemoryOStream() : Imf::OStream("memory") {}
+  void write(const char c[], int n) override {
+    const size_t end = pos_ + static_cast<size_t>(n);
+    if (end > bytes_.size()) bytes_.resize(end);
+    std::memcpy(bytes_.data() + pos_, c, static_cast<size_t>(n));
+    pos_ = end;
+  }
+  uint64_t tellp() override { return pos_; }
+  void seekp(uint64_t pos) override { pos_ = static_cast<size_t>(pos); }
+  const std::string& bytes() const { return bytes_; }
+
+ private:
+  std::string bytes_;
+  size_t pos_ = 0;
+};
+
+// The compression named as OIIO and Blender name it ("zip", "piz", "none", ...).
+bool ParseCompression(const std::string& name, Imf::Compression* out) {
+  static const std::pair<const char*, Imf::Compression> kNames[] = {
+      {"none", Imf::NO_COMPRESSION},
+      {"rle", Imf::RLE_COMPRESSION},
+      {"zips", Imf::ZIPS_COMPRESSION},
+      {"zip", Imf::ZIP_COMPRESSION},
+      {"piz", Imf::PIZ_COMPRESSION},
+      {"pxr24", Imf::PXR24_COMPRESSION},
+      {"b44", Imf::B44_COMPRESSION},
+      {"b44a", Imf::B44A_COMPRESSION},
+      {"dwaa", Imf::DWAA_COMPRESSION},
+      {"dwab", Imf::DWAB_COMPRESSION},
+  };
+  for (const auto& [n, c] : kNames) {
+    if (name == n) {
+      *out = c;
+      return true;
+    }
+  }
+  return false;
+}
+
 std::string FormatFloat(float v) {
   std::ostringstream os;
   os << v;
   return os.str();
+}
+
+// What a file that is not an EXR looks like, from its first bytes, for the error message.
+std::string SniffFormat(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  unsigned char m[8] = {};
+  in.read(reinterpret_cast<char*>(m), sizeof m);
+  const auto n = in.gcount();
+  if (n >= 8 && std::memcmp(m, "\x89PNG\r\n\x1a\n", 8) == 0) return "a PNG image";
+  if (n >= 3 && m[0] == 0xFF && m[1] == 0xD8 && m[2] == 0xFF) return "a JPEG image";
+  if (n >= 4 && (std::memcmp(m, "II*\0", 4) == 0 || std::memcmp(m, "MM\0*", 4) == 0)) {
+    return "a TIFF image";
+  }
+  if (n >= 2 && m[0] == 'B' && m[1] == 'M') return "a BMP image";
+  if (n == 0) return "an empty file";
+  return "no EXR magic number";
 }
 
 }  // namespace
@@ -52,48 +125,50 @@ Result<LabelImage> ReadLabelExr(const fs::path& path, const ExrReadOptions& opti
   if (!fs::is_regular_file(path, ec)) {
     return Error(StatusCode::kNotFound, path, "no such file");
   }
-  std::unique_ptr<OIIO::ImageInput> in = OIIO::ImageInput::open(path.string());
-  if (!in) {
-    return Error(
-        StatusCode::kBadImage, path, "cannot read as an EXR image: " + OneLine(OIIO::geterror()));
-  }
-  if (std::string(in->format_name()) != "openexr") {
-    in->close();
+  if (!Imf::isOpenExrFile(path.c_str())) {
     return Error(StatusCode::kBadImage,
                  path,
-                 std::string("not an OpenEXR file (detected ") + in->format_name() + ")");
+                 "cannot read as an EXR image: not an OpenEXR file (" + SniffFormat(path) + ")");
   }
-  // Blender writes one part; look through every subimage in case a tool split the layers.
-  int label_sub = -1, label_ch = -1, depth_sub = -1, depth_ch = -1;
+  // OpenEXR reports every problem by exception: an unreadable header is kBadImage, pixel data
+  // that cannot be read kTruncated.
+  std::unique_ptr<Imf::MultiPartInputFile> file;
+  try {
+    file = std::make_unique<Imf::MultiPartInputFile>(path.c_str());
+  } catch (const std::exception& e) {
+    return Error(StatusCode::kBadImage, path, "cannot read as an EXR image: " + OneLine(e.what()));
+  }
+  // Blender writes one part; look through every part in case a tool split the layers.
+  int label_part = -1, depth_part = -1;
+  std::string label_name, depth_name;
   std::vector<std::string> all_channels;
-  for (int sub = 0; in->seek_subimage(sub, 0); ++sub) {
-    const OIIO::ImageSpec& spec = in->spec();
-    for (int c = 0; c < spec.nchannels; ++c) {
-      const std::string& name = spec.channelnames[c];
+  for (int part = 0; part < file->parts(); ++part) {
+    const Imf::ChannelList& channels = file->header(part).channels();
+    for (auto it = channels.begin(); it != channels.end(); ++it) {
+      const std::string name = it.name();
       all_channels.push_back(name);
-      if (label_ch < 0 && EndsWith(name, kLabelChannelSuffix)) {
-        label_sub = sub;
-        label_ch = c;
+      if (label_part < 0 && EndsWith(name, kLabelChannelSuffix)) {
+        label_part = part;
+        label_name = name;
       }
-      if (depth_ch < 0 && EndsWith(name, kDepthChannelSuffix)) {
-        depth_sub = sub;
-        depth_ch = c;
+      if (depth_part < 0 && EndsWith(name, kDepthChannelSuffix)) {
+        depth_part = part;
+        depth_name = name;
       }
     }
   }
-  (void)in->geterror();  // seeking past the last subimage sets an error we do not care about
   auto channel_list = [&] {
     std::string s;
     for (const auto& c : all_channels) s += (s.empty() ? "" : ", ") + c;
     return s.empty() ? std::string("none") : s;
   };
-  if (label_ch < 0) {
+  if (label_part < 0) {
     return Error(StatusCode::kBadImage,
                  path,
                  std::string("no label channel ending in '") + kLabelChannelSuffix +
                      "' (channels: " + channel_list() + ")");
   }
-  if (options.require_depth && depth_ch < 0) {
+  if (options.require_depth && depth_part < 0) {
     return Error(StatusCode::kBadImage,
                  path,
                  std::string("no depth channel ending in '") + kDepthChannelSuffix +
@@ -101,50 +176,72 @@ Result<LabelImage> ReadLabelExr(const fs::path& path, const ExrReadOptions& opti
   }
 
   LabelImage image;
-  auto read_channel = [&](int sub, int ch, std::vector<float>* out) -> Status {
-    if (!in->seek_subimage(sub, 0)) {
-      return Error(StatusCode::kBadImage, path, "cannot seek to part " + std::to_string(sub));
-    }
-    const OIIO::ImageSpec& spec = in->spec();
-    if (spec.x != 0 || spec.y != 0 || spec.width != spec.full_width ||
-        spec.height != spec.full_height || spec.depth != 1) {
+  auto read_channel = [&](int part, const std::string& name, std::vector<float>* out) -> Status {
+    const Imf::Header& header = file->header(part);
+    const Imath::Box2i data = header.dataWindow();
+    const Imath::Box2i display = header.displayWindow();
+    const int64_t width = int64_t{data.max.x} - data.min.x + 1;
+    const int64_t height = int64_t{data.max.y} - data.min.y + 1;
+    const int64_t full_width = int64_t{display.max.x} - display.min.x + 1;
+    const int64_t full_height = int64_t{display.max.y} - display.min.y + 1;
+    if (data.min.x != 0 || data.min.y != 0 || width != full_width || height != full_height) {
       return Error(StatusCode::kSizeMismatch,
                    path,
-                   "data window " + std::to_string(spec.width) + "x" + std::to_string(spec.height) +
-                       "+" + std::to_string(spec.x) + "+" + std::to_string(spec.y) +
-                       " is not the full display window " + std::to_string(spec.full_width) + "x" +
-                       std::to_string(spec.full_height));
+                   "data window " + std::to_string(width) + "x" + std::to_string(height) + "+" +
+                       std::to_string(data.min.x) + "+" + std::to_string(data.min.y) +
+                       " is not the full display window " + std::to_string(full_width) + "x" +
+                       std::to_string(full_height));
     }
-    if ((options.expected_width > 0 && spec.width != options.expected_width) ||
-        (options.expected_height > 0 && spec.height != options.expected_height)) {
+    if ((options.expected_width > 0 && width != options.expected_width) ||
+        (options.expected_height > 0 && height != options.expected_height)) {
       return Error(StatusCode::kSizeMismatch,
                    path,
-                   "image is " + std::to_string(spec.width) + "x" + std::to_string(spec.height) +
+                   "image is " + std::to_string(width) + "x" + std::to_string(height) +
                        ", expected " + std::to_string(options.expected_width) + "x" +
                        std::to_string(options.expected_height));
     }
-    if (image.width == 0) {
-      image.width = spec.width;
-      image.height = spec.height;
-    } else if (image.width != spec.width || image.height != spec.height) {
-      return Error(StatusCode::kSizeMismatch, path, "label and depth parts differ in size");
-    }
-    if (spec.width <= 0 || spec.height <= 0) {
+    if (width <= 0 || height <= 0) {
       return Error(StatusCode::kSizeMismatch, path, "empty image");
     }
-    out->resize(static_cast<size_t>(spec.width) * static_cast<size_t>(spec.height));
-    if (!in->read_image(sub, 0, ch, ch + 1, OIIO::TypeDesc::FLOAT, out->data())) {
+    if (width > kMaxExrSide || height > kMaxExrSide) {
+      return Error(StatusCode::kSizeMismatch,
+                   path,
+                   "image is " + std::to_string(width) + "x" + std::to_string(height) +
+                       ", larger than a label render can be (" + std::to_string(kMaxExrSide) +
+                       " px per side)");
+    }
+    if (image.width == 0) {
+      image.width = static_cast<int>(width);
+      image.height = static_cast<int>(height);
+    } else if (image.width != width || image.height != height) {
+      return Error(StatusCode::kSizeMismatch, path, "label and depth parts differ in size");
+    }
+    const Imf::Channel& channel = header.channels()[name];
+    if (channel.xSampling != 1 || channel.ySampling != 1) {
+      return Error(StatusCode::kBadImage, path, "channel " + name + " is subsampled");
+    }
+    out->assign(static_cast<size_t>(width) * static_cast<size_t>(height), 0.0f);
+    try {
+      Imf::InputPart in(*file, part);
+      Imf::FrameBuffer frame;
+      frame.insert(name,
+                   Imf::Slice(Imf::FLOAT,
+                              reinterpret_cast<char*>(out->data()),
+                              sizeof(float),
+                              sizeof(float) * static_cast<size_t>(width)));
+      in.setFrameBuffer(frame);
+      in.readPixels(data.min.y, data.max.y);
+    } catch (const std::exception& e) {
       return Error(StatusCode::kTruncated,
                    path,
-                   "pixel data unreadable (truncated or corrupt): " + OneLine(in->geterror()));
+                   "pixel data unreadable (truncated or corrupt): " + OneLine(e.what()));
     }
     return Status::Ok();
   };
 
   std::vector<float> label_values;
-  HANDDB_RETURN_IF_ERROR(read_channel(label_sub, label_ch, &label_values));
-  if (depth_ch >= 0) HANDDB_RETURN_IF_ERROR(read_channel(depth_sub, depth_ch, &image.depth));
-  in->close();
+  HANDDB_RETURN_IF_ERROR(read_channel(label_part, label_name, &label_values));
+  if (depth_part >= 0) HANDDB_RETURN_IF_ERROR(read_channel(depth_part, depth_name, &image.depth));
 
   image.labels.resize(label_values.size());
   for (size_t i = 0; i < label_values.size(); ++i) {
@@ -188,35 +285,43 @@ Status WriteLabelExr(const fs::path& path,
   }
   if (image.has_depth()) names.push_back(options.layer + "." + kDepthChannelSuffix);
   names.push_back(options.layer + "." + kLabelChannelSuffix);
-  const size_t nch = names.size();
-  OIIO::ImageSpec spec(image.width,
-                       image.height,
-                       static_cast<int>(nch),
-                       options.half ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::FLOAT);
-  spec.channelnames = names;
-  spec.alpha_channel = -1;
-  spec.z_channel = -1;
-  spec.attribute("compression", options.compression);
-  std::vector<float> pixels(n * nch, 0.0f);
-  for (size_t i = 0; i < n; ++i) {
-    float* px = &pixels[i * nch + nch - 1];
-    *px = image.labels[i];
-    if (image.has_depth()) px[-1] = image.depth[i];
+  Imf::Compression compression = Imf::ZIP_COMPRESSION;
+  if (!ParseCompression(options.compression, &compression)) {
+    return Error(StatusCode::kInvalidArgument,
+                 path,
+                 "unknown EXR compression '" + options.compression + "'");
   }
-  std::vector<unsigned char> bytes;
-  OIIO::Filesystem::IOVecOutput proxy(bytes);
-  std::unique_ptr<OIIO::ImageOutput> out = OIIO::ImageOutput::create("openexr");
-  if (!out)
-    return Error(StatusCode::kIoError, path, "no OpenEXR writer: " + OneLine(OIIO::geterror()));
-  if (!out->set_ioproxy(&proxy)) {
-    return Error(StatusCode::kIoError, path, "OpenEXR writer cannot write to memory");
+  // One plane per channel, in the file's pixel type (OpenEXR converts types only when reading).
+  std::vector<std::vector<float>> planes(names.size(), std::vector<float>(n, 0.0f));
+  for (size_t i = 0; i < n; ++i) planes.back()[i] = image.labels[i];
+  if (image.has_depth()) planes[names.size() - 2] = image.depth;
+  std::vector<std::vector<Imath::half>> half_planes;
+  if (options.half) {
+    for (const std::vector<float>& plane : planes) {
+      half_planes.emplace_back(plane.begin(), plane.end());
+    }
   }
-  if (!out->open(path.string(), spec) || !out->write_image(OIIO::TypeDesc::FLOAT, pixels.data()) ||
-      !out->close()) {
-    return Error(StatusCode::kIoError, path, "EXR encoding failed: " + OneLine(out->geterror()));
+  MemoryOStream stream;
+  try {
+    Imf::Header header(image.width, image.height);
+    header.compression() = compression;
+    Imf::FrameBuffer frame;
+    const Imf::PixelType type = options.half ? Imf::HALF : Imf::FLOAT;
+    const size_t bytes = options.half ? sizeof(Imath::half) : sizeof(float);
+    for (size_t c = 0; c < names.size(); ++c) {
+      header.channels().insert(names[c], Imf::Channel(type));
+      char* base = options.half ? reinterpret_cast<char*>(half_planes[c].data())
+                                : reinterpret_cast<char*>(planes[c].data());
+      frame.insert(names[c],
+                   Imf::Slice(type, base, bytes, bytes * static_cast<size_t>(image.width)));
+    }
+    Imf::OutputFile out(stream, header, /*numThreads=*/1);
+    out.setFrameBuffer(frame);
+    out.writePixels(image.height);
+  } catch (const std::exception& e) {
+    return Error(StatusCode::kIoError, path, "EXR encoding failed: " + OneLine(e.what()));
   }
-  return WriteFileAtomic(
-      path, std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
+  return WriteFileAtomic(path, stream.bytes());
 }
 
 }  // namespace handdb

@@ -1,6 +1,6 @@
 #include "generator/convert/converter.h"
 
-#include <OpenImageIO/imageio.h>
+#include <OpenEXR/ImfThreading.h>
 #include <unistd.h>
 #include <xxhash.h>
 
@@ -350,7 +350,7 @@ Result<RunContext> LoadRunContext(const fs::path& render_dir, const ConvertOptio
   ctx.exr_options.expected_width = ctx.plan.resolution;
   ctx.exr_options.expected_height = ctx.plan.resolution;
   // Parallelism is across views; OpenEXR's own pool would only add hand-offs on small images.
-  OIIO::attribute("exr_threads", -1);
+  Imf::setGlobalThreadCount(0);
 
   return ctx;
 }
