@@ -2,7 +2,6 @@
 
 #include <gtest/gtest.h>
 
-#include <algorithm>
 #include <cmath>
 #include <random>
 #include <vector>
@@ -144,16 +143,6 @@ TEST(CoarseBound, PointBoundIsBelowTheExactDistanceAndAboveTheCellValue) {
   for (view_id_t v = 0; v < db.num_views(); v += 7) {
     ComputeCoarseField(db.points(v), want.data());
     for (int c = 0; c < CoarseGrid::kCells; ++c) ASSERT_EQ(fields.value(v, c), want[c]);
-    // The nine values around every cell (border cells too) read the same from the row-major
-    // field (the shard's section, as the scans read it) and from the cell-major copy.
-    for (int c = 0; c < CoarseGrid::kCells; ++c) {
-      uint8_t from_copy[9];
-      uint8_t from_field[9];
-      fields.NeighbourValues(v, c, from_copy);
-      CoarseFields::RowMajorNeighbourValues(want.data(), c, from_field);
-      ASSERT_TRUE(std::equal(from_copy, from_copy + 9, from_field))
-          << "view " << v << " cell " << c;
-    }
     for (const PointQ& q : RandomPoints(&rng, 2000, 180 * 16)) {
       const int bound = fields.PointLowerBound(v, q);
       const double exact =
