@@ -253,23 +253,6 @@ void CoarseFields::NeighbourValuesAtBorder(size_t v, int cell, uint8_t out[9]) c
   out[8] = f[static_cast<size_t>(cell) * kBlock];
 }
 
-void CoarseFields::RowMajorNeighbourValuesAtBorder(const uint8_t* field, int cell, uint8_t out[9]) {
-  constexpr int kSide = CoarseGrid::kSide;
-  THROW_CHECK(cell >= 0 && cell < CoarseGrid::kCells);
-  const int ix = cell % kSide;
-  const int iy = cell / kSide;
-  int k = 0;
-  for (int dy = -1; dy <= 1; ++dy) {
-    for (int dx = -1; dx <= 1; ++dx) {
-      if (dx == 0 && dy == 0) continue;
-      const int x = ix + dx;
-      const int y = iy + dy;
-      out[k++] = x < 0 || y < 0 || x >= kSide || y >= kSide ? 0 : field[y * kSide + x];
-    }
-  }
-  out[8] = field[cell];
-}
-
 int CoarseFields::PointLowerBound(size_t v, PointQ q) const {
   const int cell = CoarseGrid::CellOf(q);
   if (cell < 0) return 0;

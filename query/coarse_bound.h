@@ -144,31 +144,8 @@ class CoarseFields {
     out[7] = f[kRow + kCol];
     out[8] = f[0];
   }
-  // The same from one view's row-major field (kCells bytes, format/coarse_field.h), e.g. the
-  // shard's own section: its nine values share a few cache lines, where the cell-major copy
-  // puts each value of one view on its own line (the per-pair scans read them this way).
-  static void RowMajorNeighbourValues(const uint8_t* field, int cell, uint8_t out[9]) {
-    constexpr int kSide = CoarseGrid::kSide;
-    const int ix = cell % kSide;
-    const int iy = cell / kSide;
-    if (ix == 0 || iy == 0 || ix == kSide - 1 || iy == kSide - 1) {
-      RowMajorNeighbourValuesAtBorder(field, cell, out);
-      return;
-    }
-    const uint8_t* f = field + cell;
-    out[0] = f[-kSide - 1];
-    out[1] = f[-kSide];
-    out[2] = f[-kSide + 1];
-    out[3] = f[-1];
-    out[4] = f[1];
-    out[5] = f[kSide - 1];
-    out[6] = f[kSide];
-    out[7] = f[kSide + 1];
-    out[8] = f[0];
-  }
 
  private:
-  static void RowMajorNeighbourValuesAtBorder(const uint8_t* field, int cell, uint8_t out[9]);
   void NeighbourValuesAtBorder(size_t v, int cell, uint8_t out[9]) const;
   size_t num_views_ = 0;
   size_t computed_views_ = 0;

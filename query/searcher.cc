@@ -425,9 +425,7 @@ class QueryContext {
     for (size_t offset = 0; offset < step; ++offset) {
       for (size_t i = offset; i < q.size(); i += step) {
         if (window && cells[i] >= 0) {
-          // F_v(cell), read by PointBounds into the scratch (entry 8 of the point's cell).
-          const uint8_t centre = scan_neighbours_[worker][16 * point_entries_[s][i] + 8];
-          d2[i] = rows->NearestSquared(q[i], view, NearestWithin(centre));
+          d2[i] = rows->NearestSquared(q[i], view, NearestWithin(coarse_->value(v, cells[i])));
         } else if (window) {
           d2[i] = NearestSquaredSmall(q[i], view);
         } else {
@@ -455,15 +453,8 @@ class QueryContext {
     const std::vector<uint16_t>& distinct = distinct_cells_[s];
     std::vector<uint8_t>& nb = scan_neighbours_[worker];
     nb.resize(16 * distinct.size());
-    // The shard's row-major field where it has one: a view's values in the cell-major copy are
-    // kBlock bytes apart, one cache miss each (measured: most of a refined pair's cost).
-    if (const uint8_t* field = db_.coarse_field(v); field != nullptr) {
-      for (size_t k = 0; k < distinct.size(); ++k)
-        CoarseFields::RowMajorNeighbourValues(field, distinct[k], &nb[16 * k]);
-    } else {
-      for (size_t k = 0; k < distinct.size(); ++k)
-        coarse_->NeighbourValues(v, distinct[k], &nb[16 * k]);
-    }
+    for (size_t k = 0; k < distinct.size(); ++k)
+      coarse_->NeighbourValues(v, distinct[k], &nb[16 * k]);
     const uint16_t* entries = point_entries_[s].data();
     const uint8_t* gaps = point_gaps_[s].data();
     uint64_t sum = 0;
