@@ -33,8 +33,8 @@ bool EndsWith(const std::string& s, const std::string& suffix) {
          s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
 
-// Far above any label render (256-1024 px); a header claiming more is refused before any
-// allocation.
+// The largest resolution a render plan allows (schemas/render_plan.schema.json); a header
+// claiming more is refused before any allocation.
 constexpr int64_t kMaxExrSide = 8192;
 
 std::string OneLine(std::string s) {
