@@ -162,11 +162,12 @@ int Run(const Args& args) {
   exact.num_threads = args.threads;
   exact.top_k = 10;
   std::printf(
-      "top-10, --hand either, %d threads, nprobe %d (of %d lists); recall@k: share of the "
+      "top-10, --hand either, %d threads, nprobe %d of %d lists%s; recall@k: share of the "
       "exact top-k (view, roll, hand) in the indexed top-k, mean over queries\n",
       args.threads,
-      args.nprobe > 0 ? args.nprobe : ix.default_nprobe(),
-      ix.nlist());
+      args.nprobe > 0 ? std::min(args.nprobe, ix.nlist()) : ix.nlist(),
+      ix.nlist(),
+      args.nprobe > 0 ? "" : " (every view, one batched scan)");
   const long rss_before = PeakRssKb();
   for (const QuerySet& set : sets) {
     if (!set.skipped.empty()) {

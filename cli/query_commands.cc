@@ -183,8 +183,8 @@ void QueryFlags::Add(CLI::App& app) {
       ->capture_default_str();
   app.add_option("--nprobe",
                  search.index.nprobe,
-                 "indexed search: IVF lists searched per rolled query (0: the index's default, "
-                 "lists / 3)")
+                 "indexed search: IVF lists searched per rolled query (0: every view, one "
+                 "batched scan of all rolls)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   app.add_flag("--quiet,-q",

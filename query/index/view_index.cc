@@ -2,7 +2,6 @@
 
 #include <faiss/Clustering.h>
 #include <faiss/IndexFlat.h>
-#include <faiss/IndexIVFFlat.h>
 #include <faiss/impl/FaissException.h>
 #include <omp.h>
 #include <xxhash.h>
@@ -21,6 +20,7 @@
 #include "base/thread_pool.h"
 #include "query/chamfer.h"
 #include "query/database.h"
+#include "query/index/code_scan.h"
 #include "query/index/embedding.h"
 
 namespace handdb {
@@ -230,11 +230,12 @@ Result<ViewIndex> ViewIndex::Build(const Database& db, const IndexBuildOptions& 
     });
   }
 
-  // 3. FAISS IVF: k-means (L2, fixed seed) on the sample, every view in the list of its nearest
-  //    centroid, lists chosen at query time by inner product with the centroids and scanned by
-  //    inner product. (Turning the inner product into L2 with an extra coordinate sqrt(M^2 -
-  //    |z|^2) was tried first: M^2 dwarfs the differences that matter, and the quantizer's
-  //    |x|^2 + |y|^2 - 2<x, y> in float lost them: recall@10 0.02-0.12 at nprobe = lists / 8.)
+  // 3. IVF lists: FAISS's k-means (L2, fixed seed) on the sample, every view in the list of its
+  //    nearest centroid (in increasing view id), lists chosen at query time (--nprobe) by inner
+  //    product with the centroids and scanned by inner product. (Turning the inner product into L2
+  //    with an extra coordinate sqrt(M^2 - |z|^2) was tried first: M^2 dwarfs the differences that
+  //    matter, and the quantizer's |x|^2 + |y|^2 - 2<x, y> in float lost them: recall@10 0.02-0.12
+  //    at nprobe = lists / 8.)
   // FAISS's k-means sums in OpenMP chunks: one thread keeps the result independent of --threads.
   omp_set_num_threads(1);
   try {
@@ -253,13 +254,18 @@ Result<ViewIndex> ViewIndex::Build(const Database& db, const IndexBuildOptions& 
     std::vector<faiss::Index::idx_t> list(n);
     std::vector<float> dist(n);
     assign.search(static_cast<faiss::Index::idx_t>(n), z.data(), 1, dist.data(), list.data());
-    auto* quantizer = new faiss::IndexFlatIP(d);
-    quantizer->add(index.nlist_, clustering.centroids.data());
-    auto ivf = std::make_unique<faiss::IndexIVFFlat>(
-        quantizer, d, index.nlist_, faiss::METRIC_INNER_PRODUCT);
-    ivf->own_fields = true;
-    ivf->add_core(static_cast<faiss::Index::idx_t>(n), z.data(), nullptr, list.data());
-    index.ivf_ = std::move(ivf);
+    std::vector<uint32_t> sizes(static_cast<size_t>(index.nlist_), 0);
+    for (faiss::Index::idx_t l : list) ++sizes[static_cast<size_t>(l)];
+    std::vector<size_t> at(sizes.size(), 0);
+    for (size_t l = 1; l < sizes.size(); ++l) at[l] = at[l - 1] + sizes[l - 1];
+    std::vector<uint32_t> ids(n);
+    std::vector<float> codes(n * static_cast<size_t>(d));
+    for (size_t vi = 0; vi < n; ++vi) {
+      const size_t slot = at[static_cast<size_t>(list[vi])]++;
+      ids[slot] = static_cast<uint32_t>(vi);
+      std::memcpy(codes.data() + slot * d, z.data() + vi * d, sizeof(float) * d);
+    }
+    index.SetLists(std::move(clustering.centroids), std::move(sizes), ids, codes.data());
   } catch (const faiss::FaissException& e) {
     return Status(StatusCode::kInvalidArgument,
                   db.path().string() + ": building the IVF index failed: " + e.what());
@@ -284,23 +290,18 @@ std::string ViewIndex::Serialize() const {
   };
   append(mean_.data(), sizeof(float) * mean_.size());
   append(query_projection_.data(), sizeof(float) * query_projection_.size());
-  const auto* quantizer = dynamic_cast<const faiss::IndexFlat*>(ivf_->quantizer);
-  THROW_CHECK(quantizer != nullptr);
-  append(quantizer->get_xb(), sizeof(float) * d * static_cast<size_t>(nlist_));
-  std::vector<uint32_t> sizes(static_cast<size_t>(nlist_));
+  append(centroids_.data(), sizeof(float) * centroids_.size());
+  const std::vector<uint32_t>& sizes = list_sizes_;
   std::vector<uint32_t> ids;
   std::vector<float> codes;
   ids.reserve(num_views_);
   codes.reserve(num_views_ * d);
   for (size_t l = 0; l < sizes.size(); ++l) {
-    const size_t count = ivf_->invlists->list_size(l);
-    sizes[l] = static_cast<uint32_t>(count);
-    const faiss::Index::idx_t* list_ids = ivf_->invlists->get_ids(l);
-    const auto* list_codes = reinterpret_cast<const float*>(ivf_->invlists->get_codes(l));
-    for (size_t i = 0; i < count; ++i) ids.push_back(static_cast<uint32_t>(list_ids[i]));
-    codes.insert(codes.end(), list_codes, list_codes + count * d);
-    ivf_->invlists->release_ids(l, list_ids);
-    ivf_->invlists->release_codes(l, reinterpret_cast<const uint8_t*>(list_codes));
+    for (size_t slot = list_begin_[l]; slot < list_begin_[l] + sizes[l]; ++slot) {
+      ids.push_back(static_cast<uint32_t>(ids_[slot]));
+      const float* block = codes_.data() + (slot / kCodeLanes) * d * kCodeLanes;
+      for (size_t j = 0; j < d; ++j) codes.push_back(block[j * kCodeLanes + slot % kCodeLanes]);
+    }
   }
   append(sizes.data(), sizeof(uint32_t) * sizes.size());
   append(ids.data(), sizeof(uint32_t) * ids.size());
@@ -489,26 +490,7 @@ Result<ViewIndex> ViewIndex::Parse(std::string_view bytes,
     }
     seen[id] = true;
   }
-  try {
-    auto* quantizer = new faiss::IndexFlatIP(static_cast<int>(d));
-    quantizer->add(static_cast<faiss::Index::idx_t>(lists), centroids.data());
-    auto ivf = std::make_unique<faiss::IndexIVFFlat>(
-        quantizer, static_cast<size_t>(d), static_cast<size_t>(lists), faiss::METRIC_INNER_PRODUCT);
-    ivf->own_fields = true;
-    size_t start = 0;
-    std::vector<faiss::Index::idx_t> list_ids;
-    for (uint64_t l = 0; l < lists; ++l) {
-      list_ids.assign(ids.begin() + static_cast<std::ptrdiff_t>(start),
-                      ids.begin() + static_cast<std::ptrdiff_t>(start + sizes[l]));
-      ivf->invlists->add_entries(
-          l, sizes[l], list_ids.data(), reinterpret_cast<const uint8_t*>(codes.data() + start * d));
-      start += sizes[l];
-    }
-    ivf->ntotal = static_cast<faiss::Index::idx_t>(num_views);
-    index.ivf_ = std::move(ivf);
-  } catch (const faiss::FaissException& e) {
-    return Corrupt(StatusCode::kBadLayout, what, std::string("unusable IVF part: ") + e.what());
-  }
+  index.SetLists(std::move(centroids), std::move(sizes), ids, codes.data());
   return index;
 }
 
@@ -536,57 +518,204 @@ Result<ViewIndex> ViewIndex::Open(const std::filesystem::path& db_dir, const Man
       *bytes, DatabaseFingerprint(manifest), manifest.num_views, manifest.rolls, file.string());
 }
 
+void ViewIndex::SetLists(std::vector<float> centroids,
+                         std::vector<uint32_t> sizes,
+                         const std::vector<uint32_t>& ids,
+                         const float* codes) {
+  const size_t d = static_cast<size_t>(dims_);
+  centroids_ = std::move(centroids);
+  list_sizes_ = std::move(sizes);
+  list_begin_.assign(list_sizes_.size(), 0);
+  size_t slots = 0;
+  for (size_t l = 0; l < list_sizes_.size(); ++l) {
+    list_begin_[l] = slots;
+    slots += (list_sizes_[l] + kCodeLanes - 1) / kCodeLanes * kCodeLanes;
+  }
+  ids_.assign(slots, kInvalidViewId);
+  codes_.assign(slots * d, 0.0f);
+  size_t from = 0;
+  for (size_t l = 0; l < list_sizes_.size(); ++l) {
+    for (size_t i = 0; i < list_sizes_[l]; ++i, ++from) {
+      const size_t slot = list_begin_[l] + i;
+      ids_[slot] = ids[from];
+      float* block = codes_.data() + (slot / kCodeLanes) * d * kCodeLanes;
+      for (size_t j = 0; j < d; ++j)
+        block[j * kCodeLanes + slot % kCodeLanes] = codes[from * d + j];
+    }
+  }
+}
+
+namespace {
+
+// The best `k` candidates seen, as a max-heap under `Before` (its front is the worst kept).
+class TopCandidates {
+ public:
+  explicit TopCandidates(size_t k) : k_(k) { heap_.reserve(k); }
+  static bool Before(const Candidate& x, const Candidate& y) {
+    if (x.score != y.score) return x.score < y.score;
+    if (x.view != y.view) return x.view < y.view;
+    return x.roll < y.roll;
+  }
+  // Inner products below this cannot enter for a query with this offset (s = offset - ip):
+  // a margin far above float rounding keeps the test conservative; Offer() decides exactly.
+  double Floor(double offset) const {
+    if (heap_.size() < k_) return -std::numeric_limits<double>::infinity();
+    const double limit = offset - static_cast<double>(heap_.front().score);
+    return limit - 1e-4 * std::max(1.0, std::abs(limit));
+  }
+  void Offer(const Candidate& c) {
+    if (heap_.size() < k_) {
+      heap_.push_back(c);
+      std::push_heap(heap_.begin(), heap_.end(), Before);
+    } else if (Before(c, heap_.front())) {
+      std::pop_heap(heap_.begin(), heap_.end(), Before);
+      heap_.back() = c;
+      std::push_heap(heap_.begin(), heap_.end(), Before);
+    }
+  }
+  std::vector<Candidate>& items() { return heap_; }
+
+ private:
+  size_t k_;
+  std::vector<Candidate> heap_;
+};
+
+// Views per exhaustive-scan task: the inner products of 96 rolled queries with 512 views (192
+// KB) and the views' codes (128 KB at 64 dimensions) stay in a core's L2.
+constexpr size_t kScanBlocks = 64;
+
+}  // namespace
+
 std::vector<Candidate> ViewIndex::Candidates(std::span<const Point2f> query_px,
                                              const IndexSearchOptions& options) const {
   const int D = grid_.dims();
   const int d = dims_;
   const int threads = Threads(options.num_threads);
   const uint32_t rolls = num_rolls_;
-  const int64_t k =
-      std::min<int64_t>(std::max(1, options.candidates), static_cast<int64_t>(num_views_));
-  faiss::SearchParametersIVF params;
-  params.nprobe =
-      static_cast<size_t>(options.nprobe > 0 ? std::min(options.nprobe, nlist_) : default_nprobe());
-  std::vector<std::vector<Candidate>> per_roll(rolls);
-  // One FAISS search per roll on our own workers, FAISS itself single-threaded: OpenMP workers
-  // spinning after a parallel region took the cores the refine step needs.
+  const size_t k = static_cast<size_t>(std::min<uint64_t>(
+      static_cast<uint64_t>(std::max(1, options.candidates)), num_views_ * rolls));
+
+  // Every rolled query as w_r = -V^T W^-1 u_r and offset_r = <u_r, mu>, so that
+  // s(v, r) = offset_r - <w_r, z_v>.
+  std::vector<float> w(static_cast<size_t>(rolls) * d);
+  std::vector<double> offset(rolls);
   ParallelFor(rolls, threads, [&](size_t r, int) {
-    omp_set_num_threads(1);
     const std::vector<PointQ> rolled =
         RotateAndQuantise(query_px, -RollAngle(static_cast<roll_id_t>(r), rolls));
     std::vector<float> u(D);
     QueryVector(grid_, rolled, weight_, u.data());
-    double offset = 0;
-    for (int j = 0; j < D; ++j) offset += static_cast<double>(u[j]) * mean_[j];
-    std::vector<float> w(d);
+    double o = 0;
+    for (int j = 0; j < D; ++j) o += static_cast<double>(u[j]) * mean_[j];
+    offset[r] = o;
     for (int c = 0; c < d; ++c) {
       const float* row = query_projection_.data() + static_cast<size_t>(c) * D;
       double s = 0;
       for (int j = 0; j < D; ++j) s += static_cast<double>(row[j]) * u[j];
-      w[c] = static_cast<float>(-s);
-    }
-    std::vector<float> ip(k);
-    std::vector<faiss::Index::idx_t> ids(k);
-    ivf_->search(1, w.data(), k, ip.data(), ids.data(), &params);
-    for (int64_t j = 0; j < k; ++j) {
-      if (ids[j] < 0) continue;
-      // s(v, r) = <u, mu> + <P u, z_v> = offset - <w, z_v>.
-      per_roll[r].push_back({static_cast<view_id_t>(ids[j]),
-                             static_cast<roll_id_t>(r),
-                             static_cast<float>(offset - ip[j])});
+      w[r * d + c] = static_cast<float>(-s);
     }
     return true;
   });
-  std::vector<Candidate> all;
-  for (const auto& c : per_roll) all.insert(all.end(), c.begin(), c.end());
-  auto before = [](const Candidate& x, const Candidate& y) {
-    if (x.score != y.score) return x.score < y.score;
-    if (x.view != y.view) return x.view < y.view;
-    return x.roll < y.roll;
+
+  // Each worker keeps its own best k; their union holds the best k overall.
+  std::vector<TopCandidates> best(static_cast<size_t>(threads), TopCandidates(k));
+  // Offers the slots [slot0, slot0 + count) of the inner products ip[q * stride + i] of the
+  // rolled queries `qs`.
+  auto offer = [&](TopCandidates* top,
+                   std::span<const uint32_t> qs,
+                   const float* ip,
+                   size_t stride,
+                   size_t slot0,
+                   size_t count) {
+    for (size_t qi = 0; qi < qs.size(); ++qi) {
+      const uint32_t r = qs[qi];
+      const float* row = ip + qi * stride;
+      // Floor() is conservative by far more than float rounding: a value below the float floor
+      // is below the double one.
+      float floor = static_cast<float>(top->Floor(offset[r]));
+      for (size_t i = NextAtLeast(row, 0, count, floor); i < count;
+           i = NextAtLeast(row, i + 1, count, floor)) {
+        const view_id_t v = ids_[slot0 + i];
+        if (v == kInvalidViewId) continue;
+        top->Offer({v,
+                    static_cast<roll_id_t>(r),
+                    static_cast<float>(offset[r] - static_cast<double>(row[i]))});
+        floor = static_cast<float>(top->Floor(offset[r]));
+      }
+    }
   };
-  const size_t keep = std::min(all.size(), static_cast<size_t>(std::max(1, options.candidates)));
-  std::partial_sort(
-      all.begin(), all.begin() + static_cast<std::ptrdiff_t>(keep), all.end(), before);
+
+  const int nprobe = std::min(options.nprobe, nlist_);
+  const size_t lane = kCodeLanes;
+  const size_t block_floats = static_cast<size_t>(d) * lane;
+  if (nprobe <= 0) {
+    // Every view against every rolled query, a task per kScanBlocks blocks.
+    std::vector<uint32_t> all_rolls(rolls);
+    for (uint32_t r = 0; r < rolls; ++r) all_rolls[r] = r;
+    const size_t blocks = ids_.size() / lane;
+    const size_t tasks = (blocks + kScanBlocks - 1) / kScanBlocks;
+    std::vector<std::vector<float>> scratch(static_cast<size_t>(threads));
+    ParallelFor(tasks, threads, [&](size_t t, int worker) {
+      const size_t b0 = t * kScanBlocks;
+      const size_t nb = std::min(kScanBlocks, blocks - b0);
+      std::vector<float>& ip = scratch[static_cast<size_t>(worker)];
+      ip.resize(static_cast<size_t>(rolls) * nb * lane);
+      CodeInnerProducts(
+          w.data(), static_cast<int>(rolls), codes_.data() + b0 * block_floats, nb, d, ip.data());
+      offer(&best[static_cast<size_t>(worker)],
+            all_rolls,
+            ip.data(),
+            nb * lane,
+            b0 * lane,
+            nb * lane);
+      return true;
+    });
+  } else {
+    // IVF: per rolled query, the nprobe lists of largest <centroid, w_r> (= smallest s at the
+    // centroid; ties: lower list), scanned in list order.
+    std::vector<std::vector<float>> scratch(static_cast<size_t>(threads));
+    ParallelFor(rolls, threads, [&](size_t r, int worker) {
+      const float* wr = w.data() + r * d;
+      std::vector<std::pair<float, uint32_t>> lists(static_cast<size_t>(nlist_));
+      for (size_t l = 0; l < lists.size(); ++l) {
+        const float* c = centroids_.data() + l * d;
+        double s = 0;
+        for (int j = 0; j < d; ++j) s += static_cast<double>(wr[j]) * c[j];
+        lists[l] = {static_cast<float>(s), static_cast<uint32_t>(l)};
+      }
+      std::partial_sort(
+          lists.begin(), lists.begin() + nprobe, lists.end(), [](const auto& x, const auto& y) {
+            return x.first != y.first ? x.first > y.first : x.second < y.second;
+          });
+      std::sort(lists.begin(), lists.begin() + nprobe, [](const auto& x, const auto& y) {
+        return x.second < y.second;
+      });
+      const uint32_t qs[1] = {static_cast<uint32_t>(r)};
+      std::vector<float>& ip = scratch[static_cast<size_t>(worker)];
+      for (int p = 0; p < nprobe; ++p) {
+        const size_t l = lists[static_cast<size_t>(p)].second;
+        const size_t nb = (list_sizes_[l] + lane - 1) / lane;
+        if (nb == 0) continue;
+        ip.resize(nb * lane);
+        CodeInnerProducts(
+            wr, 1, codes_.data() + (list_begin_[l] / lane) * block_floats, nb, d, ip.data());
+        offer(&best[static_cast<size_t>(worker)],
+              qs,
+              ip.data(),
+              nb * lane,
+              list_begin_[l],
+              list_sizes_[l]);
+      }
+      return true;
+    });
+  }
+
+  std::vector<Candidate> all;
+  for (TopCandidates& t : best) all.insert(all.end(), t.items().begin(), t.items().end());
+  const size_t keep = std::min(all.size(), k);
+  std::partial_sort(all.begin(),
+                    all.begin() + static_cast<std::ptrdiff_t>(keep),
+                    all.end(),
+                    TopCandidates::Before);
   all.resize(keep);
   return all;
 }

@@ -7,8 +7,10 @@
 // z_v = V^T W (e_v - mu) with W = E[u u^T]^(1/2), which keeps the inner products with likely
 // queries rather than the vectors themselves (docs/index.md: recall of the two, measured). For a
 // query, every roll r gives u_r = u(Q_r) and the score s(v, r) = <u_r, mu> + <V^T W^-1 u_r, z_v>.
-// The best pairs by s come from a FAISS IVF index over the z_v (k-means lists in L2, searched by
-// inner product), one search per rolled query.
+// The best pairs by s come from a scan of every z_v with all rolled queries at once (a small
+// matrix product, query/index/code_scan.h), or, with nprobe > 0, from an IVF probe: the views
+// are in k-means lists (FAISS's k-means in L2), and each rolled query scans the nprobe lists
+// whose centroids have the largest inner product with it.
 // Refine. Query::Searcher computes the exact D_c of the candidates only (the same bounds, abandon
 // rules and total order as exact search): the result is the exact top-k among the candidates,
 // equal to exact search whenever the true top-k are candidates (recall, measured in bench/).
@@ -19,7 +21,6 @@
 
 #include <cstdint>
 #include <filesystem>
-#include <memory>
 #include <span>
 #include <string>
 #include <vector>
@@ -29,10 +30,6 @@
 #include "format/roll.h"
 #include "format/view.h"
 #include "query/index/embedding.h"
-
-namespace faiss {
-struct IndexIVFFlat;
-}
 
 namespace handdb {
 
@@ -53,7 +50,7 @@ struct IndexBuildOptions {
 
 struct IndexSearchOptions {
   int candidates = 1000;  // (view, roll) pairs handed to the exact refine, per hand searched
-  int nprobe = 0;         // IVF lists searched per rolled query; 0: nlist / 3, at least 1
+  int nprobe = 0;         // IVF lists searched per rolled query; 0: every view, batched
   int num_threads = -1;
 };
 
@@ -97,9 +94,6 @@ class ViewIndex {
   int dims() const { return dims_; }
   const EmbeddingGrid& grid() const { return grid_; }
   int nlist() const { return nlist_; }
-  // A third of the lists: recall@10 1.000 on 20 real photos of the paper database, where an
-  // eighth lost 0.015 (docs/index.md).
-  int default_nprobe() const { return std::max(1, nlist_ / 3); }
   uint64_t num_views() const { return num_views_; }
   uint32_t num_rolls() const { return num_rolls_; }
   uint64_t fingerprint() const { return fingerprint_; }
@@ -116,7 +110,20 @@ class ViewIndex {
   float weight_ = 1;                     // w of query/index/embedding.h
   std::vector<float> mean_;              // grid.dims()
   std::vector<float> query_projection_;  // dims x grid.dims(), row-major: V^T W^-1
-  std::unique_ptr<faiss::IndexIVFFlat> ivf_;
+  // The lists, laid out for CodeInnerProducts: list l's views fill the slots [list_begin_[l],
+  // list_begin_[l] + list_sizes_[l]) of ids_ (in increasing view id), padded with
+  // kInvalidViewId to a multiple of kCodeLanes; codes_ holds the slots' z in blocks of
+  // kCodeLanes (padding zero).
+  std::vector<float> centroids_;  // nlist x dims
+  std::vector<uint32_t> list_sizes_;
+  std::vector<size_t> list_begin_;
+  std::vector<view_id_t> ids_;
+  std::vector<float> codes_;
+  // Lays out the lists from the file's order: sizes per list, then ids and codes list by list.
+  void SetLists(std::vector<float> centroids,
+                std::vector<uint32_t> sizes,
+                const std::vector<uint32_t>& ids,
+                const float* codes);
   double build_seconds_ = 0;
 };
 

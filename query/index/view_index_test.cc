@@ -141,6 +141,56 @@ TEST(ViewIndex, BuildIsDeterministicAndSerialisesRoundTrip) {
   }
 }
 
+// The batched scan of every view (nprobe 0) and the IVF probe of every list compute each inner
+// product the same way: the same candidates and scores, whatever the number of threads.
+TEST(ViewIndex, BatchedScanEqualsTheProbeOfEveryListForAnyThreads) {
+  const std::vector<Point2f> query = Perturbed(101, 9, 3);
+  IndexSearchOptions so;
+  so.candidates = 300;
+  so.num_threads = 1;
+  const auto want = TestIndex().Candidates(query, so);
+  ASSERT_EQ(want.size(), 300u);
+  for (int threads : {1, 2, 3}) {
+    for (int nprobe : {0, 16, 99}) {
+      if (threads == 1 && nprobe == 0) continue;
+      so.num_threads = threads;
+      so.nprobe = nprobe;
+      const auto got = TestIndex().Candidates(query, so);
+      ASSERT_EQ(got.size(), want.size()) << "threads " << threads << " nprobe " << nprobe;
+      for (size_t i = 0; i < got.size(); ++i) {
+        EXPECT_EQ(got[i].view, want[i].view) << i;
+        EXPECT_EQ(got[i].roll, want[i].roll) << i;
+        EXPECT_EQ(got[i].score, want[i].score) << i;
+      }
+    }
+  }
+  // Fewer lists find a subset, each with the same score.
+  so.nprobe = 4;
+  const auto few = TestIndex().Candidates(query, so);
+  ASSERT_EQ(few.size(), 300u);
+  std::set<std::pair<view_id_t, roll_id_t>> seen;
+  for (const Candidate& c : want) seen.insert({c.view, c.roll});
+  size_t shared = 0;
+  for (const Candidate& c : few) shared += seen.count({c.view, c.roll});
+  EXPECT_GT(shared, 0u);
+  EXPECT_LE(few.front().score, few.back().score);
+  EXPECT_GE(few.front().score, want.front().score);
+}
+
+// Asking for more candidates than there are pairs gives every pair once.
+TEST(ViewIndex, AllPairsWhenTheCandidatesExceedThem) {
+  IndexSearchOptions so;
+  so.candidates = static_cast<int>(kViews * kRolls) + 100;
+  const auto all = TestIndex().Candidates(Perturbed(3, 1, 2), so);
+  ASSERT_EQ(all.size(), static_cast<size_t>(kViews) * kRolls);
+  std::set<std::pair<view_id_t, roll_id_t>> seen;
+  for (const Candidate& c : all) {
+    EXPECT_LT(c.view, kViews);
+    seen.insert({c.view, c.roll});
+  }
+  EXPECT_EQ(seen.size(), all.size());
+}
+
 TEST(ViewIndex, ParseRefusesDamagedOrForeignFiles) {
   const Database& db = *TestDatabase();
   const uint64_t fp = DatabaseFingerprint(db.manifest());
