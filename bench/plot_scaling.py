@@ -1,13 +1,14 @@
 #!/usr/bin/python3
 """Latency against database size, from index_bench outputs (issue 12's scaling plot).
 
-Usage: bench/plot_scaling.py OUT.png INDEX_BENCH_OUTPUT.txt [...]
+Usage: bench/plot_scaling.py [--candidates N] OUT.png INDEX_BENCH_OUTPUT.txt [...]
 
 Each input is the stdout of one `index_bench` run on one database. The plot has the number of
 virtual views on a log x axis and the median search latency (ms, wall, 2 threads as run) on a
-log y axis: one line per query set for exact search (solid) and one for indexed search at the
-smallest candidate count of the runs (dashed). Drawn with OpenCV (Debian's python3-opencv), so
-it needs nothing from PyPI. The numbers it read are printed as a table as well.
+log y axis: one line per query set for exact search (solid) and one for indexed search (dashed) at
+--candidates N per hand (default: the smallest candidate count of each run). Drawn with OpenCV
+(Debian's python3-opencv), so it needs nothing from PyPI. The numbers it read are printed as a
+table as well.
 """
 import math
 import os
@@ -26,8 +27,9 @@ COLOURS = {  # BGR
 }
 
 
-def parse(path):
-    """{'views': N, 'exact': {set: ms}, 'indexed': {set: ms}, 'candidates': C}."""
+def parse(path, candidates=None):
+    """{'views': N, 'exact': {set: ms}, 'indexed': {set: ms}, 'candidates': C}: the indexed line
+    of `candidates` per hand, or the first (smallest) when None."""
     with open(path, encoding="utf-8") as f:
         text = f.read()
     m = re.search(r"= (\d+) virtual views", text)
@@ -47,7 +49,7 @@ def parse(path):
             out["exact"][current] = float(m.group(1))
             continue
         m = re.match(r"^\s+indexed C=(\d+)\s+median\s+([\d.]+) ms", line)
-        if m and current not in out["indexed"]:  # the first (smallest) candidate count
+        if m and current not in out["indexed"] and candidates in (None, int(m.group(1))):
             out["indexed"][current] = float(m.group(2))
             out["candidates"] = int(m.group(1))
     if not out["exact"] and not out["indexed"]:
@@ -56,9 +58,15 @@ def parse(path):
 
 
 def main():
-    if len(sys.argv) < 3:
+    argv = sys.argv[1:]
+    candidates = None
+    if argv[:1] == ["--candidates"] and len(argv) >= 2:
+        candidates = int(argv[1])
+        argv = argv[2:]
+    if len(argv) < 2:
         sys.exit(__doc__)
-    runs = sorted((parse(p) for p in sys.argv[2:]), key=lambda r: r["views"])
+    sys.argv = [sys.argv[0]] + argv
+    runs = sorted((parse(p, candidates) for p in argv[1:]), key=lambda r: r["views"])
     print(f"{'virtual views':>14} {'set':<14} {'exact ms':>9} {'indexed ms':>11}")
     for r in runs:
         for s in SETS:

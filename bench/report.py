@@ -422,11 +422,23 @@ def main():
             "`bench/query_bench` on pca-large (1,056,768 virtual views): pruned exact search, the naive "
             "baseline (scaled from 0.1% of the views) and the read floor; brute force is left out "
             "(minutes per query). The query sets as on the paper database, 8 queries each.")
+    section("Indexed search (issue 12)", "index_bench_paper",
+            "`bench/index_bench` on the paper database after `handdb index`: indexed search (the index's "
+            "candidates, then the exact refine) against exact search on the same query sets, with "
+            "recall@1 / @10 against exact search and the candidates refined (docs/index.md).")
+    for size in ("10m", "50m"):
+        if results["steps"].get(f"index_bench_synth_{size}") is not None:
+            section(f"Indexed search at {size[:-1]}M virtual views (synthetic)", f"index_bench_synth_{size}",
+                    f"`bench/synth_db` near-copies of a real database's views, {size[:-1]}M virtual views, "
+                    "indexed and measured like the paper database (`HANDDB_BENCH_SCALE=1`).")
+    if results["steps"].get("plot_scaling") is not None:
+        md += ["![median latency against the number of virtual views](images/latency_vs_size.png)", ""]
     notes = read(os.path.join(out, "notes.md"))
     if notes:
         md += ["", notes.strip()]
     md += ["", "## Reproduce", "", "```", "bench/run.sh                          # paper database",
-           "HANDDB_BENCH_PCA_LARGE=1 bench/run.sh # also pca-large", "```", ""]
+           "HANDDB_BENCH_PCA_LARGE=1 bench/run.sh # also pca-large",
+           "HANDDB_BENCH_SCALE=1 bench/run.sh     # also the 10M / 50M synthetic databases", "```", ""]
     with open(args.markdown + ".tmp", "w") as f:
         f.write("\n".join(md))
     os.replace(args.markdown + ".tmp", args.markdown)

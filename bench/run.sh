@@ -23,6 +23,12 @@
 #             success@(d,n) with the chance baseline, keypoint error, queries/s)
 #   photos    handdb evaluate --photos: the real-photo development set (../shared/photos/asl-digits)
 #             against the paper database: top-1/5/10 shape accuracy, chance, confusion matrix
+#   index     handdb index on the paper database, then bench/index_bench: indexed search against
+#             exact search on the same query sets (latency, recall@1/10, candidates refined)
+#   scale     (HANDDB_BENCH_SCALE=1) issue 12's scaling runs: bench/synth_db makes 10M and 50M
+#             virtual views from pca-large (or the paper database when pca-large is not built),
+#             handdb index, index_bench on each (fewer queries at 50M: exact search takes
+#             seconds there), and bench/plot_scaling.py draws latency against size
 #   report    bench/report.py -> bench/results.json, docs/results.md
 # Databases and test sets are kept in $HANDDB_BENCH_DIR (default /tmp/handdb-bench) and reused by
 # a rerun (generate and testset resume); the benchmarks themselves always run again.
@@ -35,9 +41,12 @@ cd "$here"
 work="${HANDDB_BENCH_DIR:-/tmp/handdb-bench}"
 build="${HANDDB_BENCH_BUILD:-$here/build-bench}"
 jobs="${HANDDB_BENCH_JOBS:-$(nproc)}"
-steps="${HANDDB_BENCH_STEPS:-build format render generate convert query testset evaluate photos report}"
+steps="${HANDDB_BENCH_STEPS:-build format render generate convert query testset evaluate photos index report}"
 if [ "${HANDDB_BENCH_PCA_LARGE:-0}" = 1 ] && [ -z "${HANDDB_BENCH_STEPS:-}" ]; then
   steps="$steps pca_large_generate pca_large_query pca_large_evaluate"
+fi
+if [ "${HANDDB_BENCH_SCALE:-0}" = 1 ] && [ -z "${HANDDB_BENCH_STEPS:-}" ]; then
+  steps="${steps/ report/} scale report"
 fi
 out="$work/out"
 if [ "${HANDDB_BENCH_FRESH:-0}" = 1 ]; then
@@ -74,6 +83,7 @@ if want build; then
   cmake -S "$here" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=Release -DHANDDB_BUILD_TESTS=OFF \
     >"$out/build.txt" 2>&1
   cmake --build "$build" -j "$jobs" --target handdb format_bench convert_bench query_bench \
+    index_bench synth_db \
     >>"$out/build.txt" 2>&1
 fi
 
@@ -146,6 +156,39 @@ if want pca_large_evaluate; then
   stride="${HANDDB_BENCH_PCA_STRIDE:-4}"
   evaluate pca_large_clean "$work/db-pca-large" "$work/ts-paper" clean --stride "$stride"
   evaluate pca_large_photo "$work/db-pca-large" "$work/ts-paper" photo --stride "$stride"
+fi
+
+if want index; then
+  run index_paper "$handdb" index "$work/db-paper" -j "$jobs" -q
+  run index_bench_paper "$build/bench/index_bench" --db "$work/db-paper" --threads "$jobs" \
+    "${sets[@]}" --set-queries 20 --perturbed 10 --candidates 500,1000
+fi
+
+if want scale; then
+  # Synthetic 10M and 50M virtual views (bench/synth_db: near-copies of a real database's views),
+  # each indexed and measured; exact results are cached beside the database, so a rerun times the
+  # indexed search only once more and reuses the exact answers.
+  src="$work/db-pca-large"
+  [ -f "$src/manifest.json" ] || src="$work/db-paper"
+  rolls=$(/usr/bin/python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['rolls'])" \
+    "$src/manifest.json")
+  for size in 10 50; do
+    db="$work/db-synth-${size}m"
+    if [ ! -f "$db/manifest.json" ]; then
+      run synth_${size}m "$build/bench/synth_db" --from "$src" --out "$db" \
+        --views $(((size * 1000000 + rolls - 1) / rolls)) --threads "$jobs"
+      run index_synth_${size}m "$handdb" index "$db" -j "$jobs" -q
+    fi
+    queries=(--set-queries 20 --perturbed 10)
+    [ "$size" = 50 ] && queries=(--set-queries 10 --perturbed 5)
+    run index_bench_synth_${size}m "$build/bench/index_bench" --db "$db" --threads "$jobs" \
+      "${sets[@]}" "${queries[@]}" --candidates 500,1000 --cache "$db/exact-cache.txt"
+  done
+  mkdir -p docs/images
+  inputs=("$out/index_bench_paper.txt")
+  for size in 10 50; do inputs+=("$out/index_bench_synth_${size}m.txt"); done
+  run plot_scaling /usr/bin/python3 bench/plot_scaling.py --candidates 1000 docs/images/latency_vs_size.png \
+    "${inputs[@]}"
 fi
 
 if want report; then
