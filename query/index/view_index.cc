@@ -580,8 +580,8 @@ class TopCandidates {
   std::vector<Candidate> heap_;
 };
 
-// Views per exhaustive-scan task: the inner products of 96 rolled queries with 512 views (192
-// KB) and the views' codes (128 KB at 64 dimensions) stay in a core's L2.
+// Blocks per task of the scan of every view (512 views): their codes (128 KB at 64 dimensions)
+// and their inner products with a hand's 48 rolled queries (96 KB) stay in a core's L2.
 constexpr size_t kScanBlocks = 64;
 
 }  // namespace
