@@ -531,6 +531,16 @@ void ViewIndex::SetLists(std::vector<float> centroids,
     list_begin_[l] = slots;
     slots += (list_sizes_[l] + kCodeLanes - 1) / kCodeLanes * kCodeLanes;
   }
+  // The query side as one more "list" for the same kernel: rows 0..d-1 of V^T W^-1 and row d the
+  // mean, so that one product gives every rolled query's w_r and offset_r.
+  const size_t D = static_cast<size_t>(grid_.dims());
+  const size_t rows = (d + 1 + kCodeLanes - 1) / kCodeLanes * kCodeLanes;
+  query_blocks_.assign(rows * D, 0.0f);
+  for (size_t row = 0; row <= d; ++row) {
+    const float* from_row = row < d ? query_projection_.data() + row * D : mean_.data();
+    float* block = query_blocks_.data() + (row / kCodeLanes) * D * kCodeLanes;
+    for (size_t j = 0; j < D; ++j) block[j * kCodeLanes + row % kCodeLanes] = from_row[j];
+  }
   ids_.assign(slots, kInvalidViewId);
   codes_.assign(slots * d, 0.0f);
   size_t from = 0;
@@ -596,25 +606,30 @@ std::vector<Candidate> ViewIndex::Candidates(std::span<const Point2f> query_px,
       static_cast<uint64_t>(std::max(1, options.candidates)), num_views_ * rolls));
 
   // Every rolled query as w_r = -V^T W^-1 u_r and offset_r = <u_r, mu>, so that
-  // s(v, r) = offset_r - <w_r, z_v>.
-  std::vector<float> w(static_cast<size_t>(rolls) * d);
-  std::vector<double> offset(rolls);
+  // s(v, r) = offset_r - <w_r, z_v>: the query vectors u_r in parallel, then one product with the
+  // projection and the mean (query_blocks_).
+  std::vector<float> u(static_cast<size_t>(rolls) * static_cast<size_t>(D));
   ParallelFor(rolls, threads, [&](size_t r, int) {
     const std::vector<PointQ> rolled =
         RotateAndQuantise(query_px, -RollAngle(static_cast<roll_id_t>(r), rolls));
-    std::vector<float> u(D);
-    QueryVector(grid_, rolled, weight_, u.data());
-    double o = 0;
-    for (int j = 0; j < D; ++j) o += static_cast<double>(u[j]) * mean_[j];
-    offset[r] = o;
-    for (int c = 0; c < d; ++c) {
-      const float* row = query_projection_.data() + static_cast<size_t>(c) * D;
-      double s = 0;
-      for (int j = 0; j < D; ++j) s += static_cast<double>(row[j]) * u[j];
-      w[r * d + c] = static_cast<float>(-s);
-    }
+    QueryVector(grid_, rolled, weight_, u.data() + r * D);
     return true;
   });
+  const size_t query_rows = query_blocks_.size() / static_cast<size_t>(D);
+  std::vector<float> projected(static_cast<size_t>(rolls) * query_rows);
+  CodeInnerProducts(u.data(),
+                    static_cast<int>(rolls),
+                    query_blocks_.data(),
+                    query_rows / kCodeLanes,
+                    D,
+                    projected.data());
+  std::vector<float> w(static_cast<size_t>(rolls) * d);
+  std::vector<double> offset(rolls);
+  for (size_t r = 0; r < rolls; ++r) {
+    const float* row = projected.data() + r * query_rows;
+    for (int c = 0; c < d; ++c) w[r * d + c] = -row[c];
+    offset[r] = row[d];
+  }
 
   // Each worker keeps its own best k; their union holds the best k overall.
   std::vector<TopCandidates> best(static_cast<size_t>(threads), TopCandidates(k));

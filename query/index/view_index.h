@@ -119,7 +119,10 @@ class ViewIndex {
   std::vector<size_t> list_begin_;
   std::vector<view_id_t> ids_;
   std::vector<float> codes_;
-  // Lays out the lists from the file's order: sizes per list, then ids and codes list by list.
+  // query_projection_'s d rows and mean_ as one more row, in blocks of kCodeLanes rows.
+  std::vector<float> query_blocks_;
+  // Lays out the lists from the file's order (sizes per list, then ids and codes list by list)
+  // and query_blocks_ from mean_ and query_projection_, which must be set.
   void SetLists(std::vector<float> centroids,
                 std::vector<uint32_t> sizes,
                 const std::vector<uint32_t>& ids,
