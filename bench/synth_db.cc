@@ -110,7 +110,12 @@ std::string ShardName(uint64_t unit) {
 }
 
 int Main(int argc, char** argv) {
-  const Args args = Parse(argc, argv);
+  Args args;
+  try {
+    args = Parse(argc, argv);
+  } catch (const std::exception&) {  // std::stoull and friends on a malformed number
+    Usage("a number argument is not a number");
+  }
   auto db = Database::Open(args.from);
   if (!db.ok()) {
     std::fprintf(stderr, "synth_db: %s\n", db.status().ToString().c_str());
