@@ -102,6 +102,8 @@ __attribute__((target("avx2,fma"))) void Avx2InnerProducts(
   }
 }
 
+// The first block of 8 from `from` holding a value >= floor: the index of that value, or the
+// start of the last partial block (which the caller scans) when no full block holds one.
 __attribute__((target("avx2"))) size_t NextAtLeastAvx2(const float* values,
                                                        size_t from,
                                                        size_t count,
@@ -112,10 +114,7 @@ __attribute__((target("avx2"))) size_t NextAtLeastAvx2(const float* values,
     const int mask = _mm256_movemask_ps(_mm256_cmp_ps(_mm256_loadu_ps(values + i), f, _CMP_GE_OQ));
     if (mask != 0) return i + static_cast<size_t>(__builtin_ctz(static_cast<unsigned>(mask)));
   }
-  for (; i < count; ++i) {
-    if (values[i] >= floor) return i;
-  }
-  return count;
+  return i;
 }
 #endif
 
@@ -123,7 +122,7 @@ __attribute__((target("avx2"))) size_t NextAtLeastAvx2(const float* values,
 
 size_t NextAtLeast(const float* values, size_t from, size_t count, float floor) {
 #ifdef HANDDB_HAVE_AVX2_PATH
-  if (HaveAvx2()) return NextAtLeastAvx2(values, from, count, floor);
+  if (HaveAvx2()) from = NextAtLeastAvx2(values, from, count, floor);
 #endif
   for (size_t i = from; i < count; ++i) {
     if (values[i] >= floor) return i;

@@ -42,5 +42,23 @@ TEST(CodeInnerProducts, EqualsTheOrderedFusedSumForEveryShape) {
   }
 }
 
+// NextAtLeast against the plain scan, from every start, for lengths around the 8-wide blocks.
+TEST(NextAtLeast, EqualsThePlainScan) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  for (size_t count : {0u, 1u, 7u, 8u, 9u, 16u, 23u, 64u}) {
+    std::vector<float> values(count);
+    for (float& x : values) x = u(rng);
+    for (float floor : {-1.0f, 0.5f, 0.95f, 2.0f}) {
+      for (size_t from = 0; from <= count; ++from) {
+        size_t want = from;
+        while (want < count && values[want] < floor) ++want;
+        ASSERT_EQ(NextAtLeast(values.data(), from, count, floor), want)
+            << "count " << count << " floor " << floor << " from " << from;
+      }
+    }
+  }
+}
+
 }  // namespace
 }  // namespace handdb
