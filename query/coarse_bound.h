@@ -145,6 +145,21 @@ class CoarseFields {
     out[8] = f[0];
   }
 
+  // Hints the cache lines NeighbourValues(v, cell) reads.
+  void PrefetchNeighbours(size_t v, int cell) const {
+    const uint8_t* f = planes_.data() +
+                       ((v / kBlock) * CoarseGrid::kCells + static_cast<size_t>(cell)) * kBlock +
+                       v % kBlock;
+    constexpr ptrdiff_t kRow = CoarseGrid::kSide * static_cast<ptrdiff_t>(kBlock);
+    constexpr ptrdiff_t kCol = kBlock;
+    for (ptrdiff_t r : {-kRow, ptrdiff_t{0}, kRow}) {
+      for (ptrdiff_t c : {-kCol, ptrdiff_t{0}, kCol}) {
+        const ptrdiff_t at = static_cast<ptrdiff_t>(f - planes_.data()) + r + c;
+        if (at >= 0 && static_cast<size_t>(at) < planes_.size()) __builtin_prefetch(f + r + c);
+      }
+    }
+  }
+
  private:
   void NeighbourValuesAtBorder(size_t v, int cell, uint8_t out[9]) const;
   size_t num_views_ = 0;

@@ -47,8 +47,11 @@ class Database {
   uint32_t num_rolls() const { return num_rolls_; }
   uint64_t num_virtual_views() const { return static_cast<uint64_t>(num_views()) * num_rolls_; }
   uint64_t num_points() const { return num_points_; }
-  // Canonical (roll 0) points of view v, zero-copy.
-  std::span<const PointQ> points(view_id_t v) const;
+  // Canonical (roll 0) points of view v, zero-copy. Inline: the search calls it per pair.
+  std::span<const PointQ> points(view_id_t v) const {
+    THROW_CHECK_LT(v, views_.size());
+    return views_[v].points;
+  }
   ViewLabel label(view_id_t v) const;
   // View v's coarse field (format/coarse_field.h) from its shard's v1.1 section, zero-copy, or
   // nullptr when that shard has none (v1.0 shards, FromMemory databases).

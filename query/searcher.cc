@@ -186,6 +186,7 @@ class QueryContext {
         point_entries_(coarse != nullptr ? slots_.size() : 0),
         point_gaps_(coarse != nullptr ? slots_.size() : 0),
         scan_neighbours_(ResolveNumThreads(options.num_threads)),
+        scan_orders_(ResolveNumThreads(options.num_threads)),
         scan_d2_(ResolveNumThreads(options.num_threads)),
         scan_prior_(ResolveNumThreads(options.num_threads)),
         rolled_max_abs_(slots_.size()),
@@ -421,9 +422,11 @@ class QueryContext {
     const bool window = cells != nullptr && y_sorted_[v] != 0;
     const RowIndex* rows = window ? &ViewRows(v, worker) : nullptr;
     const PointBuckets* buckets = window ? nullptr : &ViewBuckets(v, worker);
-    const size_t step = std::max<size_t>(1, q.size() / kScanSpread);
-    for (size_t offset = 0; offset < step; ++offset) {
-      for (size_t i = offset; i < q.size(); i += step) {
+    ScanOrder& order = scan_orders_[worker];
+    order.Fit(q.size());
+    for (size_t j = 0; j < q.size(); ++j) {
+      const uint32_t i = order.index[j];
+      {
         if (window && cells[i] >= 0) {
           d2[i] = rows->NearestSquared(q[i], view, NearestWithin(coarse_->value(v, cells[i])));
         } else if (window) {
@@ -432,11 +435,18 @@ class QueryContext {
           d2[i] =
               buckets->usable() ? buckets->NearestSquared(q[i]) : NearestSquaredSmall(q[i], view);
         }
-        bound += std::sqrt(static_cast<double>(d2[i])) / static_cast<double>(kPointScale) -
-                 static_cast<double>(prior[i]) / CoarseGrid::kValueUnitsPerPx;
-        if (bound > stop) return false;
+        const double gain =
+            std::sqrt(static_cast<double>(d2[i])) / static_cast<double>(kPointScale) -
+            static_cast<double>(prior[i]) / CoarseGrid::kValueUnitsPerPx;
+        bound += gain;
+        order.gain[i] += static_cast<float>(gain);
+        if (bound > stop) {
+          order.Done();
+          return false;
+        }
       }
     }
+    order.Done();
     double sum = 0;
     for (size_t i = 0; i < q.size(); ++i) {
       sum += std::sqrt(static_cast<double>(d2[i])) / static_cast<double>(kPointScale);
@@ -453,6 +463,7 @@ class QueryContext {
     const std::vector<uint16_t>& distinct = distinct_cells_[s];
     std::vector<uint8_t>& nb = scan_neighbours_[worker];
     nb.resize(16 * distinct.size());
+    for (size_t k = 0; k < distinct.size(); ++k) coarse_->PrefetchNeighbours(v, distinct[k]);
     for (size_t k = 0; k < distinct.size(); ++k)
       coarse_->NeighbourValues(v, distinct[k], &nb[16 * k]);
     const uint16_t* entries = point_entries_[s].data();
@@ -504,8 +515,38 @@ class QueryContext {
   std::vector<std::vector<uint8_t>> point_gaps_;
   std::vector<std::vector<uint8_t>> scan_neighbours_;  // per worker: 16 bytes per distinct cell
   static constexpr size_t kScanSpread = 64;            // points in ScanA's first spread-out pass
-  std::vector<std::vector<int32_t>> scan_d2_;          // per worker: ScanA's squared distances
-  std::vector<std::vector<uint8_t>> scan_prior_;       // per worker: ScanA's per-point bounds
+  // The order in which ScanA visits the query's points (per worker): the points that have
+  // raised the bound most over recent scans first. A query point that no view comes near (an
+  // edge of the picture that no rendered hand has) raises every pair's bound, so learning the
+  // order drops a pair after fewer points. Any order gives the same result: the bound stays a
+  // lower bound, and a pair that is not dropped is summed in the query's order.
+  struct ScanOrder {
+    static constexpr uint32_t kResortEvery = 64;
+    std::vector<uint32_t> index;  // visiting order
+    std::vector<float> gain;      // per point: decayed sum of its exact distance less its bound
+    uint32_t scans = 0;
+    // Starts spread out (every step-th point, then the gaps), so the first scans sample the
+    // whole query.
+    void Fit(size_t n) {
+      if (index.size() == n) return;
+      index.clear();
+      const size_t step = std::max<size_t>(1, n / kScanSpread);
+      for (size_t offset = 0; offset < step; ++offset) {
+        for (size_t i = offset; i < n; i += step) index.push_back(static_cast<uint32_t>(i));
+      }
+      gain.assign(n, 0.0f);
+      scans = 0;
+    }
+    void Done() {
+      if (++scans % kResortEvery != 0) return;
+      std::stable_sort(
+          index.begin(), index.end(), [&](uint32_t a, uint32_t b) { return gain[a] > gain[b]; });
+      for (float& g : gain) g *= 0.5f;
+    }
+  };
+  std::vector<ScanOrder> scan_orders_;
+  std::vector<std::vector<int32_t>> scan_d2_;     // per worker: ScanA's squared distances
+  std::vector<std::vector<uint8_t>> scan_prior_;  // per worker: ScanA's per-point bounds
   std::vector<int32_t> rolled_max_abs_;
   std::atomic<uint64_t> probe_abandoned_{0};
   std::vector<std::unique_ptr<KdTree>> query_trees_;
