@@ -13,6 +13,7 @@
 #include <emmintrin.h>
 #endif
 
+#include "base/floor_divider.h"
 #include "base/progress.h"
 #include "base/thread_pool.h"
 #include "query/chamfer.h"
@@ -761,6 +762,7 @@ class QueryRun {
           return true;
         },
         pool_);
+    MakeQueryDividers();
     if (view_histograms_ != nullptr) PrepareSlotFields();
     CoarseBounds();
     if (coarse_ != nullptr) {
@@ -801,6 +803,7 @@ class QueryRun {
           return true;
         },
         pool_);
+    MakeQueryDividers();
     ParallelFor(
         pairs_.size(),
         threads_,
@@ -828,10 +831,12 @@ class QueryRun {
         rest.push_back(i);
       }
     }
-    std::sort(rest.begin(), rest.end(), by_bound);
-    // `rest` bounds the pairs to refine; the visit stops early once bounds pass the k-th best.
+    // `rest` bounds the pairs to refine. They are visited one view at a time (its pairs in
+    // increasing bound, the views by their smallest bound): the pairs of one view read the same
+    // points, row index and coarse-field cache lines, and the seeded k-th best is already near
+    // its final value, so visiting by view refines about the same pairs as visiting by bound.
     const auto progress = MakeProgress("refine", rest.size(), "pairs");
-    Visit(rest, progress.get());
+    VisitByView(std::move(rest), progress.get());
     progress->SetTotal(progress->done());
   }
 
@@ -881,9 +886,16 @@ class QueryRun {
 
   // L_A of a slot from its exact integer sum (1/2 px): floor(64 sum / 2 / |Q_s|).
   Bound CoarseABound(uint64_t sum, size_t s) const {
-    const uint64_t nq = ctx_.rolled(s).size();
-    const uint64_t units = sum * static_cast<uint64_t>(kBoundUnitsPerPx / 2) / nq;
+    const uint64_t units = query_divider_[s](sum * static_cast<uint64_t>(kBoundUnitsPerPx / 2));
     return static_cast<Bound>(std::min<uint64_t>(units, kBoundMax));
+  }
+
+  // Every prepared slot's divider by its point count (CoarseABound), after PrepareSlot.
+  void MakeQueryDividers() {
+    query_divider_.clear();
+    for (size_t s = 0; s < num_slots(); ++s) {
+      query_divider_.emplace_back(std::max<uint64_t>(1, ctx_.rolled(s).size()));
+    }
   }
 
   // L_A of one pair as CoarseBounds() computes it (kNoBound for a view without points, 0 without
@@ -993,10 +1005,10 @@ class QueryRun {
     }
   }
 
-  // L_Bc from its exact integer sum (1/2 px) for view v: floor(64 sum / 2 / |Y_v|).
-  Bound CoarseBBound(uint64_t sum, size_t v) const {
-    const uint64_t ny = db_.points(static_cast<view_id_t>(v)).size();
-    const uint64_t units = sum * static_cast<uint64_t>(kBoundUnitsPerPx / 2) / ny;
+  // L_Bc from its exact integer sum (1/2 px) for a view: floor(64 sum / 2 / |Y_v|), `ny` dividing
+  // by |Y_v|.
+  static Bound CoarseBBound(uint64_t sum, const FloorDivider& ny) {
+    const uint64_t units = ny(sum * static_cast<uint64_t>(kBoundUnitsPerPx / 2));
     return static_cast<Bound>(std::min<uint64_t>(units, kBoundMax));
   }
 
@@ -1009,7 +1021,10 @@ class QueryRun {
       const size_t ny = db_.points(static_cast<view_id_t>(v)).size();
       if (ny == 0) continue;
       view_histograms_->Sums(v, slot_fields_, sums.data());
-      for (size_t s = 0; s < num_slots(); ++s) lb_[s * num_views_ + v] = CoarseBBound(sums[s], v);
+      const FloorDivider divider(ny);
+      for (size_t s = 0; s < num_slots(); ++s) {
+        lb_[s * num_views_ + v] = CoarseBBound(sums[s], divider);
+      }
     }
   }
 
@@ -1169,19 +1184,60 @@ class QueryRun {
           const double bound = TotalPx(i);
           if (bound > threshold) return false;  // every later pair: a larger bound
           if (progress != nullptr) progress->Add();
-          const auto v = static_cast<view_id_t>(PairOf(i) % num_views_);
-          const size_t s = PairOf(i) / num_views_;
-          refined_.fetch_add(1, std::memory_order_relaxed);
-          Scored sc;
-          if (ctx_.Score(v, s, threshold, BoundPx(lb_[i]), worker, &sc)) {
-            sc.lower_bound = bound;
-            top_.Insert(sc);
-          } else {
-            abandoned_.fetch_add(1, std::memory_order_relaxed);
+          ScoreVisited(i, threshold, worker);
+          return true;
+        },
+        pool_);
+  }
+
+  // Scores the pairs of `pairs` whose bound is at or below the k-th best when they are reached,
+  // one view at a time (Refine).
+  void VisitByView(std::vector<uint32_t> pairs, Progress* progress) {
+    auto view_of = [&](uint32_t i) { return PairOf(i) % num_views_; };
+    std::sort(pairs.begin(), pairs.end(), [&](uint32_t x, uint32_t y) {
+      const size_t vx = view_of(x);
+      const size_t vy = view_of(y);
+      return vx != vy ? vx < vy : ByBound(x, y);
+    });
+    // Each view's run of pairs, by the bound of its first (smallest) pair.
+    std::vector<std::pair<uint32_t, uint32_t>> runs;  // [begin, end) in `pairs`
+    for (size_t b = 0; b < pairs.size();) {
+      size_t e = b + 1;
+      while (e < pairs.size() && view_of(pairs[e]) == view_of(pairs[b])) ++e;
+      runs.emplace_back(static_cast<uint32_t>(b), static_cast<uint32_t>(e));
+      b = e;
+    }
+    std::sort(runs.begin(), runs.end(), [&](const auto& x, const auto& y) {
+      return ByBound(pairs[x.first], pairs[y.first]);
+    });
+    ParallelFor(
+        runs.size(),
+        threads_,
+        [&](size_t r, int worker) {
+          for (uint32_t j = runs[r].first; j < runs[r].second; ++j) {
+            const uint32_t i = pairs[j];
+            const double threshold = top_.threshold();
+            if (TotalPx(i) > threshold) break;  // the view's later pairs: larger bounds
+            if (progress != nullptr) progress->Add();
+            ScoreVisited(i, threshold, worker);
           }
           return true;
         },
         pool_);
+  }
+
+  // Scores pair i, visited with the k-th best at `threshold`, into the top k.
+  void ScoreVisited(uint32_t i, double threshold, int worker) {
+    const auto v = static_cast<view_id_t>(PairOf(i) % num_views_);
+    const size_t s = PairOf(i) / num_views_;
+    refined_.fetch_add(1, std::memory_order_relaxed);
+    Scored sc;
+    if (ctx_.Score(v, s, threshold, BoundPx(lb_[i]), worker, &sc)) {
+      sc.lower_bound = TotalPx(i);
+      top_.Insert(sc);
+    } else {
+      abandoned_.fetch_add(1, std::memory_order_relaxed);
+    }
   }
 
   // One phase's progress line (SearchOptions::progress), e.g. "query refine (both hands)".
@@ -1214,6 +1270,7 @@ class QueryRun {
   // L = L_A + L_B <= D_c.
   std::vector<Bound> la_;
   std::vector<Bound> lb_;
+  std::vector<FloorDivider> query_divider_;  // per slot: by its rolled query's point count
   // Indexed search: each entry's pair (s * num_views + v), increasing; empty in exact search,
   // where entry i is pair i. The entries of slot s are [slot_begin_[s], slot_begin_[s + 1]).
   std::vector<uint32_t> pairs_;
