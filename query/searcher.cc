@@ -184,9 +184,8 @@ class QueryContext {
         histograms_(coarse != nullptr ? slots_.size() : 0),
         point_cells_(coarse != nullptr ? slots_.size() : 0),
         distinct_cells_(coarse != nullptr ? slots_.size() : 0),
-        point_entries_(coarse != nullptr ? slots_.size() : 0),
         point_gaps_(coarse != nullptr ? slots_.size() : 0),
-        scan_neighbours_(ResolveNumThreads(options.num_threads)),
+        neighbour_caches_(ResolveNumThreads(options.num_threads)),
         scan_orders_(ResolveNumThreads(options.num_threads)),
         scan_d2_(ResolveNumThreads(options.num_threads)),
         scan_prior_(ResolveNumThreads(options.num_threads)),
@@ -224,8 +223,8 @@ class QueryContext {
       const std::vector<PointQ>& pts = rolled_[s];
       histograms_[s].Build(pts);
       point_cells_[s].resize(pts.size());
-      // What the scans' per-point bounds read: the distinct cells, each point's index among
-      // them and its gaps to the neighbouring cells' boxes.
+      // What the scans' per-point bounds read: the distinct cells and each point's gaps to the
+      // neighbouring cells' boxes.
       std::vector<uint16_t>& distinct = distinct_cells_[s];
       distinct.clear();
       for (size_t i = 0; i < pts.size(); ++i) {
@@ -235,16 +234,8 @@ class QueryContext {
       }
       std::sort(distinct.begin(), distinct.end());
       distinct.erase(std::unique(distinct.begin(), distinct.end()), distinct.end());
-      point_entries_[s].resize(pts.size());
       point_gaps_[s].resize(8 * pts.size());
-      for (size_t i = 0; i < pts.size(); ++i) {
-        const int c = point_cells_[s][i];
-        point_entries_[s][i] =
-            c < 0 ? kOffGrid
-                  : static_cast<uint16_t>(std::lower_bound(distinct.begin(), distinct.end(), c) -
-                                          distinct.begin());
-        NeighbourGaps(pts[i], &point_gaps_[s][8 * i]);
-      }
+      for (size_t i = 0; i < pts.size(); ++i) NeighbourGaps(pts[i], &point_gaps_[s][8 * i]);
     }
   }
 
@@ -461,21 +452,24 @@ class QueryContext {
   // their sum: the nine values around each distinct cell once, then per point one byte-wise
   // saturating subtraction of its gaps and a maximum.
   uint64_t PointBounds(view_id_t v, size_t s, int worker, uint8_t* out) {
+    NeighbourCache& cache = neighbour_caches_[worker];
+    cache.Switch(v);
     const std::vector<uint16_t>& distinct = distinct_cells_[s];
-    std::vector<uint8_t>& nb = scan_neighbours_[worker];
-    nb.resize(16 * distinct.size());
-    for (size_t k = 0; k < distinct.size(); ++k) coarse_->PrefetchNeighbours(v, distinct[k]);
-    for (size_t k = 0; k < distinct.size(); ++k)
-      coarse_->NeighbourValues(v, distinct[k], &nb[16 * k]);
-    const uint16_t* entries = point_entries_[s].data();
+    for (uint16_t c : distinct) {
+      if (!cache.Has(c)) coarse_->PrefetchNeighbours(v, c);
+    }
+    for (uint16_t c : distinct) {
+      if (!cache.Has(c)) coarse_->NeighbourValues(v, c, cache.Fill(c));
+    }
+    const int16_t* cells = point_cells_[s].data();
     const uint8_t* gaps = point_gaps_[s].data();
     uint64_t sum = 0;
-    for (size_t i = 0; i < point_entries_[s].size(); ++i) {
-      if (entries[i] == kOffGrid) {
+    for (size_t i = 0; i < point_cells_[s].size(); ++i) {
+      if (cells[i] < 0) {
         out[i] = 0;
         continue;
       }
-      const uint8_t* values = &nb[16 * entries[i]];
+      const uint8_t* values = cache.values(cells[i]);
       int best = values[8];
 #ifdef __SSE2__
       __m128i d = _mm_subs_epu8(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(values)),
@@ -508,14 +502,44 @@ class QueryContext {
   std::vector<std::vector<PointQ>> rolled_;
   std::vector<CellHistogram> histograms_;          // per slot, with coarse fields
   std::vector<std::vector<int16_t>> point_cells_;  // per slot: each point's coarse cell or -1
-  // Per slot: the cells holding points, each point's index among them (kOffGrid: none) and its
-  // eight gaps to the neighbouring cells' boxes (NeighbourGaps).
-  static constexpr uint16_t kOffGrid = 0xFFFF;
+  // Per slot: the cells holding points and each point's eight gaps to the neighbouring cells'
+  // boxes (NeighbourGaps).
   std::vector<std::vector<uint16_t>> distinct_cells_;
-  std::vector<std::vector<uint16_t>> point_entries_;
   std::vector<std::vector<uint8_t>> point_gaps_;
-  std::vector<std::vector<uint8_t>> scan_neighbours_;  // per worker: 16 bytes per distinct cell
-  static constexpr size_t kScanSpread = 64;            // points in ScanA's first spread-out pass
+  // Per worker: one view's NeighbourValues by cell, as PointBounds gathered them. Refine visits a
+  // view's pairs one after another (its rolls and hands), whose rolled queries share most cells,
+  // so each cell of the view is gathered from the cell-major copy once. 30 KB per worker.
+  class NeighbourCache {
+   public:
+    // Makes the cache hold view v's values (forgets the previous view's).
+    void Switch(view_id_t v) {
+      if (values_.empty()) {
+        values_.resize(16 * static_cast<size_t>(CoarseGrid::kCells));
+        stamp_.assign(CoarseGrid::kCells, 0);
+      }
+      if (v == view_ && generation_ != 0) return;
+      view_ = v;
+      if (++generation_ == 0) {  // wrapped: no stale stamp may equal a generation again
+        std::fill(stamp_.begin(), stamp_.end(), 0);
+        generation_ = 1;
+      }
+    }
+    bool Has(int cell) const { return stamp_[static_cast<size_t>(cell)] == generation_; }
+    // Where cell's nine values go; marks them present.
+    uint8_t* Fill(int cell) {
+      stamp_[static_cast<size_t>(cell)] = generation_;
+      return &values_[16 * static_cast<size_t>(cell)];
+    }
+    const uint8_t* values(int cell) const { return &values_[16 * static_cast<size_t>(cell)]; }
+
+   private:
+    view_id_t view_ = 0;
+    uint32_t generation_ = 0;
+    std::vector<uint32_t> stamp_;
+    std::vector<uint8_t> values_;
+  };
+  std::vector<NeighbourCache> neighbour_caches_;
+  static constexpr size_t kScanSpread = 64;  // points in ScanA's first spread-out pass
   // The order in which ScanA visits the query's points (per worker): the points that have
   // raised the bound most over recent scans first. A query point that no view comes near (an
   // edge of the picture that no rendered hand has) raises every pair's bound, so learning the
