@@ -389,8 +389,8 @@ class QueryContext {
   // for points off the coarse grid, a scan of every point. Abandoned as soon as a lower bound of
   // the whole sum exceeds `limit`: it starts at the sum of the points' coarse bounds
   // (CoarseFields::PointLowerBound), often above the limit before any scan, and each scanned point
-  // replaces its bound by its exact distance (which is never smaller). Points are scanned spread
-  // out first (every step-th point, then the gaps), so the bound rises quickly. A pair that is not
+  // replaces its bound by its exact distance (which is never smaller). Points are scanned in the
+  // worker's learnt order (ScanOrder), so the bound rises quickly. A pair that is not
   // abandoned gets the same sum as the kd-tree path, bit for bit: the nearest squared distances are
   // exact integers either way, and they are summed in the query's order.
   bool ScanA(view_id_t v, size_t s, double limit, int worker, double* sum_out) {
@@ -418,24 +418,20 @@ class QueryContext {
     order.Fit(q.size());
     for (size_t j = 0; j < q.size(); ++j) {
       const uint32_t i = order.index[j];
-      {
-        if (window && cells[i] >= 0) {
-          d2[i] = rows->NearestSquared(q[i], view, NearestWithin(coarse_->value(v, cells[i])));
-        } else if (window) {
-          d2[i] = NearestSquaredSmall(q[i], view);
-        } else {
-          d2[i] =
-              buckets->usable() ? buckets->NearestSquared(q[i]) : NearestSquaredSmall(q[i], view);
-        }
-        const double gain =
-            std::sqrt(static_cast<double>(d2[i])) / static_cast<double>(kPointScale) -
-            static_cast<double>(prior[i]) / CoarseGrid::kValueUnitsPerPx;
-        bound += gain;
-        order.gain[i] += static_cast<float>(gain);
-        if (bound > stop) {
-          order.Done();
-          return false;
-        }
+      if (window && cells[i] >= 0) {
+        d2[i] = rows->NearestSquared(q[i], view, NearestWithin(coarse_->value(v, cells[i])));
+      } else if (window) {
+        d2[i] = NearestSquaredSmall(q[i], view);
+      } else {
+        d2[i] = buckets->usable() ? buckets->NearestSquared(q[i]) : NearestSquaredSmall(q[i], view);
+      }
+      const double gain = std::sqrt(static_cast<double>(d2[i])) / static_cast<double>(kPointScale) -
+                          static_cast<double>(prior[i]) / CoarseGrid::kValueUnitsPerPx;
+      bound += gain;
+      order.gain[i] += static_cast<float>(gain);
+      if (bound > stop) {
+        order.Done();
+        return false;
       }
     }
     order.Done();
