@@ -77,6 +77,14 @@ CoarseFields::CoarseFields(const Database& db, int num_threads) : num_views_(db.
   db.ReleaseCoarseFieldPages();
 }
 
+CoarseFields CoarseFields::RowMajor(const Database& db) {
+  THROW_CHECK(db.has_coarse_fields());
+  CoarseFields fields;
+  fields.num_views_ = db.num_views();
+  fields.rows_ = &db;
+  return fields;
+}
+
 namespace {
 
 // ceil(sqrt(gx^2 + gy^2) / 8) for gaps gx, gy in [0, 128] PointQ units: a distance rounded up to
@@ -236,7 +244,8 @@ void NeighbourGaps(PointQ q, uint8_t out[8]) {
 void CoarseFields::NeighbourValuesAtBorder(size_t v, int cell, uint8_t out[9]) const {
   constexpr int kSide = CoarseGrid::kSide;
   THROW_CHECK(cell >= 0 && cell < CoarseGrid::kCells);
-  const uint8_t* f = planes_.data() + (v / kBlock) * CoarseGrid::kCells * kBlock + v % kBlock;
+  const uint8_t* f = At(v, 0);
+  const auto col = static_cast<size_t>(ColumnStride());
   const int ix = cell % kSide;
   const int iy = cell / kSide;
   int k = 0;
@@ -247,10 +256,10 @@ void CoarseFields::NeighbourValuesAtBorder(size_t v, int cell, uint8_t out[9]) c
       const int y = iy + dy;
       out[k++] = x < 0 || y < 0 || x >= kSide || y >= kSide
                      ? 0
-                     : f[static_cast<size_t>(y * kSide + x) * kBlock];
+                     : f[static_cast<size_t>(y * kSide + x) * col];
     }
   }
-  out[8] = f[static_cast<size_t>(cell) * kBlock];
+  out[8] = f[static_cast<size_t>(cell) * col];
 }
 
 int CoarseFields::PointLowerBound(size_t v, PointQ q) const {
@@ -285,6 +294,7 @@ void CoarseFields::BlockSums(const CellHistogram& histogram,
                              bool neighbours,
                              unsigned groups) const {
   THROW_CHECK_LT(block, num_blocks());
+  THROW_CHECK(rows_ == nullptr);  // the streaming products need the cell-major copy
   const uint8_t* plane = planes_.data() + block * CoarseGrid::kCells * kBlock;
 #ifdef HANDDB_HAVE_AVX2_PATH
   if (HaveAvx2()) {

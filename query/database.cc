@@ -128,11 +128,6 @@ Result<Database> Database::OpenOnce(const std::filesystem::path& dir, bool verif
   return db;
 }
 
-const uint8_t* Database::coarse_field(view_id_t v) const {
-  THROW_CHECK_LT(v, views_.size());
-  return views_[v].coarse_field;
-}
-
 void Database::ReleaseCoarseFieldPages() const {
   for (const auto& shard : shards_) shard->ReleaseCoarseFieldPages();
 }

@@ -55,7 +55,10 @@ class Database {
   ViewLabel label(view_id_t v) const;
   // View v's coarse field (format/coarse_field.h) from its shard's v1.1 section, zero-copy, or
   // nullptr when that shard has none (v1.0 shards, FromMemory databases).
-  const uint8_t* coarse_field(view_id_t v) const;
+  const uint8_t* coarse_field(view_id_t v) const {
+    THROW_CHECK_LT(v, views_.size());
+    return views_[v].coarse_field;
+  }
   // True when every view has one (then the search reads them instead of computing them).
   bool has_coarse_fields() const { return !shards_.empty() && shards_without_coarse_fields_ == 0; }
   size_t shards_without_coarse_fields() const { return shards_without_coarse_fields_; }

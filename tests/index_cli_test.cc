@@ -141,6 +141,31 @@ TEST_F(IndexCli, BuildsAValidatedIndexThatQuerySearchesByDefault) {
   EXPECT_NE(info.out.find("index         " + file), std::string::npos) << info.out;
 }
 
+// Indexed search reads the shards' own coarse fields (row-major, in place) where exact search
+// reads the Searcher's cell-major copy: with every pair a candidate, both give the same top k.
+TEST_F(IndexCli, IndexedSearchOfEveryPairReadsTheShardsFieldsAndIsExact) {
+  ASSERT_EQ(Handdb("index " + db() + " --dims 16 --nlist 8 --cell-px 16 --grid-side 15 -q").code,
+            0);
+  for (const std::string hand : {"right", "either"}) {
+    const std::string common = " --json --top 10 -q --hand " + hand;
+    const CliRun exact = Handdb("query " + db() + " " + image() + common + " --search exact");
+    const CliRun indexed =
+        Handdb("query " + db() + " " + image() + common + " --search indexed --candidates " +
+               std::to_string(kViews * kRolls));
+    ASSERT_EQ(exact.code, 0) << exact.err;
+    ASSERT_EQ(indexed.code, 0) << indexed.err;
+    const nlohmann::json e = nlohmann::json::parse(exact.out)["matches"];
+    const nlohmann::json i = nlohmann::json::parse(indexed.out)["matches"];
+    ASSERT_EQ(e.size(), 10u);
+    ASSERT_EQ(i.size(), e.size());
+    for (size_t k = 0; k < e.size(); ++k) {
+      for (const char* field : {"view_id", "roll", "hand", "distance"}) {
+        EXPECT_EQ(i[k][field], e[k][field]) << hand << " rank " << k << " " << field;
+      }
+    }
+  }
+}
+
 TEST_F(IndexCli, ADamagedIndexIsOneLineNamingTheFile) {
   ASSERT_EQ(Handdb("index " + db() + " --dims 8 --nlist 4 --cell-px 16 --grid-side 15 -q").code, 0);
   const fs::path file = dir_ / "db" / ManifestJson()["index"]["file"].get<std::string>();
