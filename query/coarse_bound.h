@@ -76,7 +76,8 @@ void NeighbourGaps(PointQ q, uint8_t out[8]);
 // Every view's coarse field, cell-major in blocks of kBlock views: the shard's own (format v1.1)
 // where the shard has the section, else computed from the points, in parallel (~110 us per
 // view). The copy replaces the shards' row-major sections in memory (their mapped pages are
-// released once copied), so the fields are resident once.
+// released once copied), so the fields are resident once. Or (RowMajor) the shards' sections
+// themselves, read in place, for searches that read a few views' fields.
 class CoarseFields {
  public:
   static constexpr size_t kBlock = 128;  // views per block
@@ -88,7 +89,6 @@ class CoarseFields {
   // copy of every view would cost more than the search (~4 s and 1.2 GB at 10M virtual views).
   // Needs db.has_coarse_fields(); BlockSums is not available.
   static CoarseFields RowMajor(const Database& db);
-  bool row_major() const { return rows_ != nullptr; }
   bool empty() const { return num_views_ == 0; }
   size_t num_views() const { return num_views_; }
   size_t num_blocks() const { return (num_views_ + kBlock - 1) / kBlock; }
@@ -133,16 +133,16 @@ class CoarseFields {
       return;
     }
     const uint8_t* f = At(v, cell);
-    const ptrdiff_t kCol = ColumnStride();
-    const ptrdiff_t kRow = kSide * kCol;
-    out[0] = f[-kRow - kCol];
-    out[1] = f[-kRow];
-    out[2] = f[-kRow + kCol];
-    out[3] = f[-kCol];
-    out[4] = f[kCol];
-    out[5] = f[kRow - kCol];
-    out[6] = f[kRow];
-    out[7] = f[kRow + kCol];
+    const ptrdiff_t col = ColumnStride();
+    const ptrdiff_t row = kSide * col;
+    out[0] = f[-row - col];
+    out[1] = f[-row];
+    out[2] = f[-row + col];
+    out[3] = f[-col];
+    out[4] = f[col];
+    out[5] = f[row - col];
+    out[6] = f[row];
+    out[7] = f[row + col];
     out[8] = f[0];
   }
 
@@ -153,10 +153,10 @@ class CoarseFields {
     const int iy = cell / kSide;
     if (ix == 0 || iy == 0 || ix == kSide - 1 || iy == kSide - 1) return;
     const uint8_t* f = At(v, cell);
-    const ptrdiff_t kCol = ColumnStride();
-    const ptrdiff_t kRow = CoarseGrid::kSide * kCol;
-    for (ptrdiff_t r : {-kRow, ptrdiff_t{0}, kRow}) {
-      for (ptrdiff_t c : {-kCol, ptrdiff_t{0}, kCol}) __builtin_prefetch(f + r + c);
+    const ptrdiff_t col = ColumnStride();
+    const ptrdiff_t row = kSide * col;
+    for (ptrdiff_t r : {-row, ptrdiff_t{0}, row}) {
+      for (ptrdiff_t c : {-col, ptrdiff_t{0}, col}) __builtin_prefetch(f + r + c);
     }
   }
 
