@@ -16,6 +16,10 @@
 namespace handdb {
 
 class FloorDivider {
+#ifdef __SIZEOF_INT128__
+  __extension__ typedef unsigned __int128 Wide;  // GCC and Clang; -Wpedantic knows no __int128
+#endif
+
  public:
   explicit FloorDivider(uint64_t d = 1) : d_(d), m_(d > 1 ? ~uint64_t{0} / d + 1 : 0) {
     THROW_CHECK_GT(d, 0u);
@@ -23,8 +27,12 @@ class FloorDivider {
   uint64_t divisor() const { return d_; }
   uint64_t operator()(uint64_t x) const {
     if (d_ == 1) return x;
+#ifdef __SIZEOF_INT128__
     if (x >> 32 != 0 || d_ >> 32 != 0) return x / d_;
-    return static_cast<uint64_t>((static_cast<unsigned __int128>(x) * m_) >> 64);
+    return static_cast<uint64_t>((static_cast<Wide>(x) * m_) >> 64);
+#else
+    return x / d_;
+#endif
   }
 
  private:
