@@ -1195,32 +1195,20 @@ class QueryRun {
   // threshold, which only falls).
   void ScorePair(uint32_t i, int worker) {
     const double threshold = top_.threshold();
-    const double bound = TotalPx(i);
-    if (bound > threshold) return;
-    const auto v = static_cast<view_id_t>(PairOf(i) % num_views_);
-    const size_t s = PairOf(i) / num_views_;
-    refined_.fetch_add(1, std::memory_order_relaxed);
-    Scored sc;
-    if (ctx_.Score(v, s, threshold, BoundPx(lb_[i]), worker, &sc)) {
-      sc.lower_bound = bound;
-      top_.Insert(sc);
-    } else {
-      abandoned_.fetch_add(1, std::memory_order_relaxed);
-    }
+    if (TotalPx(i) > threshold) return;
+    ScoreVisited(i, threshold, worker);
     la_[i] = kNoBound;
   }
 
   // Scores the pairs of `order` (increasing bound) until a bound exceeds the k-th best.
-  void Visit(std::span<const uint32_t> order, Progress* progress = nullptr) {
+  void Visit(std::span<const uint32_t> order) {
     ParallelFor(
         order.size(),
         threads_,
         [&](size_t j, int worker) {
           const uint32_t i = order[j];
           const double threshold = top_.threshold();
-          const double bound = TotalPx(i);
-          if (bound > threshold) return false;  // every later pair: a larger bound
-          if (progress != nullptr) progress->Add();
+          if (TotalPx(i) > threshold) return false;  // every later pair: a larger bound
           ScoreVisited(i, threshold, worker);
           return true;
         },
