@@ -44,7 +44,22 @@ int64_t CoarseCellDistanceSquaredBruteForce(std::span<const PointQ> view, int ix
   return best;
 }
 
-void ComputeCoarseField(std::span<const PointQ> view, uint8_t* out) {
+int64_t CentreDistanceSquaredBruteForce(std::span<const PointQ> view, int ix, int iy) {
+  const int64_t cx = -CoarseGrid::kHalfUnits + ix * CoarseGrid::kCellUnits + kCentreOffset;
+  const int64_t cy = -CoarseGrid::kHalfUnits + iy * CoarseGrid::kCellUnits + kCentreOffset;
+  int64_t best = kInf64;
+  for (const PointQ& p : view) {
+    best = std::min(best, (p.x - cx) * (p.x - cx) + (p.y - cy) * (p.y - cy));
+  }
+  return best;
+}
+
+namespace {
+
+// ComputeCoarseField (kCentre false: the distance from each cell's closed box) and
+// ComputeCentreField (kCentre true: from each cell's centre), one envelope per band of cells.
+template <bool kCentre>
+void ComputeField(std::span<const PointQ> view, uint8_t* out) {
   constexpr int kSide = CoarseGrid::kSide;
   constexpr int kCell = CoarseGrid::kCellUnits;
   constexpr int kHalf = CoarseGrid::kHalfUnits;
@@ -78,12 +93,14 @@ void ComputeCoarseField(std::span<const PointQ> view, uint8_t* out) {
     size_t m = 0;
     std::fill(inside_d2, inside_d2 + kSide, kInf64);
     for (size_t i = 0; i < n; ++i) {
-      const int64_t gb = Gap(pts[i].second, b0);
+      const int64_t gb = kCentre ? pts[i].second - (b0 + kCentreOffset) : Gap(pts[i].second, b0);
       const int64_t f = gb * gb;
       const int64_t a = pts[i].first;
-      // Points inside a cell's a range: the distance to that cell is gap_b alone.
+      // Points inside a cell's a range: the distance to that cell's box is gap_b alone.
       const int64_t cell = (a + kHalf) / kCell;
-      if (a >= -kHalf && cell < kSide) inside_d2[cell] = std::min(inside_d2[cell], f);
+      if (!kCentre && a >= -kHalf && cell < kSide) {
+        inside_d2[cell] = std::min(inside_d2[cell], f);
+      }
       if (m > 0 && va[m - 1] == a) {
         vf[m - 1] = std::min(vf[m - 1], f);
       } else {
@@ -116,21 +133,32 @@ void ComputeCoarseField(std::span<const PointQ> view, uint8_t* out) {
       zn[k] = num;
       zd[k] = den;
     }
-    // Evaluate at the cell edges along a, in increasing order.
+    // Evaluate at the cell edges (or centres) along a, in increasing order.
     size_t j = 0;
     for (int e = 0; e <= kSide; ++e) {
-      const int64_t a = -kHalf + static_cast<int64_t>(e) * kCell;
+      const int64_t a = -kHalf + static_cast<int64_t>(e) * kCell + (kCentre ? kCentreOffset : 0);
       while (j < k && zn[j + 1] < a * zd[j + 1]) ++j;
       const int64_t da = a - va[j];
       edge_d2[e] = da * da + vf[j];
     }
     for (int c = 0; c < kSide; ++c) {
-      const uint8_t value = ToUnits(std::min({edge_d2[c], edge_d2[c + 1], inside_d2[c]}));
+      const uint8_t value =
+          ToUnits(kCentre ? edge_d2[c] : std::min({edge_d2[c], edge_d2[c + 1], inside_d2[c]}));
       // a = y: band is the column ix, c the row iy; a = x: band is the row, c the column.
       out[by_y ? static_cast<size_t>(c) * kSide + band : static_cast<size_t>(band) * kSide + c] =
           value;
     }
   }
+}
+
+}  // namespace
+
+void ComputeCoarseField(std::span<const PointQ> view, uint8_t* out) {
+  ComputeField<false>(view, out);
+}
+
+void ComputeCentreField(std::span<const PointQ> view, uint8_t* out) {
+  ComputeField<true>(view, out);
 }
 
 }  // namespace handdb

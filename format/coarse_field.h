@@ -45,6 +45,20 @@ static_assert((1 << 7) == CoarseGrid::kCellUnits);
 // F_v for one view (kCells bytes, row-major), written to `out`. Empty views get all zeros.
 void ComputeCoarseField(std::span<const PointQ> view, uint8_t* out);
 
+// Where a cell's centre is from its lower corner, in PointQ units along each axis (4 px).
+constexpr int kCentreOffset = CoarseGrid::kCellUnits / 2;
+
+// The centre field C_v, not stored in shards: per cell the distance from the cell's centre
+// point to the view's nearest point, rounded down to 1/2 px (saturating at 127.5 px), row-major
+// like F_v. For any point q, d(q, Y_v) >= C_v(c) - |q - centre(c)| for every cell c (distance to
+// a set is 1-Lipschitz). The exact search computes it from the points when it opens a database
+// (query/coarse_bound.h: ~30 us per view, the same envelope as F_v). Empty views get all zeros.
+void ComputeCentreField(std::span<const PointQ> view, uint8_t* out);
+
+// The exact min over the view's points of the squared distance (PointQ units^2) to the centre
+// of cell (ix, iy): the brute-force reference ComputeCentreField is tested against.
+int64_t CentreDistanceSquaredBruteForce(std::span<const PointQ> view, int ix, int iy);
+
 // The exact min over the view's points of the squared distance (PointQ units^2) to the closed box
 // of cell (ix, iy): the brute-force reference ComputeCoarseField is tested against.
 int64_t CoarseCellDistanceSquaredBruteForce(std::span<const PointQ> view, int ix, int iy);

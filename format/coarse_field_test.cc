@@ -19,8 +19,9 @@ uint8_t Units(int64_t d2) {
       std::min(255.0, std::floor(std::sqrt(static_cast<double>(d2)) * 2.0 / kPointScale)));
 }
 
-// The envelope computation equals the brute-force box distance in every cell: clustered sets,
-// sets wider than the grid, many points sharing an x, a single point.
+// The envelope computation equals the brute-force box distance in every cell, and the centre
+// field the brute-force centre distance: clustered sets, sets wider than the grid, many points
+// sharing an x, a single point.
 TEST(CoarseField, EqualsBruteForceInEveryCell) {
   std::mt19937 rng(7);
   std::vector<std::vector<PointQ>> sets;
@@ -39,16 +40,28 @@ TEST(CoarseField, EqualsBruteForceInEveryCell) {
     sets.push_back(sorted);
   }
   std::vector<uint8_t> field(CoarseGrid::kCells);
+  std::vector<uint8_t> centre(CoarseGrid::kCells);
   for (size_t s = 0; s < sets.size(); ++s) {
     ComputeCoarseField(sets[s], field.data());
+    ComputeCentreField(sets[s], centre.data());
     for (int iy = 0; iy < CoarseGrid::kSide; ++iy) {
       for (int ix = 0; ix < CoarseGrid::kSide; ++ix) {
+        const int c = iy * CoarseGrid::kSide + ix;
         const uint8_t want = Units(CoarseCellDistanceSquaredBruteForce(sets[s], ix, iy));
-        ASSERT_EQ(field[iy * CoarseGrid::kSide + ix], want)
-            << "set " << s << " cell " << ix << "," << iy;
+        ASSERT_EQ(field[c], want) << "set " << s << " cell " << ix << "," << iy;
+        // The centre field: the same envelope evaluated at the centres; the centre lies in the
+        // box and at most half its diagonal (5.66 px, 11.3 half px) from every point of it.
+        const uint8_t want_centre = Units(CentreDistanceSquaredBruteForce(sets[s], ix, iy));
+        ASSERT_EQ(centre[c], want_centre) << "set " << s << " cell " << ix << "," << iy;
+        ASSERT_GE(centre[c], field[c]);
+        if (centre[c] < 255) {
+          ASSERT_LE(centre[c], field[c] + 12);
+        }
       }
     }
   }
+  ComputeCentreField({}, centre.data());
+  EXPECT_EQ(std::count(centre.begin(), centre.end(), 0), CoarseGrid::kCells);
 }
 
 }  // namespace

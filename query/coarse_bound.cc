@@ -12,7 +12,7 @@
 
 namespace handdb {
 
-void CellHistogram::Build(std::span<const PointQ> points) {
+void CellHistogram::Build(std::span<const PointQ> points, FieldKind kind) {
   std::vector<uint32_t> count(CoarseGrid::kCells, 0);
   for (const PointQ& p : points) {
     const int c = CoarseGrid::CellOf(p);
@@ -31,29 +31,33 @@ void CellHistogram::Build(std::span<const PointQ> points) {
     }
   }
   // The gap sums per entry: a cell's points fill its entries in order, kMaxCount each.
-  std::vector<uint32_t> gap_sums(8 * cells_.size(), 0);
+  std::vector<uint32_t> gap_sums(9 * cells_.size(), 0);
   std::vector<uint32_t> seen(CoarseGrid::kCells, 0);
   for (const PointQ& p : points) {
     const int c = CoarseGrid::CellOf(p);
     if (c < 0) continue;
     const size_t entry = first[static_cast<size_t>(c)] + seen[static_cast<size_t>(c)]++ / kMaxCount;
-    uint8_t g[8];
-    NeighbourGaps(p, g);
-    for (int k = 0; k < 8; ++k) gap_sums[8 * entry + static_cast<size_t>(k)] += g[k];
+    uint8_t g[9];
+    FieldGaps(kind, p, g);
+    for (int k = 0; k < 9; ++k) gap_sums[9 * entry + static_cast<size_t>(k)] += g[k];
   }
   gaps_.assign(8 * cells_.size(), kNoNeighbour);
+  own_gaps_.resize(cells_.size());
   constexpr int kSide = CoarseGrid::kSide;
   for (size_t i = 0; i < cells_.size(); ++i) {
+    // ceil(sum / n): at most the largest gap, 34 units.
+    own_gaps_[i] = static_cast<uint8_t>((gap_sums[9 * i + 8] + counts_[i] - 1) / counts_[i]);
     const int ix = cells_[i] % kSide;
     const int iy = cells_[i] / kSide;
     if (ix == 0 || iy == 0 || ix == kSide - 1 || iy == kSide - 1) continue;
-    for (size_t k = 0; k < 8; ++k) {  // ceil(sum / n): at most the largest gap, 23 units
-      gaps_[8 * i + k] = static_cast<uint8_t>((gap_sums[8 * i + k] + counts_[i] - 1) / counts_[i]);
+    for (size_t k = 0; k < 8; ++k) {
+      gaps_[8 * i + k] = static_cast<uint8_t>((gap_sums[9 * i + k] + counts_[i] - 1) / counts_[i]);
     }
   }
 }
 
-CoarseFields::CoarseFields(const Database& db, int num_threads) : num_views_(db.num_views()) {
+CoarseFields::CoarseFields(const Database& db, int num_threads, FieldKind kind)
+    : kind_(kind), num_views_(db.num_views()) {
   planes_.assign(num_blocks() * CoarseGrid::kCells * kBlock, 0);
   std::vector<size_t> computed(num_blocks(), 0);
   ParallelFor(num_blocks(), ResolveNumThreads(num_threads), [&](size_t b, int) {
@@ -61,8 +65,12 @@ CoarseFields::CoarseFields(const Database& db, int num_threads) : num_views_(db.
     uint8_t* plane = planes_.data() + b * CoarseGrid::kCells * kBlock;
     for (size_t i = 0; i < kBlock && b * kBlock + i < num_views_; ++i) {
       const auto v = static_cast<view_id_t>(b * kBlock + i);
-      const uint8_t* field = db.coarse_field(v);
-      if (field == nullptr) {  // a shard without the section (v1.0): computed here
+      const uint8_t* field = kind == FieldKind::kBox ? db.coarse_field(v) : nullptr;
+      if (kind == FieldKind::kCentre) {
+        ComputeCentreField(db.points(v), scratch.data());
+        field = scratch.data();
+        ++computed[b];
+      } else if (field == nullptr) {  // a shard without the section (v1.0): computed here
         ComputeCoarseField(db.points(v), scratch.data());
         field = scratch.data();
         ++computed[b];
@@ -77,7 +85,7 @@ CoarseFields::CoarseFields(const Database& db, int num_threads) : num_views_(db.
   db.ReleaseCoarseFieldPages();
 }
 
-CoarseFields CoarseFields::RowMajor(const Database& db) {
+CoarseFields CoarseFields::RowMajor(const Database& db) {  // kind_: kBox
   THROW_CHECK(db.has_coarse_fields());
   CoarseFields fields;
   fields.num_views_ = db.num_views();
@@ -128,7 +136,8 @@ __attribute__((target("avx2"))) inline __m256i EntryValues(const uint8_t* plane,
                                                            size_t j) {
   constexpr auto kBlock = static_cast<ptrdiff_t>(CoarseFields::kBlock);
   const uint8_t* row = plane + static_cast<size_t>(h.cells()[i]) * CoarseFields::kBlock + j;
-  __m256i best = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(row));
+  __m256i best = _mm256_subs_epu8(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(row)),
+                                  _mm256_set1_epi8(static_cast<char>(h.own_gap(i))));
   if (!kNeighbours || !h.interior(i)) return best;
   const uint8_t* g = h.gaps(i);
   for (int k = 0; k < 8; ++k) {
@@ -241,6 +250,50 @@ void NeighbourGaps(PointQ q, uint8_t out[8]) {
   out[7] = d[kCell - fx][kCell - fy];
 }
 
+namespace {
+
+// ceil(sqrt(dx^2 + dy^2) / 8) for |dx|, |dy| <= 192 PointQ units (a point of a cell to the centre
+// of a neighbour is at most 1.5 cells away along each axis): a distance rounded up to 1/2 px.
+struct CentreGapTable {
+  static constexpr int kMax = 3 * CoarseGrid::kCellUnits / 2;
+  uint8_t value[kMax + 1][kMax + 1];
+  CentreGapTable() {
+    for (int dx = 0; dx <= kMax; ++dx) {
+      for (int dy = 0; dy <= kMax; ++dy) {
+        int u = 0;
+        while (64 * u * u < dx * dx + dy * dy) ++u;  // (8u)^2 >= dx^2 + dy^2
+        value[dx][dy] = static_cast<uint8_t>(u);
+      }
+    }
+  }
+};
+
+}  // namespace
+
+void FieldGaps(FieldKind kind, PointQ q, uint8_t out[9]) {
+  if (kind == FieldKind::kBox) {
+    NeighbourGaps(q, out);
+    out[8] = 0;
+    return;
+  }
+  static const CentreGapTable table;
+  constexpr int kCell = CoarseGrid::kCellUnits;
+  // q's offset from its own cell's centre, in [-64, 63] along each axis.
+  const int dx = ((static_cast<int>(q.x) + CoarseGrid::kHalfUnits) & (kCell - 1)) - kCentreOffset;
+  const int dy = ((static_cast<int>(q.y) + CoarseGrid::kHalfUnits) & (kCell - 1)) - kCentreOffset;
+  int k = 0;
+  for (int oy = -1; oy <= 1; ++oy) {
+    for (int ox = -1; ox <= 1; ++ox) {
+      const uint8_t gap = table.value[std::abs(dx - ox * kCell)][std::abs(dy - oy * kCell)];
+      if (ox == 0 && oy == 0) {
+        out[8] = gap;
+      } else {
+        out[k++] = gap;
+      }
+    }
+  }
+}
+
 void CoarseFields::NeighbourValuesAtBorder(size_t v, int cell, uint8_t out[9]) const {
   constexpr int kSide = CoarseGrid::kSide;
   THROW_CHECK(cell >= 0 && cell < CoarseGrid::kCells);
@@ -266,11 +319,11 @@ int CoarseFields::PointLowerBound(size_t v, PointQ q) const {
   const int cell = CoarseGrid::CellOf(q);
   if (cell < 0) return 0;
   uint8_t values[9];
-  uint8_t gaps[8];
+  uint8_t gaps[9];
   NeighbourValues(v, cell, values);
-  NeighbourGaps(q, gaps);
-  int best = values[8];
-  for (int k = 0; k < 8; ++k) best = std::max(best, values[k] - gaps[k]);
+  FieldGaps(kind_, q, gaps);
+  int best = 0;
+  for (int k = 0; k < 9; ++k) best = std::max(best, values[k] - gaps[k]);
   return best;
 }
 
@@ -279,7 +332,7 @@ uint64_t CoarseFields::PairSum(const CellHistogram& histogram, size_t v) const {
   for (size_t i = 0; i < histogram.num_cells(); ++i) {
     uint8_t values[9];
     NeighbourValues(v, histogram.cells()[i], values);
-    int best = values[8];
+    int best = std::max(0, values[8] - histogram.own_gap(i));
     if (histogram.interior(i)) {
       for (int k = 0; k < 8; ++k) best = std::max(best, values[k] - histogram.gaps(i)[k]);
     }
@@ -314,7 +367,7 @@ void CoarseFields::BlockSums(const CellHistogram& histogram,
     const uint8_t* g = histogram.gaps(i);
     for (size_t j = 0; j < kBlock; ++j) {
       if ((groups >> (j / 32) & 1) == 0) continue;
-      int best = row[j];
+      int best = std::max(0, row[j] - histogram.own_gap(i));
       if (neighbours && histogram.interior(i)) {
         for (int k = 0; k < 8; ++k) {
           best = std::max(best,

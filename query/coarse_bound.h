@@ -28,17 +28,25 @@ namespace handdb {
 
 enum class GridFlip;  // query/distance_transform.h
 
+// What a CoarseFields holds per cell of a view (format/coarse_field.h): the distance from the
+// cell's closed box to the view (F_v, the shards' section), or from the cell's centre (C_v,
+// computed on open for the exact search, docs/query.md). A query point q is credited, for its
+// own cell and each neighbour n, the value less q's gap to n: its distance to n's box (0 for its
+// own cell) or to n's centre.
+enum class FieldKind : uint8_t { kBox, kCentre };
+
 // The rolled query's occupied cells and their point counts. A cell holding more than kMaxCount
 // points is listed more than once (the sum is the same), so every product count x field value
 // fits 16 bits in the vector kernel. Per entry also the mean gap from its points to each of the
-// eight neighbouring cells' boxes, rounded up (the neighbour term of L_A, CoarseFields::BlockSums).
+// eight neighbouring cells (the neighbour term of L_A, CoarseFields::BlockSums) and to its own
+// cell (0 for boxes), rounded up, for the field kind given.
 class CellHistogram {
  public:
   static constexpr uint32_t kMaxCount = 128;
   // An entry's gap to a neighbour that is off the grid, or that the bound does not read (cells
   // on the grid's border): larger than any field value, so the neighbour's term is 0.
   static constexpr uint8_t kNoNeighbour = 255;
-  void Build(std::span<const PointQ> points);
+  void Build(std::span<const PointQ> points, FieldKind kind = FieldKind::kBox);
   // L_A in px for a row-major field (kCells bytes): sum_c n(c) F(c) / |Q| / 2, rounded down by a
   // relative 1e-12 (so it never exceeds the exact value), given the number of query points.
   double LowerBound(const uint8_t* field, size_t num_query_points) const {
@@ -62,16 +70,24 @@ class CellHistogram {
   // border.
   const uint8_t* gaps(size_t i) const { return gaps_.data() + 8 * i; }
   bool interior(size_t i) const { return gaps_[8 * i] != kNoNeighbour; }
+  // Entry i's gap to its own cell: ceil(sum_q gap(q, own) / n_i), 0 for boxes.
+  uint8_t own_gap(size_t i) const { return own_gaps_[i]; }
 
  private:
   std::vector<uint16_t> cells_;
   std::vector<uint16_t> counts_;  // each <= kMaxCount
   std::vector<uint8_t> gaps_;     // 8 per entry
+  std::vector<uint8_t> own_gaps_;
 };
 
 // The gaps (rounded up to 1/2 px) from a point q on the coarse grid to the boxes of its cell's
 // eight neighbours, in the order (-1,-1), (0,-1), (1,-1), (-1,0), (1,0), (-1,1), (0,1), (1,1).
 void NeighbourGaps(PointQ q, uint8_t out[8]);
+
+// The gaps for a field kind: out[0..7] to the eight neighbours (NeighbourGaps' order), out[8]
+// to q's own cell. Boxes: NeighbourGaps and 0. Centres: |q - centre(n)| rounded up to 1/2 px,
+// the smallest u with (8u)^2 >= dx^2 + dy^2 (exact integers).
+void FieldGaps(FieldKind kind, PointQ q, uint8_t out[9]);
 
 // Every view's coarse field, cell-major in blocks of kBlock views: the shard's own (format v1.1)
 // where the shard has the section, else computed from the points, in parallel (~110 us per
@@ -83,26 +99,29 @@ class CoarseFields {
   static constexpr size_t kBlock = 128;  // views per block
 
   CoarseFields() = default;
-  CoarseFields(const Database& db, int num_threads);
+  // kBox: the shards' F_v (computed where a shard lacks the section); kCentre: C_v, computed
+  // from every view's points (~30 us per view, in parallel).
+  CoarseFields(const Database& db, int num_threads, FieldKind kind = FieldKind::kBox);
   // The shards' own row-major fields, read in place (nothing copied, nothing computed): for
   // searches that read the fields of a few views only (indexed search), where the cell-major
   // copy of every view would cost more than the search (~4 s and 1.2 GB at 10M virtual views).
   // Needs db.has_coarse_fields(); BlockSums is not available.
   static CoarseFields RowMajor(const Database& db);
   bool empty() const { return num_views_ == 0; }
+  FieldKind kind() const { return kind_; }
   size_t num_views() const { return num_views_; }
   size_t num_blocks() const { return (num_views_ + kBlock - 1) / kBlock; }
   size_t computed_views() const { return computed_views_; }  // 0: all read from the shards
-  // F_v(cell) in 1/2 px.
+  // F_v(cell) (or C_v(cell)) in 1/2 px.
   uint8_t value(size_t v, int cell) const { return At(v, cell)[0]; }
-  // L_A's sum for view v and the query of `histogram` (1/2 px units, exact integer): over the
-  // histogram's entries i (cell c, n_i points, mean gaps g_ik),
-  //   n_i * max(F_v(c), max_k F_v(n_k) - g_ik)
-  // (a negative neighbour term counts 0; border cells use F_v(c) alone). It is <= the sum of
-  // the entry's points' PointLowerBound, hence <= the sum of their distances to Y_v
-  // (docs/query.md): each point's bound is >= F_v(c) and >= F_v(n_k) - its gap to box k, and
-  // summed over the entry's points the latter is n_i F_v(n_k) - sum of gaps >= n_i (F_v(n_k) -
-  // g_ik). It is >= sum_c n(c) F_v(c), the cell-only bound.
+  // L_A's sum for view v and the query of `histogram` (built for this kind; 1/2 px units, exact
+  // integer): over the histogram's entries i (cell c, n_i points, mean gaps g_ik, own gap g_i),
+  //   n_i * max(F_v(c) - g_i, max_k F_v(n_k) - g_ik)
+  // (a negative term counts 0; border cells use their own cell alone; boxes have g_i = 0). It
+  // is <= the sum of the entry's points' PointLowerBound, hence <= the sum of their distances to
+  // Y_v (docs/query.md): each point's bound is >= F_v(n) - its gap to n for its own cell and
+  // each neighbour n, and summed over the entry's points that is n_i F_v(n) - sum of gaps >= n_i
+  // (F_v(n) - g). It is >= sum_c n(c) (F_v(c) - g_i), the cell-only bound.
   uint64_t PairSum(const CellHistogram& histogram, size_t v) const;
   // PairSum for the views of block b: out[i] for view b kBlock + i, i < kBlock (views past the
   // end get 0). With `neighbours` false the cell-only sum sum_c n(c) F_v(c) instead (<= PairSum,
@@ -114,10 +133,11 @@ class CoarseFields {
                  bool neighbours = true,
                  unsigned groups = 0xF) const;
   // A lower bound of d(q, Y_v) in 1/2 px from q's cell c and its eight neighbours n:
-  //   max_n F_v(n) - gap(q, box_n)   (n = c: gap 0)
-  // since d(q, Y) >= d(p, Y) - |q - p| >= F_v(n) - |q - p| for p the point of box n nearest q.
-  // The gaps are rounded up to 1/2 px (NeighbourGaps), so the integer result never exceeds the
-  // true bound; neighbours off the grid count 0. 0 for q off the grid. The linear scans of A
+  //   max_n F_v(n) - gap(q, n)   (boxes: the box's point p nearest q, gap 0 for n = c;
+  //                               centres: p = centre(n))
+  // since d(q, Y) >= d(p, Y) - |q - p| >= F_v(n) - |q - p|. The gaps are rounded up to 1/2 px
+  // (FieldGaps), so the integer result never exceeds the true bound; neighbours off the grid and
+  // negative terms count 0. 0 for q off the grid. The linear scans of A
   // start from it, so a pair is often dropped before any point is scanned (docs/query.md). The
   // search computes it in bulk (NeighbourValues once per cell, then one byte-wise max per
   // point); this is the plain form, for tests.
@@ -172,6 +192,7 @@ class CoarseFields {
   }
   ptrdiff_t ColumnStride() const { return rows_ != nullptr ? 1 : static_cast<ptrdiff_t>(kBlock); }
   const Database* rows_ = nullptr;  // RowMajor: the database whose shards hold the fields
+  FieldKind kind_ = FieldKind::kBox;
   size_t num_views_ = 0;
   size_t computed_views_ = 0;
   std::vector<uint8_t> planes_;  // [block][cell][view in block]

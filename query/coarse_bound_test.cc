@@ -131,46 +131,100 @@ TEST(CoarseBound, ViewHistogramSumsAreBelowTheExactViewToQueryTerm) {
 // The neighbour bound of one point is below its exact distance to the view, never below the own
 // cell's value, and above it for many points (so it prunes more); the cell-major copy holds the
 // fields the shards would (ComputeCoarseField).
+// The same for the centre field (FieldKind::kCentre): below the exact distance, never below the
+// own cell's term, and larger than the box field's point bound on the whole for points within
+// reach of the hand (the mean of real queries' refined pairs: 4.53 -> 4.90 px, docs/query.md).
 TEST(CoarseBound, PointBoundIsBelowTheExactDistanceAndAboveTheCellValue) {
   const auto db = testing::SyntheticDatabase(150, 300, 4, /*views_per_shape=*/10);
   const CoarseFields fields(db, 2);
+  const CoarseFields centres(db, 2, FieldKind::kCentre);
   EXPECT_EQ(fields.num_views(), 150u);
   EXPECT_EQ(fields.computed_views(), 150u);  // in memory: no shard sections
+  EXPECT_EQ(centres.kind(), FieldKind::kCentre);
   std::mt19937 rng(9);
   std::vector<uint8_t> want(CoarseGrid::kCells);
+  std::vector<uint8_t> want_centres(CoarseGrid::kCells);
   size_t better = 0;
+  uint64_t near_box = 0;
+  uint64_t near_centre = 0;
   size_t total = 0;
   for (view_id_t v = 0; v < db.num_views(); v += 7) {
     ComputeCoarseField(db.points(v), want.data());
-    for (int c = 0; c < CoarseGrid::kCells; ++c) ASSERT_EQ(fields.value(v, c), want[c]);
+    ComputeCentreField(db.points(v), want_centres.data());
+    for (int c = 0; c < CoarseGrid::kCells; ++c) {
+      ASSERT_EQ(fields.value(v, c), want[c]);
+      ASSERT_EQ(centres.value(v, c), want_centres[c]);
+    }
     for (const PointQ& q : RandomPoints(&rng, 2000, 180 * 16)) {
       const int bound = fields.PointLowerBound(v, q);
+      const int centre_bound = centres.PointLowerBound(v, q);
       const double exact =
           std::sqrt(static_cast<double>(NearestSquaredSmall(q, db.points(v)))) / kPointScale;
       ASSERT_LE(bound / CoarseGrid::kValueUnitsPerPx, exact) << v << ": " << q.x << "," << q.y;
+      ASSERT_LE(centre_bound / CoarseGrid::kValueUnitsPerPx, exact)
+          << v << ": " << q.x << "," << q.y;
       const int c = CoarseGrid::CellOf(q);
       if (c < 0) {
         EXPECT_EQ(bound, 0);
+        EXPECT_EQ(centre_bound, 0);
         continue;
       }
       ASSERT_GE(bound, fields.value(v, c));
+      uint8_t gaps[9];
+      FieldGaps(FieldKind::kCentre, q, gaps);
+      ASSERT_GE(centre_bound, centres.value(v, c) - gaps[8]);
       better += bound > fields.value(v, c);
+      if (exact < 20) {  // within reach of the hand: where the bounds decide
+        near_box += static_cast<uint64_t>(bound);
+        near_centre += static_cast<uint64_t>(centre_bound);
+      }
       ++total;
     }
   }
   EXPECT_GT(better, total / 4);
+  EXPECT_GT(near_centre, near_box);
+}
+
+// A point's gaps to the centres of its cell and its neighbours are its distances to them,
+// rounded up to 1/2 px; to boxes, NeighbourGaps and 0 for its own.
+TEST(CoarseBound, FieldGapsAreTheDistancesRoundedUp) {
+  std::mt19937 rng(3);
+  for (const PointQ& q : RandomPoints(&rng, 5000, 170 * 16)) {
+    const int c = CoarseGrid::CellOf(q);
+    if (c < 0) continue;
+    uint8_t box[9];
+    uint8_t nb[8];
+    FieldGaps(FieldKind::kBox, q, box);
+    NeighbourGaps(q, nb);
+    ASSERT_EQ(box[8], 0);
+    for (int k = 0; k < 8; ++k) ASSERT_EQ(box[k], nb[k]);
+    uint8_t centre[9];
+    FieldGaps(FieldKind::kCentre, q, centre);
+    const int ix = c % CoarseGrid::kSide;
+    const int iy = c / CoarseGrid::kSide;
+    int k = 0;
+    for (int oy = -1; oy <= 1; ++oy) {
+      for (int ox = -1; ox <= 1; ++ox) {
+        const double cx = -CoarseGrid::kHalfUnits + (ix + ox) * CoarseGrid::kCellUnits + 64;
+        const double cy = -CoarseGrid::kHalfUnits + (iy + oy) * CoarseGrid::kCellUnits + 64;
+        const double units = std::hypot(q.x - cx, q.y - cy) / 8;  // 1/2 px
+        const uint8_t got = ox == 0 && oy == 0 ? centre[8] : centre[k++];
+        ASSERT_GE(got, units - 1e-9) << q.x << "," << q.y << " " << ox << "," << oy;
+        ASSERT_LT(got, units + 1) << q.x << "," << q.y << " " << ox << "," << oy;
+      }
+    }
+  }
 }
 
 // L_A's streaming product is PairSum exactly, for every view of a full and a partial block (views
 // past the end get 0), and without the neighbour terms the cell-only sum; only the groups of 32
-// views asked for are written; PairSum lies between the cell-only sum of n(c) F_v(c) and the sum of
-// the points' own bounds (CoarseFields::PointLowerBound), which the exact distances exceed
-// (PointBoundIsBelowTheExactDistanceAndAboveTheCellValue). A cell holding more than kMaxCount
-// points (listed more than once) is covered, and so are points on the grid's border cells and
-// off the grid.
-TEST(CoarseBound, BlockSumsArePairSumsBetweenTheCellAndThePointBounds) {
-  const auto db = testing::SyntheticDatabase(150, 300, 4, /*views_per_shape=*/10);
-  const CoarseFields fields(db, 2);
+// views asked for are written; PairSum lies between the cell-only sum of n_i (F_v(c) - own gap)
+// and the sum of the points' own bounds (CoarseFields::PointLowerBound), which the exact
+// distances exceed (PointBoundIsBelowTheExactDistanceAndAboveTheCellValue). For box fields and
+// for centre fields. A cell holding more than kMaxCount points (listed more than once) is
+// covered, and so are points on the grid's border cells and off the grid.
+void CheckBlockSums(const Database& db, FieldKind kind) {
+  const CoarseFields fields(db, 2, kind);
   ASSERT_EQ(fields.num_blocks(), 2u);
   std::mt19937 rng(11);
   std::vector<PointQ> query = RandomPoints(&rng, 3000, 120 * 16);
@@ -178,7 +232,7 @@ TEST(CoarseBound, BlockSumsArePairSumsBetweenTheCellAndThePointBounds) {
   const std::vector<PointQ> border = RandomPoints(&rng, 200, 180 * 16);  // border and off-grid
   query.insert(query.end(), border.begin(), border.end());
   CellHistogram hist;
-  hist.Build(query);
+  hist.Build(query, kind);
   std::vector<uint32_t> sums(CoarseFields::kBlock);
   std::vector<uint32_t> cell_sums(CoarseFields::kBlock);
   std::vector<uint32_t> some(CoarseFields::kBlock, 7);
@@ -197,23 +251,35 @@ TEST(CoarseBound, BlockSumsArePairSumsBetweenTheCellAndThePointBounds) {
         ASSERT_EQ(sums[i], 0u) << "view " << v;
         continue;
       }
+      // The cell-only sum: n_i (F_v(c) - own gap) per entry (the own gap is 0 for boxes).
       uint64_t cell_only = 0;
+      for (size_t e = 0; e < hist.num_cells(); ++e) {
+        cell_only +=
+            static_cast<uint64_t>(hist.counts()[e]) *
+            static_cast<uint64_t>(std::max(0, fields.value(v, hist.cells()[e]) - hist.own_gap(e)));
+      }
       uint64_t point_bounds = 0;
       for (const PointQ& q : query) {
-        const int c = CoarseGrid::CellOf(q);
-        if (c >= 0) cell_only += fields.value(v, c);
         point_bounds += static_cast<uint64_t>(fields.PointLowerBound(v, q));
       }
       const uint64_t pair = fields.PairSum(hist, v);
       ASSERT_EQ(sums[i], pair) << "view " << v;
       ASSERT_GE(pair, cell_only) << "view " << v;
       ASSERT_LE(pair, point_bounds) << "view " << v;
-      ASSERT_EQ(hist.Sum([&](int c) { return fields.value(v, c); }), cell_only);
+      if (kind == FieldKind::kBox) {
+        ASSERT_EQ(hist.Sum([&](int c) { return fields.value(v, c); }), cell_only);
+      }
       ASSERT_EQ(cell_sums[i], cell_only) << "view " << v;
       tighter += pair > cell_only;
     }
   }
   EXPECT_GT(tighter, fields.num_views() / 2);  // the neighbour terms do tighten the bound
+}
+
+TEST(CoarseBound, BlockSumsArePairSumsBetweenTheCellAndThePointBounds) {
+  const auto db = testing::SyntheticDatabase(150, 300, 4, /*views_per_shape=*/10);
+  CheckBlockSums(db, FieldKind::kBox);
+  CheckBlockSums(db, FieldKind::kCentre);
 }
 
 // Queries with edges the views lack (clutter) are where the A bound matters: pruned search with

@@ -101,11 +101,13 @@ double Limit(double threshold, double known, double n) {
   return (threshold - known) * n * (1 + kAbandonSlack) + kAbandonSlack;
 }
 
-// An upper bound (PointQ units) of d(q, Y_v) for q in a cell with coarse value F (1/2 px): the
-// box's nearest point to Y_v is F away, and q is at most the box's diagonal (8 sqrt 2 px, 181.02
-// units) from it.
-int32_t NearestWithin(uint8_t coarse_value) {
-  return static_cast<int32_t>(coarse_value) * (kPointScale / 2) + 182 + kPointScale / 2;
+// An upper bound (PointQ units) of d(q, Y_v) for q in a cell with coarse value F (1/2 px, rounded
+// down, so the true distance is below F + 1/2 px). Boxes: the box's nearest point to Y_v is that
+// far, and q is at most the box's diagonal (8 sqrt 2 px, 181.02 units) from it. Centres: q is at
+// most half the diagonal (90.51 units) from its cell's centre.
+int32_t NearestWithin(FieldKind kind, uint8_t coarse_value) {
+  return static_cast<int32_t>(coarse_value) * (kPointScale / 2) + kPointScale / 2 +
+         (kind == FieldKind::kBox ? 182 : 91);
 }
 
 // Where each 1 px row of the coarse grid starts in a view's points sorted by y (every converted
@@ -185,6 +187,7 @@ class QueryContext {
         point_cells_(coarse != nullptr ? slots_.size() : 0),
         distinct_cells_(coarse != nullptr ? slots_.size() : 0),
         point_gaps_(coarse != nullptr ? slots_.size() : 0),
+        point_own_gaps_(coarse != nullptr ? slots_.size() : 0),
         neighbour_caches_(ResolveNumThreads(options.num_threads)),
         scan_orders_(ResolveNumThreads(options.num_threads)),
         scan_d2_(ResolveNumThreads(options.num_threads)),
@@ -221,10 +224,10 @@ class QueryContext {
     rolled_max_abs_[s] = m;
     if (coarse_ != nullptr) {
       const std::vector<PointQ>& pts = rolled_[s];
-      histograms_[s].Build(pts);
+      histograms_[s].Build(pts, coarse_->kind());
       point_cells_[s].resize(pts.size());
       // What the scans' per-point bounds read: the distinct cells and each point's gaps to the
-      // neighbouring cells' boxes.
+      // neighbouring cells and its own (FieldGaps).
       std::vector<uint16_t>& distinct = distinct_cells_[s];
       distinct.clear();
       for (size_t i = 0; i < pts.size(); ++i) {
@@ -235,7 +238,13 @@ class QueryContext {
       std::sort(distinct.begin(), distinct.end());
       distinct.erase(std::unique(distinct.begin(), distinct.end()), distinct.end());
       point_gaps_[s].resize(8 * pts.size());
-      for (size_t i = 0; i < pts.size(); ++i) NeighbourGaps(pts[i], &point_gaps_[s][8 * i]);
+      point_own_gaps_[s].resize(pts.size());
+      for (size_t i = 0; i < pts.size(); ++i) {
+        uint8_t g[9];
+        FieldGaps(coarse_->kind(), pts[i], g);
+        std::copy(g, g + 8, &point_gaps_[s][8 * i]);
+        point_own_gaps_[s][i] = g[8];
+      }
     }
   }
 
@@ -419,7 +428,8 @@ class QueryContext {
     for (size_t j = 0; j < q.size(); ++j) {
       const uint32_t i = order.index[j];
       if (window && cells[i] >= 0) {
-        d2[i] = rows->NearestSquared(q[i], view, NearestWithin(coarse_->value(v, cells[i])));
+        d2[i] = rows->NearestSquared(
+            q[i], view, NearestWithin(coarse_->kind(), coarse_->value(v, cells[i])));
       } else if (window) {
         d2[i] = NearestSquaredSmall(q[i], view);
       } else {
@@ -459,6 +469,7 @@ class QueryContext {
     }
     const int16_t* cells = point_cells_[s].data();
     const uint8_t* gaps = point_gaps_[s].data();
+    const uint8_t* own_gaps = point_own_gaps_[s].data();
     uint64_t sum = 0;
     for (size_t i = 0; i < point_cells_[s].size(); ++i) {
       if (cells[i] < 0) {
@@ -466,7 +477,7 @@ class QueryContext {
         continue;
       }
       const uint8_t* values = cache.values(cells[i]);
-      int best = values[8];
+      int best = std::max(0, values[8] - own_gaps[i]);
 #ifdef __SSE2__
       __m128i d = _mm_subs_epu8(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(values)),
                                 _mm_loadl_epi64(reinterpret_cast<const __m128i*>(gaps + 8 * i)));
@@ -498,10 +509,11 @@ class QueryContext {
   std::vector<std::vector<PointQ>> rolled_;
   std::vector<CellHistogram> histograms_;          // per slot, with coarse fields
   std::vector<std::vector<int16_t>> point_cells_;  // per slot: each point's coarse cell or -1
-  // Per slot: the cells holding points and each point's eight gaps to the neighbouring cells'
-  // boxes (NeighbourGaps).
+  // Per slot: the cells holding points, each point's eight gaps to the neighbouring cells and
+  // its gap to its own (FieldGaps for the fields' kind).
   std::vector<std::vector<uint16_t>> distinct_cells_;
   std::vector<std::vector<uint8_t>> point_gaps_;
+  std::vector<std::vector<uint8_t>> point_own_gaps_;
   // Per worker: one view's NeighbourValues by cell, as PointBounds gathered them. Refine visits a
   // view's pairs one after another (its rolls and hands), whose rolled queries share most cells,
   // so each cell of the view is gathered from the cell-major copy once. 30 KB per worker.
@@ -628,7 +640,8 @@ Searcher::Searcher(std::shared_ptr<const Database> db) : db_(std::move(db)) {
 }
 
 const CoarseFields& Searcher::cell_major_fields() const {
-  std::call_once(cell_major_once_, [this] { cell_major_ = CoarseFields(*db_, -1); });
+  std::call_once(cell_major_once_,
+                 [this] { cell_major_ = CoarseFields(*db_, -1, FieldKind::kCentre); });
   return cell_major_;
 }
 

@@ -150,7 +150,7 @@ TEST(Searcher, LongSearchesShowProgressOnStderrFastOnesNothing) {
   auto query = Transform(RolledView(*TestDatabase(), 7, 3), 0.2f, 3, -2, 0.7, 5);
   std::mt19937 rng(6);
   std::uniform_real_distribution<float> clutter(-100, 100);
-  for (int i = 0; i < 60; ++i) query.push_back({clutter(rng), clutter(rng)});
+  for (int i = 0; i < 200; ++i) query.push_back({clutter(rng), clutter(rng)});
   SearchOptions options = Options();
   options.hand = Hand::kEither;
   options.top_k = 40;  // more pairs near the k-th best than the bounds step scores
