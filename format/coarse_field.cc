@@ -56,10 +56,67 @@ int64_t CentreDistanceSquaredBruteForce(std::span<const PointQ> view, int ix, in
 
 namespace {
 
-// ComputeCoarseField (kCentre false: the distance from each cell's closed box) and
-// ComputeCentreField (kCentre true: from each cell's centre), one envelope per band of cells.
-template <bool kCentre>
-void ComputeField(std::span<const PointQ> view, uint8_t* out) {
+// The lower envelope (Felzenszwalb & Huttenlocher) of the parabolas (a - va[i])^2 + vf[i], i < m,
+// with va strictly increasing, in exact integer fractions, built in place: the envelope's
+// vertices are a subsequence of the parabolas. zn / zd is the left boundary of each (zd > 0;
+// index 0 is -infinity and never read). Returns the index of the last vertex.
+size_t LowerEnvelope(size_t m, int64_t* va, int64_t* vf, int64_t* zn, int64_t* zd) {
+  size_t k = 0;
+  for (size_t q = 1; q < m; ++q) {
+    const int64_t aq = va[q];
+    const int64_t fq = vf[q];
+    int64_t num = 0;
+    int64_t den = 0;
+    for (;;) {
+      num = (fq + aq * aq) - (vf[k] + va[k] * va[k]);
+      den = 2 * (aq - va[k]);
+      // Pop while the new boundary is at or left of the top's left boundary.
+      if (k > 0 && num * zd[k] <= zn[k] * den) {
+        --k;
+        continue;
+      }
+      break;
+    }
+    ++k;
+    va[k] = aq;
+    vf[k] = fq;
+    zn[k] = num;
+    zd[k] = den;
+  }
+  return k;
+}
+
+// The envelope's value at kSide + 1 points along a, a_e = first + e * kCellUnits, into d2.
+void EvaluateEnvelope(size_t k,
+                      const int64_t* va,
+                      const int64_t* vf,
+                      const int64_t* zn,
+                      const int64_t* zd,
+                      int64_t first,
+                      int64_t* d2) {
+  size_t j = 0;
+  for (int e = 0; e <= CoarseGrid::kSide; ++e) {
+    const int64_t a = first + static_cast<int64_t>(e) * CoarseGrid::kCellUnits;
+    while (j < k && zn[j + 1] < a * zd[j + 1]) ++j;
+    const int64_t da = a - va[j];
+    d2[e] = da * da + vf[j];
+  }
+}
+
+// Envelope scratch for up to n parabolas.
+struct EnvelopeScratch {
+  std::vector<int64_t> va, vf, zn, zd;
+  void Reserve(size_t n) {
+    va.resize(n);
+    vf.resize(n);
+    zn.resize(n);
+    zd.resize(n);
+  }
+};
+
+}  // namespace
+
+void ComputeCoarseField(std::span<const PointQ> view, uint8_t* out) {
   constexpr int kSide = CoarseGrid::kSide;
   constexpr int kCell = CoarseGrid::kCellUnits;
   constexpr int kHalf = CoarseGrid::kHalfUnits;
@@ -77,13 +134,8 @@ void ComputeField(std::span<const PointQ> view, uint8_t* out) {
   for (const PointQ& p : view) pts.emplace_back(by_y ? p.y : p.x, by_y ? p.x : p.y);
   if (!by_y) std::sort(pts.begin(), pts.end());
   const size_t n = pts.size();
-  // Envelope scratch: vertex a, its value gap_b^2, and the left boundary of each parabola as a
-  // fraction zn / zd (zd > 0; index 0 is -infinity and never read).
-  thread_local std::vector<int64_t> va, vf, zn, zd;
-  va.resize(n);
-  vf.resize(n);
-  zn.resize(n);
-  zd.resize(n);
+  thread_local EnvelopeScratch env;
+  env.Reserve(n);
   int64_t edge_d2[kSide + 1];
   int64_t inside_d2[kSide];
 
@@ -93,57 +145,26 @@ void ComputeField(std::span<const PointQ> view, uint8_t* out) {
     size_t m = 0;
     std::fill(inside_d2, inside_d2 + kSide, kInf64);
     for (size_t i = 0; i < n; ++i) {
-      const int64_t gb = kCentre ? pts[i].second - (b0 + kCentreOffset) : Gap(pts[i].second, b0);
+      const int64_t gb = Gap(pts[i].second, b0);
       const int64_t f = gb * gb;
       const int64_t a = pts[i].first;
-      // Points inside a cell's a range: the distance to that cell's box is gap_b alone.
+      // Points inside a cell's a range: the distance to that cell is gap_b alone.
       const int64_t cell = (a + kHalf) / kCell;
-      if (!kCentre && a >= -kHalf && cell < kSide) {
-        inside_d2[cell] = std::min(inside_d2[cell], f);
-      }
-      if (m > 0 && va[m - 1] == a) {
-        vf[m - 1] = std::min(vf[m - 1], f);
+      if (a >= -kHalf && cell < kSide) inside_d2[cell] = std::min(inside_d2[cell], f);
+      if (m > 0 && env.va[m - 1] == a) {
+        env.vf[m - 1] = std::min(env.vf[m - 1], f);
       } else {
-        va[m] = a;
-        vf[m] = f;
+        env.va[m] = a;
+        env.vf[m] = f;
         ++m;
       }
     }
-    // Lower envelope (Felzenszwalb & Huttenlocher) in exact integer fractions, built in place:
-    // the envelope's vertices are a subsequence of the parabolas.
-    size_t k = 0;
-    for (size_t q = 1; q < m; ++q) {
-      const int64_t aq = va[q];
-      const int64_t fq = vf[q];
-      int64_t num = 0;
-      int64_t den = 0;
-      for (;;) {
-        num = (fq + aq * aq) - (vf[k] + va[k] * va[k]);
-        den = 2 * (aq - va[k]);
-        // Pop while the new boundary is at or left of the top's left boundary.
-        if (k > 0 && num * zd[k] <= zn[k] * den) {
-          --k;
-          continue;
-        }
-        break;
-      }
-      ++k;
-      va[k] = aq;
-      vf[k] = fq;
-      zn[k] = num;
-      zd[k] = den;
-    }
-    // Evaluate at the cell edges (or centres) along a, in increasing order.
-    size_t j = 0;
-    for (int e = 0; e <= kSide; ++e) {
-      const int64_t a = -kHalf + static_cast<int64_t>(e) * kCell + (kCentre ? kCentreOffset : 0);
-      while (j < k && zn[j + 1] < a * zd[j + 1]) ++j;
-      const int64_t da = a - va[j];
-      edge_d2[e] = da * da + vf[j];
-    }
+    const size_t k = LowerEnvelope(m, env.va.data(), env.vf.data(), env.zn.data(), env.zd.data());
+    // Evaluate at the cell edges along a, in increasing order.
+    EvaluateEnvelope(
+        k, env.va.data(), env.vf.data(), env.zn.data(), env.zd.data(), -kHalf, edge_d2);
     for (int c = 0; c < kSide; ++c) {
-      const uint8_t value =
-          ToUnits(kCentre ? edge_d2[c] : std::min({edge_d2[c], edge_d2[c + 1], inside_d2[c]}));
+      const uint8_t value = ToUnits(std::min({edge_d2[c], edge_d2[c + 1], inside_d2[c]}));
       // a = y: band is the column ix, c the row iy; a = x: band is the row, c the column.
       out[by_y ? static_cast<size_t>(c) * kSide + band : static_cast<size_t>(band) * kSide + c] =
           value;
@@ -151,14 +172,60 @@ void ComputeField(std::span<const PointQ> view, uint8_t* out) {
   }
 }
 
-}  // namespace
-
-void ComputeCoarseField(std::span<const PointQ> view, uint8_t* out) {
-  ComputeField<false>(view, out);
-}
-
 void ComputeCentreField(std::span<const PointQ> view, uint8_t* out) {
-  ComputeField<true>(view, out);
+  constexpr int kSide = CoarseGrid::kSide;
+  constexpr int kCell = CoarseGrid::kCellUnits;
+  constexpr int kHalf = CoarseGrid::kHalfUnits;
+  if (view.empty()) {
+    std::fill(out, out + CoarseGrid::kCells, uint8_t{0});
+    return;
+  }
+  // The points as rows of equal y, sorted by x within a row (a database view's points come
+  // sorted by y, then x). The centres of one column of cells (x = bc) see row r's points at
+  // best min_p |p.x - bc| away along x, so the column's values are the lower envelope of one
+  // parabola per row, (y - y_r)^2 + min_p (p.x - bc)^2, at the centres' y: per column one pass
+  // over the rows (a pointer per row moves right as bc grows) instead of over every point.
+  thread_local std::vector<PointQ> pts;
+  pts.assign(view.begin(), view.end());
+  auto by_yx = [](PointQ p, PointQ q) { return p.y != q.y ? p.y < q.y : p.x < q.x; };
+  if (!std::is_sorted(pts.begin(), pts.end(), by_yx)) std::sort(pts.begin(), pts.end(), by_yx);
+  thread_local std::vector<int64_t> row_y;
+  thread_local std::vector<uint32_t> row_end, next;  // per row: its end, its first x >= bc
+  row_y.clear();
+  row_end.clear();
+  next.clear();
+  for (uint32_t i = 0; i < pts.size(); ++i) {
+    if (row_y.empty() || row_y.back() != pts[i].y) {
+      if (!row_y.empty()) row_end.push_back(i);
+      row_y.push_back(pts[i].y);
+      next.push_back(i);
+    }
+  }
+  row_end.push_back(static_cast<uint32_t>(pts.size()));
+  const size_t m = row_y.size();
+  thread_local EnvelopeScratch env;
+  env.Reserve(m);
+  int64_t d2[kSide + 1];
+  for (int column = 0; column < kSide; ++column) {
+    const int32_t bc = -kHalf + column * kCell + kCentreOffset;
+    for (size_t r = 0; r < m; ++r) {
+      const uint32_t begin = r == 0 ? 0 : row_end[r - 1];
+      uint32_t i = next[r];
+      while (i < row_end[r] && pts[i].x < bc) ++i;
+      next[r] = i;
+      int64_t best = kInf64;
+      if (i < row_end[r]) best = static_cast<int64_t>(pts[i].x) - bc;
+      if (i > begin) best = std::min<int64_t>(best, bc - static_cast<int64_t>(pts[i - 1].x));
+      env.va[r] = row_y[r];
+      env.vf[r] = best * best;
+    }
+    const size_t k = LowerEnvelope(m, env.va.data(), env.vf.data(), env.zn.data(), env.zd.data());
+    EvaluateEnvelope(
+        k, env.va.data(), env.vf.data(), env.zn.data(), env.zd.data(), -kHalf + kCentreOffset, d2);
+    for (int row = 0; row < kSide; ++row) {
+      out[static_cast<size_t>(row) * kSide + column] = ToUnits(d2[row]);
+    }
+  }
 }
 
 }  // namespace handdb
