@@ -89,11 +89,13 @@ void NeighbourGaps(PointQ q, uint8_t out[8]);
 // the smallest u with (8u)^2 >= dx^2 + dy^2 (exact integers).
 void FieldGaps(FieldKind kind, PointQ q, uint8_t out[9]);
 
-// Every view's coarse field, cell-major in blocks of kBlock views: the shard's own (format v1.1)
-// where the shard has the section, else computed from the points, in parallel (~110 us per
-// view). The copy replaces the shards' row-major sections in memory (their mapped pages are
-// released once copied), so the fields are resident once. Or (RowMajor) the shards' sections
-// themselves, read in place, for searches that read a few views' fields.
+// Every view's coarse field, cell-major in blocks of kBlock views. Box fields (kBox): the shard's
+// own (format v1.1) where the shard has the section, else computed from the points, in parallel
+// (~110 us per view); the copy replaces the shards' row-major sections in memory (their mapped
+// pages are released once copied), so the fields are resident once. Centre fields (kCentre, what
+// the exact search uses since they bound A tighter): computed from the points (~60 us per view),
+// the shards' sections never read. Or (RowMajor) the shards' box sections themselves, read in
+// place, for searches that read a few views' fields.
 class CoarseFields {
  public:
   static constexpr size_t kBlock = 128;  // views per block

@@ -138,10 +138,11 @@ class Searcher {
 
   const Database& database() const { return *db_; }
 
-  // Builds now what exact searches build on first use: every view's coarse field copied
-  // cell-major (CoarseFields; ~0.3 s and 41 MB for 1M virtual views) and the views' cell
-  // histograms. For benchmarks and servers that should not pay it in their first query; a
-  // process that runs indexed searches only never needs it (they read the shards' fields).
+  // Builds now what exact searches build on first use: every view's centre field, cell-major
+  // (CoarseFields, FieldKind::kCentre; ~0.7 s on 2 threads and 41 MB for 1M virtual views) and
+  // the views' cell histograms. For benchmarks and servers that should not pay it in their
+  // first query; a process that runs indexed searches only never needs it (they read the
+  // shards' box fields).
   void PrepareExactSearch() const;
 
   // The index kIndexed searches use (built for this database: ViewIndex::Open checks that).
@@ -157,9 +158,9 @@ class Searcher {
   // Half extent of the per-roll distance grids: the largest |x|, |y| of any view (px), so every
   // view's points are on the grid (the fast path) and no node is computed that no view reads.
   float grid_half_extent_px_ = 0;
-  // Per view: the A bound's coarse field, copied cell-major by the first exact search
-  // (cell_major_fields()); indexed searches read the shards' own row-major fields (coarse_rows_,
-  // when every shard has them).
+  // Per view: the A bound's centre field, computed cell-major by the first exact search
+  // (cell_major_fields()); indexed searches read the shards' own row-major box fields
+  // (coarse_rows_, when every shard has them).
   const CoarseFields& cell_major_fields() const;
   mutable std::once_flag cell_major_once_;
   mutable CoarseFields cell_major_;
