@@ -351,6 +351,9 @@ int RunQuery(int argc, char** argv) {
     return Fail("query", Status(StatusCode::kNotFound, db_dir + ": the database has no views"));
   auto shared_db = std::make_shared<const Database>(std::move(db).value());
   Searcher searcher(shared_db);
+  // One query: the shards' box fields are copied in a fraction of the time the centre fields
+  // take to compute (pca-large: ~0.1 s against ~0.7 s), which is more than one query gains.
+  if (shared_db->has_coarse_fields()) searcher.SetExactFieldKind(FieldKind::kBox);
   // Indexed search when asked, or by default when the manifest lists an index.
   if (flags.search_mode != "exact" && !flags.search.brute_force &&
       (flags.search_mode == "indexed" || shared_db->manifest().index)) {

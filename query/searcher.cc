@@ -641,7 +641,7 @@ Searcher::Searcher(std::shared_ptr<const Database> db) : db_(std::move(db)) {
 
 const CoarseFields& Searcher::cell_major_fields() const {
   std::call_once(cell_major_once_,
-                 [this] { cell_major_ = CoarseFields(*db_, -1, FieldKind::kCentre); });
+                 [this] { cell_major_ = CoarseFields(*db_, -1, exact_field_kind_); });
   return cell_major_;
 }
 

@@ -145,6 +145,13 @@ class Searcher {
   // shards' box fields).
   void PrepareExactSearch() const;
 
+  // Which coarse field the exact search bounds A with (docs/query.md "The centre field"):
+  // kCentre, the default, computed from the points when first needed (~60 us per view) and
+  // tighter; or kBox, the shards' own fields, copied (fast to prepare: what a process that runs
+  // a single query on a database with stored fields should use, `handdb query`). The results
+  // are the same. Call before the first exact search (later calls have no effect).
+  void SetExactFieldKind(FieldKind kind) { exact_field_kind_ = kind; }
+
   // The index kIndexed searches use (built for this database: ViewIndex::Open checks that).
   void SetIndex(std::shared_ptr<const ViewIndex> index) { index_ = std::move(index); }
   const ViewIndex* index() const { return index_.get(); }
@@ -158,10 +165,11 @@ class Searcher {
   // Half extent of the per-roll distance grids: the largest |x|, |y| of any view (px), so every
   // view's points are on the grid (the fast path) and no node is computed that no view reads.
   float grid_half_extent_px_ = 0;
-  // Per view: the A bound's centre field, computed cell-major by the first exact search
-  // (cell_major_fields()); indexed searches read the shards' own row-major box fields
-  // (coarse_rows_, when every shard has them).
+  // Per view: the A bound's field (centre, or box: exact_field_kind_), laid out cell-major by
+  // the first exact search (cell_major_fields()); indexed searches read the shards' own
+  // row-major box fields (coarse_rows_, when every shard has them).
   const CoarseFields& cell_major_fields() const;
+  FieldKind exact_field_kind_ = FieldKind::kCentre;
   mutable std::once_flag cell_major_once_;
   mutable CoarseFields cell_major_;
   CoarseFields coarse_rows_;

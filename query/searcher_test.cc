@@ -220,14 +220,19 @@ TEST(Searcher, SmallRotationsShiftsAndDroppedPointsKeepTopOne) {
 
 // >= 50 random queries: pruned == brute force (views, order, distances), for both backends and
 // any thread count.
+// With either coarse field for the A bound (the centre field by default, the box field that
+// `handdb query` uses for its single query).
 TEST(Searcher, PrunedEqualsBruteForce) {
-  for (const bool sorted : {false, true}) {
-    const Searcher searcher(sorted ? SortedTestDatabase() : TestDatabase());
+  for (const auto& [sorted, kind] : {std::pair{false, FieldKind::kCentre},
+                                     std::pair{true, FieldKind::kCentre},
+                                     std::pair{true, FieldKind::kBox}}) {
+    Searcher searcher(sorted ? SortedTestDatabase() : TestDatabase());
+    searcher.SetExactFieldKind(kind);
     std::mt19937 rng(42);
     std::uniform_int_distribution<uint32_t> view(0, kViews - 1);
     std::uniform_int_distribution<uint32_t> roll(0, kRolls - 1);
     std::uniform_real_distribution<float> u(-1, 1);
-    for (int i = 0; i < 60; ++i) {
+    for (int i = 0; i < (kind == FieldKind::kCentre ? 60 : 24); ++i) {
       std::vector<Point2f> q;
       if (i % 4 == 3) {
         // A shape unlike any view: an unrelated synthetic set.
