@@ -52,7 +52,8 @@ constexpr int kCentreOffset = CoarseGrid::kCellUnits / 2;
 // point to the view's nearest point, rounded down to 1/2 px (saturating at 127.5 px), row-major
 // like F_v. For any point q, d(q, Y_v) >= C_v(c) - |q - centre(c)| for every cell c (distance to
 // a set is 1-Lipschitz). The exact search computes it from the points when it opens a database
-// (query/coarse_bound.h: ~30 us per view, the same envelope as F_v). Empty views get all zeros.
+// (query/coarse_bound.h; ~60 us per view, the envelope of F_v over one parabola per row of points).
+// Empty views get all zeros.
 void ComputeCentreField(std::span<const PointQ> view, uint8_t* out);
 
 // The exact min over the view's points of the squared distance (PointQ units^2) to the centre

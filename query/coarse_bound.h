@@ -102,7 +102,7 @@ class CoarseFields {
 
   CoarseFields() = default;
   // kBox: the shards' F_v (computed where a shard lacks the section); kCentre: C_v, computed
-  // from every view's points (~30 us per view, in parallel).
+  // from every view's points (~60 us per view, in parallel).
   CoarseFields(const Database& db, int num_threads, FieldKind kind = FieldKind::kBox);
   // The shards' own row-major fields, read in place (nothing copied, nothing computed): for
   // searches that read the fields of a few views only (indexed search), where the cell-major
@@ -126,7 +126,7 @@ class CoarseFields {
   // (F_v(n) - g). It is >= sum_c n(c) (F_v(c) - g_i), the cell-only bound.
   uint64_t PairSum(const CellHistogram& histogram, size_t v) const;
   // PairSum for the views of block b: out[i] for view b kBlock + i, i < kBlock (views past the
-  // end get 0). With `neighbours` false the cell-only sum sum_c n(c) F_v(c) instead (<= PairSum,
+  // end get 0). With `neighbours` false the cell-only sum sum_i n_i (F_v(c) - g_i) (<= PairSum,
   // ~1/4 of the work); only the groups of 32 views whose bit is set in `groups` (bit g: views
   // 32g..32g+31 of the block) are written.
   void BlockSums(const CellHistogram& histogram,
