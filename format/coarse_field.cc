@@ -114,16 +114,21 @@ struct EnvelopeScratch {
   }
 };
 
+constexpr int kSide = CoarseGrid::kSide;
+constexpr int kCell = CoarseGrid::kCellUnits;
+constexpr int kHalf = CoarseGrid::kHalfUnits;
+
+// Empty views get all zeros (a valid bound: no distance is negative).
+bool ZeroIfEmpty(std::span<const PointQ> view, uint8_t* out) {
+  if (!view.empty()) return false;
+  std::fill(out, out + CoarseGrid::kCells, uint8_t{0});
+  return true;
+}
+
 }  // namespace
 
 void ComputeCoarseField(std::span<const PointQ> view, uint8_t* out) {
-  constexpr int kSide = CoarseGrid::kSide;
-  constexpr int kCell = CoarseGrid::kCellUnits;
-  constexpr int kHalf = CoarseGrid::kHalfUnits;
-  if (view.empty()) {
-    std::fill(out, out + CoarseGrid::kCells, uint8_t{0});
-    return;
-  }
+  if (ZeroIfEmpty(view, out)) return;
   // The envelope runs along one axis ("a") over bands of cells across the other ("b"), and needs
   // the points sorted by a. A database view's points come in raster order (sorted by y), so a = y
   // and bands are columns; any other set is sorted by x and bands are rows.
@@ -173,13 +178,7 @@ void ComputeCoarseField(std::span<const PointQ> view, uint8_t* out) {
 }
 
 void ComputeCentreField(std::span<const PointQ> view, uint8_t* out) {
-  constexpr int kSide = CoarseGrid::kSide;
-  constexpr int kCell = CoarseGrid::kCellUnits;
-  constexpr int kHalf = CoarseGrid::kHalfUnits;
-  if (view.empty()) {
-    std::fill(out, out + CoarseGrid::kCells, uint8_t{0});
-    return;
-  }
+  if (ZeroIfEmpty(view, out)) return;
   // The points as rows of equal y, sorted by x within a row (a database view's points come
   // sorted by y, then x). The centres of one column of cells (x = bc) see row r's points at
   // best min_p |p.x - bc| away along x, so the column's values are the lower envelope of one
