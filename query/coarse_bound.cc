@@ -85,7 +85,8 @@ CoarseFields::CoarseFields(const Database& db, int num_threads, FieldKind kind)
   db.ReleaseCoarseFieldPages();
 }
 
-CoarseFields CoarseFields::RowMajor(const Database& db) {  // kind_: kBox
+// The shards store box fields: kind_ stays FieldKind::kBox.
+CoarseFields CoarseFields::RowMajor(const Database& db) {
   THROW_CHECK(db.has_coarse_fields());
   CoarseFields fields;
   fields.num_views_ = db.num_views();
