@@ -184,10 +184,14 @@ void ComputeCentreField(std::span<const PointQ> view, uint8_t* out) {
   // best min_p |p.x - bc| away along x, so the column's values are the lower envelope of one
   // parabola per row, (y - y_r)^2 + min_p (p.x - bc)^2, at the centres' y: per column one pass
   // over the rows (a pointer per row moves right as bc grows) instead of over every point.
-  thread_local std::vector<PointQ> pts;
-  pts.assign(view.begin(), view.end());
   auto by_yx = [](PointQ p, PointQ q) { return p.y != q.y ? p.y < q.y : p.x < q.x; };
-  if (!std::is_sorted(pts.begin(), pts.end(), by_yx)) std::sort(pts.begin(), pts.end(), by_yx);
+  std::span<const PointQ> pts = view;
+  if (!std::is_sorted(view.begin(), view.end(), by_yx)) {  // sorted in a copy, else read in place
+    thread_local std::vector<PointQ> sorted;
+    sorted.assign(view.begin(), view.end());
+    std::sort(sorted.begin(), sorted.end(), by_yx);
+    pts = sorted;
+  }
   thread_local std::vector<int64_t> row_y;
   thread_local std::vector<uint32_t> row_end, next;  // per row: its end, its first x >= bc
   row_y.clear();
