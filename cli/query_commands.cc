@@ -288,6 +288,7 @@ json ResultJson(const QueryFlags& flags,
       query_json["wrist_line_px"] = {{query.wrist_line[0], query.wrist_line[1]},
                                      {query.wrist_line[2], query.wrist_line[3]}};
     }
+    if (query.arm_found) query_json["arm_direction"] = {query.arm_dir_x, query.arm_dir_y};
   }
   return {{"format", "handdb-query-result"},
           {"version", 1},

@@ -709,6 +709,30 @@ PYBIND11_MODULE(_handdb, m) {
           [](const PyQueryEdges& q) { return py::make_tuple(q.edges.centre_x, q.edges.centre_y); },
           "normalisation centre in image px: normalised = (pixel centre - centre) * scale")
       .def_property_readonly("scale", [](const PyQueryEdges& q) { return q.edges.scale; })
+      .def_property_readonly(
+          "palm",
+          [](const PyQueryEdges& q) -> py::object {
+            if (q.edges.palm_radius_px <= 0) return py::none();
+            return py::make_tuple(
+                q.edges.palm_centre_x, q.edges.palm_centre_y, q.edges.palm_radius_px);
+          },
+          "photo: the palm's largest inscribed circle (x, y, radius) in image px, or None")
+      .def_property_readonly(
+          "arm_direction",
+          [](const PyQueryEdges& q) -> py::object {
+            if (!q.edges.arm_found) return py::none();
+            return py::make_tuple(q.edges.arm_dir_x, q.edges.arm_dir_y);
+          },
+          "photo: unit vector (x right, y down, image px) from the palm centre towards where "
+          "the arm leaves the picture, or None when no arm was found")
+      .def_property_readonly(
+          "wrist_line",
+          [](const PyQueryEdges& q) -> py::object {
+            if (!q.edges.forearm_cut) return py::none();
+            const auto& w = q.edges.wrist_line;
+            return py::make_tuple(w[0], w[1], w[2], w[3]);
+          },
+          "photo: the wrist cut (x0, y0, x1, y1) in image px, or None when no forearm was cut")
       .def(
           "image_from_normalised",
           [](const PyQueryEdges& q,

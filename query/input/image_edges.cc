@@ -300,6 +300,7 @@ struct WristCut {
   cv::Point2d palm_centre;  // working px (pixel centres at +0.5)
   double palm_radius = 0;
   cv::Point2d a, b;  // the cut line's ends across the region, working px
+  cv::Point2d dir;   // unit direction from the palm centre to the arm (working px), when arm
 };
 
 // A wrist is 1.2-2 palm radii wide (a fist has the largest radius); one finger is about half a
@@ -338,6 +339,7 @@ WristCut CutForearm(cv::Mat* region, double radii) {
   const double len = std::hypot(dir.x, dir.y);
   if (len < 1e-9) return out;
   dir /= len;
+  out.dir = dir;
   const double limit = radii * out.palm_radius;
   double lo = 1e30, hi = -1e30;  // extent of the cut line across the region
   for (int y = 0; y < h; ++y) {
@@ -620,6 +622,14 @@ Result<QueryEdges> FromPhoto(const std::filesystem::path& path,
     out.palm_radius_px = wrist.palm_radius / out.work_scale;
   }
   out.forearm_cut = wrist.cut;
+  if (wrist.arm && (wrist.dir.x != 0 || wrist.dir.y != 0)) {
+    // Back to source px: the working image may be scaled differently in x and y.
+    const double dx = wrist.dir.x / fx, dy = wrist.dir.y / fy;
+    const double n = std::hypot(dx, dy);
+    out.arm_found = true;
+    out.arm_dir_x = dx / n;
+    out.arm_dir_y = dy / n;
+  }
   if (wrist.cut) {
     out.wrist_line = {crop.x + wrist.a.x / fx,
                       crop.y + wrist.a.y / fy,
@@ -648,6 +658,11 @@ void ScaleToSource(cv::Size source, cv::Size decoded, QueryEdges* q) {
   q->palm_centre_y *= fy;
   q->palm_radius_px *= f;
   for (size_t i = 0; i < 4; ++i) q->wrist_line[i] *= i % 2 == 0 ? fx : fy;
+  if (q->arm_found) {
+    const double dx = q->arm_dir_x * fx, dy = q->arm_dir_y * fy, n = std::hypot(dx, dy);
+    q->arm_dir_x = dx / n;
+    q->arm_dir_y = dy / n;
+  }
   q->centre_x *= fx;
   q->centre_y *= fy;
   q->diameter_px *= f;

@@ -128,6 +128,11 @@ struct QueryEdges {
   // Photo: what the working size and the wrist cut did (for --json and the contact sheet).
   double work_scale = 1;     // working px per source px (1: the picture's own resolution)
   bool forearm_cut = false;  // a forearm was cut off
+  // An arm leaves the picture (whether or not it was long enough to cut): the unit direction,
+  // in source px (y down), from the palm centre towards where it leaves. Not looked for when
+  // cut_forearm is off; (0, 0) when not found.
+  bool arm_found = false;
+  double arm_dir_x = 0, arm_dir_y = 0;
   double palm_centre_x = 0;  // the palm's inscribed circle, source px (0 radius: not found)
   double palm_centre_y = 0;
   double palm_radius_px = 0;

@@ -442,6 +442,13 @@ TEST_F(ImageEdgesTest, ForearmIsCutOffAtTheWrist) {
   EXPECT_GT(cut->wrist_line[1], cut->palm_centre_y);
   EXPECT_GT(cut->wrist_line[3], cut->palm_centre_y);
   EXPECT_GT(cut->palm_radius_px, 0.8 * palm_radius);
+  // The arm's direction: a unit vector along the drawn arm (wrist away from the middle finger),
+  // none for the hand alone, nor with the wrist cut off (no arm is looked for).
+  EXPECT_FALSE(hand->arm_found);
+  EXPECT_FALSE(uncut->arm_found);
+  ASSERT_TRUE(cut->arm_found);
+  EXPECT_NEAR(std::hypot(cut->arm_dir_x, cut->arm_dir_y), 1.0, 1e-9);
+  EXPECT_GT((cut->arm_dir_x * ux + cut->arm_dir_y * uy) / len, std::cos(0.35));  // within 20 deg
 }
 
 TEST_F(ImageEdgesTest, PicturesTheSearchCannotUseAreRefusedInOneLine) {
