@@ -1,0 +1,67 @@
+// Lossless compression of a view's edge points on the source pixel lattice (issue 12 item 3;
+// docs/format.md "Point compression").
+//
+// A converted view's points are its edge pixels (integer columns and rows of the rendered label
+// image) pushed through the normalisation (edges/normalise.h): PointQ = round((pixel centre -
+// centre) * scale * 16). Stored as PointQ they take 4 bytes each (~2,400 bytes per view), but the
+// pixels themselves form thin curves, which a chain code stores in about 2 bits per pixel: the
+// pixels are walked as chains of 8-neighbour moves, each move coded by a fixed prefix code
+// (canonical Huffman, lengths from moves measured on rendered databases) given whether the
+// previous move was axial or diagonal; each chain's start is coded relative to the previous
+// start in raster order (Elias gamma). Decoding rebuilds the pixel set in raster order (row,
+// then column), which is also the order NormalisePixels sorts the points into.
+//
+// Stream (bytes): varint n (pixels); when n > 0: zigzag varints min column, min row, varints
+// width - 1, height - 1 of the pixels' bounding box, then a bit stream (least significant bit
+// first) of the chains, zero-padded to a byte. Every pixel is coded exactly once, so n and the
+// stream must agree: a decoder that finds a move off the box, onto a pixel already coded, or
+// bytes left over rejects the stream.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "base/status.h"
+
+namespace handdb {
+
+struct LatticePixel {
+  int32_t col = 0;
+  int32_t row = 0;
+  friend bool operator==(const LatticePixel&, const LatticePixel&) = default;
+};
+
+// Largest bounding box side the codec accepts: the largest render (schemas/config.schema.json,
+// 8192 px). The encoder's work memory is one byte per box pixel, the decoder's one bit.
+constexpr int32_t kMaxLatticeSide = 8192;
+
+// Appends the code of `pixels` (any order; duplicates are coded once) to *out.
+// kOutOfRange when their bounding box is wider or taller than kMaxLatticeSide.
+Status EncodeLatticePixels(std::span<const LatticePixel> pixels, std::string* out);
+
+// Decodes a whole stream made by EncodeLatticePixels into *out (replaced), in raster order.
+// Errors (kTruncated, kOutOfRange, kSizeMismatch) say what is wrong and where (byte offset);
+// the caller adds the file and view. Never reads outside `code`; memory is bounded by the box
+// (at most kMaxLatticeSide^2 bits, 8 MB) and n.
+Status DecodeLatticePixels(std::span<const uint8_t> code, std::vector<LatticePixel>* out);
+
+// Statistics of a code, for benchmarks: chains and move bits.
+struct LatticeCodeStats {
+  uint64_t pixels = 0;
+  uint64_t chains = 0;
+  uint64_t start_bits = 0;  // chain starts
+  uint64_t move_bits = 0;   // moves and chain ends
+  uint64_t header_bytes = 0;
+  // Moves by context (0: after an axial move or at a chain's start, 1: after a diagonal move)
+  // and symbol (0-7: direction relative to the previous move, counter-clockwise in image
+  // coordinates; 8: end of chain).
+  uint64_t symbols[2][9] = {};
+};
+// Like EncodeLatticePixels, and adds what it coded to *stats.
+Status EncodeLatticePixels(std::span<const LatticePixel> pixels,
+                           std::string* out,
+                           LatticeCodeStats* stats);
+
+}  // namespace handdb

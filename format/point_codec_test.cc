@@ -1,0 +1,155 @@
+#include "format/point_codec.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <set>
+
+namespace handdb {
+namespace {
+
+std::vector<LatticePixel> Raster(std::vector<LatticePixel> p) {
+  std::sort(p.begin(), p.end(), [](const LatticePixel& a, const LatticePixel& b) {
+    return a.row != b.row ? a.row < b.row : a.col < b.col;
+  });
+  p.erase(std::unique(p.begin(), p.end()), p.end());
+  return p;
+}
+
+std::string Encode(const std::vector<LatticePixel>& p) {
+  std::string code;
+  const Status s = EncodeLatticePixels(p, &code);
+  EXPECT_TRUE(s.ok()) << s.ToString();
+  return code;
+}
+
+std::span<const uint8_t> Bytes(const std::string& s) {
+  return {reinterpret_cast<const uint8_t*>(s.data()), s.size()};
+}
+
+void ExpectRoundTrip(const std::vector<LatticePixel>& p) {
+  const std::string code = Encode(p);
+  std::vector<LatticePixel> back;
+  const Status s = DecodeLatticePixels(Bytes(code), &back);
+  ASSERT_TRUE(s.ok()) << s.ToString();
+  EXPECT_EQ(back, Raster(p));
+}
+
+// Outlines of a few overlapping ellipses and a line across them: thin curves like a view's edges,
+// with junctions, 4- and 8-connected steps.
+std::vector<LatticePixel> Curves(int ox, int oy) {
+  std::vector<LatticePixel> p;
+  for (int e = 0; e < 4; ++e) {
+    const double a = 30 + 12 * e, b = 18 + 9 * e, cx = 100 + 15 * e, cy = 80 + 5 * e;
+    for (int i = 0; i < 2000; ++i) {
+      const double t = 2 * M_PI * i / 2000;
+      p.push_back({ox + static_cast<int>(std::floor(cx + a * std::cos(t))),
+                   oy + static_cast<int>(std::floor(cy + b * std::sin(t)))});
+    }
+  }
+  for (int x = 40; x < 200; ++x) p.push_back({ox + x, oy + 60 + x / 3});
+  return p;
+}
+
+TEST(PointCodec, RoundTripsCurvesInRasterOrder) {
+  const std::vector<LatticePixel> p = Curves(0, 0);
+  ExpectRoundTrip(p);
+  // About 2 bits per pixel on curves (the point of the codec): far below PointQ's 32.
+  const std::string code = Encode(p);
+  EXPECT_LT(8.0 * code.size() / Raster(p).size(), 4.0);
+  // Any order and duplicates give the same code.
+  std::vector<LatticePixel> shuffled = p;
+  std::shuffle(shuffled.begin(), shuffled.end(), std::mt19937(7));
+  shuffled.insert(shuffled.end(), p.begin(), p.begin() + 50);
+  EXPECT_EQ(Encode(shuffled), code);
+  // Negative and large coordinates.
+  ExpectRoundTrip(Curves(-5000, -70000));
+  ExpectRoundTrip(Curves(2000000000, 100));
+}
+
+TEST(PointCodec, SmallAndScatteredSets) {
+  ExpectRoundTrip({});
+  EXPECT_EQ(Encode({}), std::string(1, '\0'));
+  ExpectRoundTrip({{3, 4}});
+  ExpectRoundTrip({{3, 4}, {4, 4}});
+  ExpectRoundTrip({{3, 4}, {2, 5}});  // the first move goes south-west
+  ExpectRoundTrip({{0, 0}, {kMaxLatticeSide - 1, kMaxLatticeSide - 1}});
+  std::mt19937 rng(11);
+  for (int trial = 0; trial < 50; ++trial) {
+    std::vector<LatticePixel> p;
+    std::uniform_int_distribution<int> coord(-40, 40);
+    const int n = 1 + trial * 13;
+    for (int i = 0; i < n; ++i) p.push_back({coord(rng), coord(rng)});
+    ExpectRoundTrip(p);
+  }
+  // A full block: every pixel a neighbour of many.
+  std::vector<LatticePixel> block;
+  for (int y = 0; y < 20; ++y) {
+    for (int x = 0; x < 30; ++x) block.push_back({x, y});
+  }
+  ExpectRoundTrip(block);
+}
+
+TEST(PointCodec, RefusesABoxTooLargeToCode) {
+  std::string code;
+  const Status s =
+      EncodeLatticePixels(std::vector<LatticePixel>{{0, 0}, {kMaxLatticeSide, 0}}, &code);
+  EXPECT_EQ(s.code(), StatusCode::kOutOfRange);
+  EXPECT_NE(s.message().find("8192"), std::string::npos) << s.message();
+}
+
+TEST(PointCodec, DamagedCodesAreErrorsNeverCrashes) {
+  const std::vector<LatticePixel> p = Curves(10, 20);
+  const std::string code = Encode(p);
+  std::vector<LatticePixel> back;
+  // Every truncation is an error.
+  for (size_t len = 0; len < code.size(); ++len) {
+    const Status s = DecodeLatticePixels(Bytes(code).first(len), &back);
+    EXPECT_FALSE(s.ok()) << "length " << len;
+  }
+  // A byte more is an error.
+  EXPECT_FALSE(DecodeLatticePixels(Bytes(code + std::string(1, '\0')), &back).ok());
+  // Every single-bit flip either fails with a message or decodes to some valid set; never a
+  // crash or a read outside the code (the sanitizer stage runs this test).
+  int failed = 0;
+  for (size_t bit = 0; bit < 8 * code.size(); ++bit) {
+    std::string flipped = code;
+    flipped[bit / 8] = static_cast<char>(flipped[bit / 8] ^ (1 << (bit % 8)));
+    const Status s = DecodeLatticePixels(Bytes(flipped), &back);
+    if (!s.ok()) {
+      ++failed;
+      EXPECT_FALSE(s.message().empty());
+    }
+  }
+  EXPECT_GT(failed, 0);
+  // Hostile headers: a count that cannot fit the box, a box wider than allowed.
+  std::string huge_count;
+  huge_count.push_back('\xff');
+  huge_count.push_back('\x7f');                      // n = 16383
+  huge_count += std::string("\x00\x00\x01\x01", 4);  // a 2 x 2 box at (0, 0)
+  EXPECT_EQ(DecodeLatticePixels(Bytes(huge_count), &back).code(), StatusCode::kSizeMismatch);
+  std::string wide = std::string("\x01\x00\x00", 3);
+  wide += std::string("\x80\x40\x00", 3);  // width - 1 = 8192
+  EXPECT_EQ(DecodeLatticePixels(Bytes(wide), &back).code(), StatusCode::kOutOfRange);
+}
+
+TEST(PointCodec, StatsCountWhatWasCoded) {
+  const std::vector<LatticePixel> p = Curves(0, 0);
+  std::string code;
+  LatticeCodeStats stats;
+  ASSERT_TRUE(EncodeLatticePixels(p, &code, &stats).ok());
+  EXPECT_EQ(stats.pixels, Raster(p).size());
+  uint64_t symbols = 0, ends = 0;
+  for (const auto& context : stats.symbols) {
+    for (int s = 0; s < 9; ++s) symbols += context[s];
+    ends += context[8];
+  }
+  EXPECT_EQ(ends, stats.chains);
+  EXPECT_EQ(symbols, stats.pixels);  // one move per pixel but each chain's first, one end each
+  EXPECT_EQ(stats.header_bytes + (stats.start_bits + stats.move_bits + 7) / 8, code.size());
+}
+
+}  // namespace
+}  // namespace handdb
