@@ -9,9 +9,11 @@
 // converted views are, synthetic benchmark views jittered off it are not), encoded, decoded and
 // compared. Prints bytes per point and per view against PointQ's 4 bytes, decode time per view
 // (median of --reps passes over all views), the symbol counts and the canonical Huffman code
-// lengths they imply (format/point_codec.cc's table), and the database's bytes per canonical
-// and per virtual view today and with coded points.
+// lengths they imply (format/point_codec.cc's table); the same for the coarse fields with
+// format/field_codec.h; and the database's bytes per canonical and per virtual view today, with
+// coded points, and with coded points and fields.
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -22,6 +24,7 @@
 #include <vector>
 
 #include "format/coarse_field.h"
+#include "format/field_codec.h"
 #include "format/point_codec.h"
 #include "query/database.h"
 
@@ -29,6 +32,10 @@ namespace handdb {
 namespace {
 
 namespace fs = std::filesystem;
+
+std::span<const uint8_t> Bytes(const std::string& s) {
+  return {reinterpret_cast<const uint8_t*>(s.data()), s.size()};
+}
 
 double Now() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
@@ -264,56 +271,45 @@ int Run(int argc, char** argv) {
     std::printf("; Huffman lengths {");
     for (int s = 0; s < 9; ++s) std::printf("%d%s", lengths[s], s < 8 ? ", " : "}\n");
   }
-  // The coarse fields (1,849 bytes per view raw): what a lossless predictive code could reach,
-  // estimated from the residuals of LOCO-I's median predictor (from the west, north and
-  // north-west cells) under one static Huffman code for all views. An estimate for the format's
-  // next step, not a codec.
-  std::vector<uint64_t> residuals(511, 0);
-  uint64_t field_views = 0;
-  for (size_t v = 0; v < n; ++v) {
-    const uint8_t* f = db.coarse_field(static_cast<view_id_t>(v));
-    if (f == nullptr) continue;
-    ++field_views;
-    for (int y = 0; y < CoarseGrid::kSide; ++y) {
-      for (int x = 0; x < CoarseGrid::kSide; ++x) {
-        const int w =
-            x > 0 ? f[y * CoarseGrid::kSide + x - 1] : (y > 0 ? f[(y - 1) * CoarseGrid::kSide] : 0);
-        const int nn = y > 0 ? f[(y - 1) * CoarseGrid::kSide + x] : w;
-        const int nw = x > 0 && y > 0 ? f[(y - 1) * CoarseGrid::kSide + x - 1] : nn;
-        const int pred = nw >= std::max(w, nn)   ? std::min(w, nn)
-                         : nw <= std::min(w, nn) ? std::max(w, nn)
-                                                 : w + nn - nw;
-        ++residuals[static_cast<size_t>(f[y * CoarseGrid::kSide + x] - pred + 255)];
-      }
+  // The coarse fields (1,849 bytes per view raw): coded (format/field_codec.h), checked, timed.
+  uint64_t field_views = 0, field_bytes = 0, field_mismatched = 0;
+  std::vector<double> field_decode_us;
+  {
+    std::vector<std::string> field_codes;
+    std::array<uint8_t, CoarseGrid::kCells> back_field{};
+    for (size_t v = 0; v < n; ++v) {
+      const uint8_t* f = db.coarse_field(static_cast<view_id_t>(v));
+      if (f == nullptr) continue;
+      field_codes.emplace_back();
+      EncodeCoarseField(std::span<const uint8_t, CoarseGrid::kCells>(f, CoarseGrid::kCells),
+                        &field_codes.back());
+      field_bytes += field_codes.back().size();
+      const Status st = DecodeCoarseField(Bytes(field_codes.back()), back_field);
+      field_mismatched += !st.ok() || !std::equal(back_field.begin(), back_field.end(), f);
+      ++field_views;
     }
-  }
-  double field_entropy_bits = 0, field_huffman_bits = 0, cells = 0;
-  if (field_views > 0) {
-    for (uint64_t c : residuals) cells += static_cast<double>(c);
-    std::vector<uint64_t> used;
-    std::vector<int> used_index;
-    for (size_t i = 0; i < residuals.size(); ++i) {
-      if (residuals[i] == 0) continue;
-      used.push_back(residuals[i]);
-      const double p = residuals[i] / cells;
-      field_entropy_bits -= static_cast<double>(residuals[i]) * std::log2(p);
+    for (int r = 0; r < reps && !field_codes.empty(); ++r) {
+      const double t0 = Now();
+      for (const std::string& c : field_codes) (void)DecodeCoarseField(Bytes(c), back_field);
+      field_decode_us.push_back(1e6 * (Now() - t0) / static_cast<double>(field_codes.size()));
+      sink += back_field[0];
     }
-    const std::vector<int> lengths = HuffmanLengths(used.data(), static_cast<int>(used.size()));
-    for (size_t i = 0; i < used.size(); ++i) {
-      field_huffman_bits += static_cast<double>(used[i]) * std::max(1, lengths[i]);
-    }
+    std::sort(field_decode_us.begin(), field_decode_us.end());
   }
   const double field_raw = CoarseGrid::kCells;
-  const double field_coded = field_views > 0 ? field_huffman_bits / 8 / field_views : field_raw;
+  const double field_coded =
+      field_views > 0 ? static_cast<double>(field_bytes) / static_cast<double>(field_views)
+                      : field_raw;
   if (field_views > 0) {
     std::printf(
-        "  coarse fields (%llu views): %.0f bytes raw; predicted residuals %.2f bits/cell "
-        "entropy, %.2f with one static Huffman code: ~%.0f bytes/view (estimate)\n",
+        "  coarse fields (%llu views): %.0f bytes raw, coded %.1f bytes/view (%.2f "
+        "bits/cell), %llu differ after the round trip; decode %.2f us/view\n",
         static_cast<unsigned long long>(field_views),
         field_raw,
-        field_entropy_bits / cells,
-        field_huffman_bits / cells,
-        field_coded);
+        field_coded,
+        8 * field_coded / field_raw,
+        static_cast<unsigned long long>(field_mismatched),
+        field_decode_us[field_decode_us.size() / 2]);
   }
   std::printf(
       "  storage per canonical view: shards %.0f (points %.0f as PointQ) + index %.0f = "
@@ -323,18 +319,16 @@ int Run(int argc, char** argv) {
       index_per_view,
       shards_per_view + index_per_view,
       (shards_per_view + index_per_view) / rolls);
-  std::printf(
-      "  with coded points: shards %.0f + index %.0f = %.0f bytes; %.1f per virtual view "
-      "(target 40 at R = 48)\n",
-      with_code,
-      index_per_view,
-      with_code + index_per_view,
-      (with_code + index_per_view) / rolls);
+  std::printf("  with coded points: shards %.0f + index %.0f = %.0f bytes; %.1f per virtual view\n",
+              with_code,
+              index_per_view,
+              with_code + index_per_view,
+              (with_code + index_per_view) / rolls);
   if (field_views > 0) {
     const double both = with_code - field_raw + field_coded;
     std::printf(
-        "  with coded points and fields (estimate): shards %.0f + index %.0f = %.0f bytes; "
-        "%.1f per virtual view\n",
+        "  with coded points and fields: shards %.0f + index %.0f = %.0f bytes; "
+        "%.1f per virtual view (target 40 at R = 48)\n",
         both,
         index_per_view,
         both + index_per_view,
