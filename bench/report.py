@@ -426,6 +426,12 @@ def main():
             "`bench/index_bench` on the paper database after `handdb index`: indexed search (the index's "
             "candidates, then the exact refine) against exact search on the same query sets, with "
             "recall@1 / @10 against exact search and the candidates refined (docs/index.md).")
+    section("Point and field compression (issue 12)", "point_codec_paper",
+            "`bench/point_codec_bench` on the paper database (index built): each view's points chain-coded "
+            "on the render's pixel lattice (format/point_codec.h) and its coarse field predictively coded "
+            "(format/field_codec.h), both checked lossless against the shards, decode time per view on one "
+            "thread, and the bytes per canonical and per virtual view they would give (docs/format.md "
+            "section 10; the shard format does not carry them yet).")
     for size in ("10m", "50m"):
         if results["steps"].get(f"index_bench_synth_{size}") is not None:
             section(f"Indexed search at {size[:-1]}M virtual views (synthetic)", f"index_bench_synth_{size}",

@@ -25,6 +25,8 @@
 #             against the paper database: top-1/5/10 shape accuracy, chance, confusion matrix
 #   index     handdb index on the paper database, then bench/index_bench: indexed search against
 #             exact search on the same query sets (latency, recall@1/10, candidates refined)
+#   codec     bench/point_codec_bench on the paper database: the point and coarse-field codes'
+#             bytes per view, decode time, and the storage per virtual view they give (issue 12)
 #   scale     (HANDDB_BENCH_SCALE=1) issue 12's scaling runs: bench/synth_db makes 10M and 50M
 #             virtual views from pca-large (or the paper database when pca-large is not built),
 #             handdb index, index_bench on each (fewer queries at 50M: exact search takes
@@ -41,7 +43,7 @@ cd "$here"
 work="${HANDDB_BENCH_DIR:-/tmp/handdb-bench}"
 build="${HANDDB_BENCH_BUILD:-$here/build-bench}"
 jobs="${HANDDB_BENCH_JOBS:-$(nproc)}"
-steps="${HANDDB_BENCH_STEPS:-build format render generate convert query testset evaluate photos index report}"
+steps="${HANDDB_BENCH_STEPS:-build format render generate convert query testset evaluate photos index codec report}"
 if [ "${HANDDB_BENCH_PCA_LARGE:-0}" = 1 ] && [ -z "${HANDDB_BENCH_STEPS:-}" ]; then
   steps="$steps pca_large_generate pca_large_query pca_large_evaluate"
 fi
@@ -83,7 +85,7 @@ if want build; then
   cmake -S "$here" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=Release -DHANDDB_BUILD_TESTS=OFF \
     >"$out/build.txt" 2>&1
   cmake --build "$build" -j "$jobs" --target handdb format_bench convert_bench query_bench \
-    index_bench synth_db \
+    index_bench synth_db point_codec_bench \
     >>"$out/build.txt" 2>&1
 fi
 
@@ -162,6 +164,10 @@ if want index; then
   run index_paper "$handdb" index "$work/db-paper" -j "$jobs" -q
   run index_bench_paper "$build/bench/index_bench" --db "$work/db-paper" --threads "$jobs" \
     "${sets[@]}" --set-queries 20 --perturbed 10 --candidates 500,1000
+fi
+
+if want codec; then
+  run point_codec_paper "$build/bench/point_codec_bench" --db "$work/db-paper"
 fi
 
 if want scale; then
