@@ -55,29 +55,37 @@ void EncodeCoarseField(std::span<const uint8_t, CoarseGrid::kCells> field, std::
 
 Status DecodeCoarseField(std::span<const uint8_t> bytes,
                          std::span<uint8_t, CoarseGrid::kCells> field) {
+  constexpr int kSide = CoarseGrid::kSide;
   const FieldPrefixCode& code = FieldCode();
   bits::BitReader reader(bytes);
   uint8_t* f = field.data();
-  for (int y = 0; y < CoarseGrid::kSide; ++y) {
-    for (int x = 0; x < CoarseGrid::kSide; ++x) {
+  for (int y = 0; y < kSide; ++y) {
+    uint8_t* row = f + y * kSide;
+    const uint8_t* above = y > 0 ? row - kSide : nullptr;
+    // Residuals outside 0..255 (possible only in a damaged code) are caught after the row.
+    bool out_of_range = false;
+    for (int x = 0; x < kSide; ++x) {
       const int symbol = code.Get(&reader);
       int value = 0;
       if (symbol == kFieldEscape) {
         value = static_cast<int>(reader.Get(8));
       } else {
-        value = PredictCell(f, x, y) + symbol - kFieldMaxResidual;
-        if (value < 0 || value > 255) {
-          return Status(StatusCode::kOutOfRange,
-                        "field code: cell (" + std::to_string(x) + ", " + std::to_string(y) +
-                            ") decodes to " + std::to_string(value) + ", outside 0..255");
-        }
+        const int prediction = above == nullptr ? (x == 0 ? 0 : row[x - 1])
+                               : x == 0         ? above[0]
+                                        : std::clamp(row[x - 1] + above[x] - above[x - 1], 0, 255);
+        value = prediction + symbol - kFieldMaxResidual;
+        out_of_range |= value < 0 || value > 255;
       }
-      if (reader.overrun()) {
-        return Status(StatusCode::kTruncated,
-                      "field code: " + std::to_string(bytes.size()) + " bytes end at cell (" +
-                          std::to_string(x) + ", " + std::to_string(y) + ")");
-      }
-      f[y * CoarseGrid::kSide + x] = static_cast<uint8_t>(value);
+      row[x] = static_cast<uint8_t>(value);
+    }
+    if (reader.overrun()) {
+      return Status(
+          StatusCode::kTruncated,
+          "field code: " + std::to_string(bytes.size()) + " bytes end in row " + std::to_string(y));
+    }
+    if (out_of_range) {
+      return Status(StatusCode::kOutOfRange,
+                    "field code: a cell of row " + std::to_string(y) + " decodes outside 0..255");
     }
   }
   const uint64_t used = (reader.consumed() + 7) / 8;
