@@ -197,6 +197,46 @@ int Run(int argc, char** argv) {
   std::sort(decode_us.begin(), decode_us.end());
   std::sort(normalise_us.begin(), normalise_us.end());
 
+  // What a shard would store: the exact code of each view's PointQ (format/point_codec.h
+  // EncodeViewPoints: the lattice code plus corrections, or raw), checked and timed.
+  uint64_t view_bytes = 0, view_lattice = 0, view_raw = 0, view_mismatched = 0;
+  std::vector<double> view_decode_us;
+  {
+    std::vector<std::string> view_codes(n);
+    std::vector<ViewLabel> labels(n);
+    std::vector<PointQ> decoded;
+    for (size_t v = 0; v < n; ++v) {
+      labels[v] = db.label(static_cast<view_id_t>(v));
+      const std::span<const PointQ> pts = db.points(static_cast<view_id_t>(v));
+      int mode = -1;
+      const Status st =
+          EncodeViewPoints(pts, labels[v].scale, labels[v].source_centre_px, &view_codes[v], &mode);
+      if (!st.ok()) {
+        std::fprintf(stderr, "point_codec_bench: view %zu: %s\n", v, st.ToString().c_str());
+        return 1;
+      }
+      view_bytes += view_codes[v].size();
+      (mode == 0 ? view_lattice : view_raw) += 1;
+      const Status d = DecodeViewPoints(
+          Bytes(view_codes[v]), labels[v].scale, labels[v].source_centre_px, &decoded);
+      view_mismatched +=
+          !d.ok() || decoded.size() != pts.size() ||
+          !std::equal(
+              decoded.begin(), decoded.end(), pts.begin(), [](const PointQ& a, const PointQ& b) {
+                return a.x == b.x && a.y == b.y;
+              });
+    }
+    for (int r = 0; r < reps; ++r) {
+      const double t0 = Now();
+      for (size_t v = 0; v < n; ++v) {
+        (void)DecodeViewPoints(
+            Bytes(view_codes[v]), labels[v].scale, labels[v].source_centre_px, &decoded);
+      }
+      view_decode_us.push_back(1e6 * (Now() - t0) / static_cast<double>(n));
+    }
+    std::sort(view_decode_us.begin(), view_decode_us.end());
+  }
+
   uint64_t coded = 0;
   std::vector<size_t> sizes;
   for (const std::string& c : codes) {
@@ -217,7 +257,8 @@ int Run(int argc, char** argv) {
   const double coded_per_view = static_cast<double>(coded) / static_cast<double>(n);
   const double shards_per_view = static_cast<double>(shard_bytes) / views;
   const double index_per_view = static_cast<double>(index_bytes) / views;
-  const double with_code = shards_per_view - pointq_per_view + coded_per_view;
+  const double view_per_view = static_cast<double>(view_bytes) / static_cast<double>(n);
+  const double with_code = shards_per_view - pointq_per_view + view_per_view;
 
   std::printf("point_codec_bench: %s, %zu of %zu views, %.1f points/view, %d rolls\n",
               db_dir.c_str(),
@@ -255,6 +296,16 @@ int Run(int argc, char** argv) {
       static_cast<double>(stats.start_bits) / stats.chains,
       static_cast<double>(stats.move_bits) / stats.pixels,
       static_cast<double>(stats.header_bytes) / n);
+  std::printf(
+      "  view codes (EncodeViewPoints: exactly the stored points): %llu lattice-mode views, %llu "
+      "raw; %.1f bytes/view (%.2f bits/point); %llu views differ after the round trip; decode "
+      "to PointQ %.2f us/view\n",
+      static_cast<unsigned long long>(view_lattice),
+      static_cast<unsigned long long>(view_raw),
+      view_per_view,
+      8.0 * static_cast<double>(view_bytes) / static_cast<double>(points),
+      static_cast<unsigned long long>(view_mismatched),
+      view_decode_us[view_decode_us.size() / 2]);
   std::printf(
       "  encode %.2f us/view; decode %.2f us/view, + to PointQ %.2f us/view "
       "(medians of %d passes, 1 thread)\n",
@@ -319,11 +370,13 @@ int Run(int argc, char** argv) {
       index_per_view,
       shards_per_view + index_per_view,
       (shards_per_view + index_per_view) / rolls);
-  std::printf("  with coded points: shards %.0f + index %.0f = %.0f bytes; %.1f per virtual view\n",
-              with_code,
-              index_per_view,
-              with_code + index_per_view,
-              (with_code + index_per_view) / rolls);
+  std::printf(
+      "  with coded points (view codes): shards %.0f + index %.0f = %.0f bytes; %.1f per virtual "
+      "view\n",
+      with_code,
+      index_per_view,
+      with_code + index_per_view,
+      (with_code + index_per_view) / rolls);
   if (field_views > 0) {
     const double both = with_code - field_raw + field_coded;
     std::printf(

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <array>
 #include <bit>
+#include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <limits>
 
@@ -275,6 +277,247 @@ Status DecodeLatticePixels(std::span<const uint8_t> code, std::vector<LatticePix
         const int64_t x = static_cast<int64_t>(wi * 64) + std::countr_zero(word);
         out->push_back({static_cast<int32_t>(min_col + x), static_cast<int32_t>(min_row + y)});
       }
+    }
+  }
+  return Status::Ok();
+}
+
+}  // namespace handdb
+
+namespace handdb {
+namespace {
+
+bool YxLess(const PointQ& a, const PointQ& b) { return a.y != b.y ? a.y < b.y : a.x < b.x; }
+
+// The record's normalisation, as the lattice <-> point maps use it.
+struct Lattice {
+  double s = 0, cx = 0, cy = 0;
+  bool usable = false;
+  Lattice(float scale, std::array<float, 2> centre)
+      : s(static_cast<double>(scale) * kPointScale), cx(centre[0]), cy(centre[1]) {
+    usable = std::isfinite(s) && s >= 1 && std::isfinite(cx) && std::isfinite(cy) &&
+             std::fabs(cx) < 1e8 && std::fabs(cy) < 1e8;
+  }
+  // The pixel a point came from (false when it is far outside int32).
+  bool PixelOf(const PointQ& p, LatticePixel* q) const {
+    const double col = std::nearbyint(p.x / s + cx - 0.5), row = std::nearbyint(p.y / s + cy - 0.5);
+    if (std::fabs(col) > 1e9 || std::fabs(row) > 1e9) return false;
+    *q = {static_cast<int32_t>(col), static_cast<int32_t>(row)};
+    return true;
+  }
+  // The point a pixel gives (the converter's NormalisePixels, in the record's float values).
+  void PointOf(const LatticePixel& q, int64_t* x, int64_t* y) const {
+    *x = static_cast<int64_t>(std::nearbyint((q.col + 0.5 - cx) * s));
+    *y = static_cast<int64_t>(std::nearbyint((q.row + 0.5 - cy) * s));
+  }
+};
+
+constexpr uint8_t kModeLattice = 0;
+constexpr uint8_t kModeRaw = 1;
+
+void EncodeRaw(std::span<const PointQ> points, std::string* out) {
+  out->push_back(static_cast<char>(kModeRaw));
+  bits::PutVarint(points.size(), out);
+  int64_t prev_x = 0, prev_y = 0;
+  for (size_t i = 0; i < points.size(); ++i) {
+    const int64_t dy = points[i].y - prev_y;
+    bits::PutVarint(bits::ZigZag(dy), out);
+    if (i > 0 && dy == 0) {
+      bits::PutVarint(bits::ZigZag(points[i].x - prev_x), out);
+    } else {
+      bits::PutVarint(bits::ZigZag(points[i].x), out);
+    }
+    prev_x = points[i].x;
+    prev_y = points[i].y;
+  }
+}
+
+Status OutOfRange(const std::string& what) {
+  return Status(StatusCode::kOutOfRange, "point code: " + what);
+}
+
+Status DecodeRaw(std::span<const uint8_t> code, size_t pos, std::vector<PointQ>* out) {
+  uint64_t n = 0;
+  if (!bits::GetVarint(code, &pos, &n)) {
+    return Status(StatusCode::kTruncated, "point code: count cut off");
+  }
+  if (n > code.size()) {  // every point takes at least two bytes
+    return Status(StatusCode::kSizeMismatch,
+                  "point code: " + std::to_string(n) + " points cannot fit " +
+                      std::to_string(code.size()) + " bytes");
+  }
+  out->reserve(n);
+  int64_t prev_x = 0, prev_y = 0;
+  for (uint64_t i = 0; i < n; ++i) {
+    uint64_t zy = 0, xv = 0;
+    if (!bits::GetVarint(code, &pos, &zy) || !bits::GetVarint(code, &pos, &xv)) {
+      return Status(
+          StatusCode::kTruncated,
+          "point code: point " + std::to_string(i) + " of " + std::to_string(n) + " cut off");
+    }
+    const int64_t dy = bits::UnZigZag(zy);
+    const int64_t y = prev_y + dy;
+    const int64_t x = (i > 0 && dy == 0) ? prev_x + bits::UnZigZag(xv) : bits::UnZigZag(xv);
+    if (x < INT16_MIN || x > INT16_MAX || y < INT16_MIN || y > INT16_MAX) {
+      return OutOfRange("point " + std::to_string(i) + " (" + std::to_string(x) + ", " +
+                        std::to_string(y) + ") is outside int16");
+    }
+    out->push_back({static_cast<int16_t>(x), static_cast<int16_t>(y)});
+    prev_x = x;
+    prev_y = y;
+  }
+  if (pos != code.size()) {
+    return Status(StatusCode::kSizeMismatch,
+                  "point code: " + std::to_string(code.size() - pos) + " byte(s) after the points");
+  }
+  return Status::Ok();
+}
+
+// Mode 0 after its mode byte: the lattice code, then the corrections.
+Status DecodeLatticeMode(std::span<const uint8_t> code,
+                         const Lattice& lattice,
+                         std::vector<PointQ>* out) {
+  if (!lattice.usable) return OutOfRange("lattice code with an unusable scale or centre");
+  size_t pos = 0;
+  uint64_t lattice_bytes = 0;
+  if (!bits::GetVarint(code, &pos, &lattice_bytes) || lattice_bytes > code.size() - pos) {
+    return Status(StatusCode::kTruncated, "point code: lattice code length cut off or too long");
+  }
+  std::vector<LatticePixel> pixels;
+  HANDDB_RETURN_IF_ERROR(
+      DecodeLatticePixels(code.subspan(pos, static_cast<size_t>(lattice_bytes)), &pixels));
+  pos += static_cast<size_t>(lattice_bytes);
+  std::vector<int64_t> xs(pixels.size()), ys(pixels.size());
+  for (size_t i = 0; i < pixels.size(); ++i) lattice.PointOf(pixels[i], &xs[i], &ys[i]);
+  uint64_t corrections = 0;
+  if (!bits::GetVarint(code, &pos, &corrections) || corrections > pixels.size()) {
+    return Status(StatusCode::kTruncated, "point code: correction count cut off or too large");
+  }
+  uint64_t index = 0;
+  for (uint64_t c = 0; c < corrections; ++c) {
+    uint64_t step = 0, zx = 0, zy = 0;
+    if (!bits::GetVarint(code, &pos, &step) || !bits::GetVarint(code, &pos, &zx) ||
+        !bits::GetVarint(code, &pos, &zy)) {
+      return Status(StatusCode::kTruncated,
+                    "point code: correction " + std::to_string(c) + " cut off");
+    }
+    index = c == 0 ? step : index + step;
+    if ((c > 0 && step == 0) || index >= pixels.size()) {
+      return OutOfRange("correction " + std::to_string(c) + " names point " +
+                        std::to_string(index) + " of " + std::to_string(pixels.size()));
+    }
+    xs[index] += bits::UnZigZag(zx);
+    ys[index] += bits::UnZigZag(zy);
+  }
+  if (pos != code.size()) {
+    return Status(
+        StatusCode::kSizeMismatch,
+        "point code: " + std::to_string(code.size() - pos) + " byte(s) after the corrections");
+  }
+  out->reserve(pixels.size());
+  for (size_t i = 0; i < pixels.size(); ++i) {
+    if (xs[i] < INT16_MIN || xs[i] > INT16_MAX || ys[i] < INT16_MIN || ys[i] > INT16_MAX) {
+      return OutOfRange("point " + std::to_string(i) + " (" + std::to_string(xs[i]) + ", " +
+                        std::to_string(ys[i]) + ") is outside int16");
+    }
+    out->push_back({static_cast<int16_t>(xs[i]), static_cast<int16_t>(ys[i])});
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
+Status EncodeViewPoints(std::span<const PointQ> points,
+                        float scale,
+                        std::array<float, 2> centre,
+                        std::string* out,
+                        int* mode) {
+  std::string raw;
+  EncodeRaw(points, &raw);
+  std::string lattice_code;
+  const Lattice lattice(scale, centre);
+  // The lattice mode gives points in (y, x) order, without repeats: only for such views.
+  bool lattice_ok =
+      lattice.usable && !points.empty() &&
+      std::adjacent_find(points.begin(), points.end(), [](const PointQ& a, const PointQ& b) {
+        return !YxLess(a, b);
+      }) == points.end();
+  std::vector<LatticePixel> pixels;
+  if (lattice_ok) {
+    pixels.reserve(points.size());
+    for (const PointQ& p : points) {
+      LatticePixel q;
+      if (!lattice.PixelOf(p, &q)) {
+        lattice_ok = false;
+        break;
+      }
+      pixels.push_back(q);
+    }
+  }
+  std::string chain;
+  if (lattice_ok && EncodeLatticePixels(pixels, &chain).ok()) {
+    std::vector<LatticePixel> raster;
+    lattice_ok = DecodeLatticePixels({reinterpret_cast<const uint8_t*>(chain.data()), chain.size()},
+                                     &raster)
+                     .ok() &&
+                 raster.size() == points.size();  // else two points share a pixel
+    if (lattice_ok) {
+      lattice_code.push_back(static_cast<char>(kModeLattice));
+      bits::PutVarint(chain.size(), &lattice_code);
+      lattice_code += chain;
+      std::string fixes;
+      uint64_t count = 0;
+      size_t last = 0;
+      for (size_t i = 0; i < raster.size(); ++i) {
+        int64_t x = 0, y = 0;
+        lattice.PointOf(raster[i], &x, &y);
+        if (x == points[i].x && y == points[i].y) continue;
+        bits::PutVarint(count == 0 ? i : i - last, &fixes);
+        bits::PutVarint(bits::ZigZag(points[i].x - x), &fixes);
+        bits::PutVarint(bits::ZigZag(points[i].y - y), &fixes);
+        last = i;
+        ++count;
+      }
+      bits::PutVarint(count, &lattice_code);
+      lattice_code += fixes;
+      // The guarantee: mode 0 only if it decodes to exactly these points.
+      std::vector<PointQ> back;
+      lattice_ok =
+          DecodeViewPoints(
+              {reinterpret_cast<const uint8_t*>(lattice_code.data()), lattice_code.size()},
+              scale,
+              centre,
+              &back)
+              .ok() &&
+          back.size() == points.size() &&
+          std::equal(
+              back.begin(), back.end(), points.begin(), [](const PointQ& a, const PointQ& b) {
+                return a.x == b.x && a.y == b.y;
+              });
+    }
+  } else {
+    lattice_ok = false;
+  }
+  const bool use_lattice = lattice_ok && lattice_code.size() <= raw.size();
+  *out += use_lattice ? lattice_code : raw;
+  if (mode) *mode = use_lattice ? kModeLattice : kModeRaw;
+  return Status::Ok();
+}
+
+Status DecodeViewPoints(std::span<const uint8_t> code,
+                        float scale,
+                        std::array<float, 2> centre,
+                        std::vector<PointQ>* out) {
+  out->clear();
+  if (code.empty()) return Status(StatusCode::kTruncated, "point code: empty");
+  if (code[0] == kModeRaw) return DecodeRaw(code, 1, out);
+  if (code[0] != kModeLattice) return OutOfRange("unknown mode " + std::to_string(code[0]));
+  HANDDB_RETURN_IF_ERROR(DecodeLatticeMode(code.subspan(1), Lattice(scale, centre), out));
+  for (size_t i = 1; i < out->size(); ++i) {
+    if (!YxLess((*out)[i - 1], (*out)[i])) {
+      return Status(StatusCode::kBadLayout,
+                    "point code: decoded points " + std::to_string(i - 1) + " and " +
+                        std::to_string(i) + " are not sorted by (y, x) and unique");
     }
   }
   return Status::Ok();

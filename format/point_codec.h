@@ -18,12 +18,14 @@
 // bytes left over rejects the stream.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <span>
 #include <string>
 #include <vector>
 
 #include "base/status.h"
+#include "format/view.h"
 
 namespace handdb {
 
@@ -63,5 +65,31 @@ struct LatticeCodeStats {
 Status EncodeLatticePixels(std::span<const LatticePixel> pixels,
                            std::string* out,
                            LatticeCodeStats* stats);
+
+// A view's points (PointQ, in any order), coded exactly. The first byte says the mode.
+// Mode 0, for points sorted by (y, x), unique and on the render's lattice (every converted view;
+// not bench/synth_db's jittered copies, which are not even sorted): the pixels are recovered
+// with the view's normalisation as its record keeps it (`scale`, `centre` = source_centre_px,
+// float: pixel = round(point / (16 scale) + centre - 1/2)), chain-coded by EncodeLatticePixels
+// (after a varint of its length), and the few points the pixels do not give back exactly (the
+// converter normalised in double) follow as corrections: varint count, then per correction a
+// varint index step (in raster order; the first is the index itself) and zigzag varints dx, dy.
+// Mode 1, for anything else (points off the lattice, two points on one pixel, a degenerate scale,
+// any order): varint count, then per point zigzag varint y step and, on the same row, zigzag
+// varint x step, else zigzag varint x. The encoder decodes its own mode-0 code and falls back to
+// mode 1 unless it gives the points back exactly, and uses mode 1 when that is no longer, so
+// decoding always returns the input. *mode: which was used.
+Status EncodeViewPoints(std::span<const PointQ> points,
+                        float scale,
+                        std::array<float, 2> centre,
+                        std::string* out,
+                        int* mode = nullptr);
+
+// The inverse (the same scale and centre). Errors name what is wrong; a mode-0 result is checked
+// to be sorted by (y, x) and unique.
+Status DecodeViewPoints(std::span<const uint8_t> code,
+                        float scale,
+                        std::array<float, 2> centre,
+                        std::vector<PointQ>* out);
 
 }  // namespace handdb
