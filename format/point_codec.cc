@@ -295,7 +295,8 @@ struct Lattice {
   bool usable = false;
   Lattice(float scale, std::array<float, 2> centre)
       : s(static_cast<double>(scale) * kPointScale), cx(centre[0]), cy(centre[1]) {
-    usable = std::isfinite(s) && s >= 1 && std::isfinite(cx) && std::isfinite(cy) &&
+    // Bounded so that every product below stays far inside int64.
+    usable = std::isfinite(s) && s >= 1 && s <= 1e6 && std::isfinite(cx) && std::isfinite(cy) &&
              std::fabs(cx) < 1e8 && std::fabs(cy) < 1e8;
   }
   // The pixel a point came from (false when it is far outside int32).
@@ -313,6 +314,8 @@ struct Lattice {
 };
 
 constexpr uint8_t kModeLattice = 0;
+// The zigzag code of the largest step between two int16 values (65535): larger ones are damage.
+constexpr uint64_t kMaxZigZagStep = 2 * 65535;
 constexpr uint8_t kModeRaw = 1;
 
 void EncodeRaw(std::span<const PointQ> points, std::string* out) {
@@ -354,6 +357,9 @@ Status DecodeRaw(std::span<const uint8_t> code, size_t pos, std::vector<PointQ>*
       return Status(
           StatusCode::kTruncated,
           "point code: point " + std::to_string(i) + " of " + std::to_string(n) + " cut off");
+    }
+    if (zy > kMaxZigZagStep || xv > kMaxZigZagStep) {
+      return OutOfRange("point " + std::to_string(i) + " steps outside int16");
     }
     const int64_t dy = bits::UnZigZag(zy);
     const int64_t y = prev_y + dy;
@@ -400,6 +406,9 @@ Status DecodeLatticeMode(std::span<const uint8_t> code,
         !bits::GetVarint(code, &pos, &zy)) {
       return Status(StatusCode::kTruncated,
                     "point code: correction " + std::to_string(c) + " cut off");
+    }
+    if (step >= pixels.size() || zx > kMaxZigZagStep || zy > kMaxZigZagStep) {
+      return OutOfRange("correction " + std::to_string(c) + " is out of range");
     }
     index = c == 0 ? step : index + step;
     if ((c > 0 && step == 0) || index >= pixels.size()) {
