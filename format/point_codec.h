@@ -57,8 +57,8 @@ struct LatticeCodeStats {
   uint64_t move_bits = 0;   // moves and chain ends
   uint64_t header_bytes = 0;
   // Moves by context (0: after an axial move or at a chain's start, 1: after a diagonal move)
-  // and symbol (0-7: direction relative to the previous move, counter-clockwise in image
-  // coordinates; 8: end of chain).
+  // and symbol (0-7: the move's direction relative to the previous move's, in 45-degree
+  // steps clockwise on the image (y down): 0 straight on; 8: end of chain).
   uint64_t symbols[2][9] = {};
 };
 // Like EncodeLatticePixels, and adds what it coded to *stats.
