@@ -393,8 +393,17 @@ Status DecodeLatticeMode(std::span<const uint8_t> code,
   HANDDB_RETURN_IF_ERROR(
       DecodeLatticePixels(code.subspan(pos, static_cast<size_t>(lattice_bytes)), &pixels));
   pos += static_cast<size_t>(lattice_bytes);
-  std::vector<int64_t> xs(pixels.size()), ys(pixels.size());
-  for (size_t i = 0; i < pixels.size(); ++i) lattice.PointOf(pixels[i], &xs[i], &ys[i]);
+  // The points the pixels give; a damaged code may give them outside int16.
+  out->resize(pixels.size());
+  for (size_t i = 0; i < pixels.size(); ++i) {
+    int64_t x = 0, y = 0;
+    lattice.PointOf(pixels[i], &x, &y);
+    if (x < INT16_MIN || x > INT16_MAX || y < INT16_MIN || y > INT16_MAX) {
+      return OutOfRange("pixel " + std::to_string(i) + " gives point (" + std::to_string(x) + ", " +
+                        std::to_string(y) + "), outside int16");
+    }
+    (*out)[i] = {static_cast<int16_t>(x), static_cast<int16_t>(y)};
+  }
   uint64_t corrections = 0;
   if (!bits::GetVarint(code, &pos, &corrections) || corrections > pixels.size()) {
     return Status(StatusCode::kTruncated, "point code: correction count cut off or too large");
@@ -415,21 +424,18 @@ Status DecodeLatticeMode(std::span<const uint8_t> code,
       return OutOfRange("correction " + std::to_string(c) + " names point " +
                         std::to_string(index) + " of " + std::to_string(pixels.size()));
     }
-    xs[index] += bits::UnZigZag(zx);
-    ys[index] += bits::UnZigZag(zy);
+    const int64_t x = (*out)[index].x + bits::UnZigZag(zx);
+    const int64_t y = (*out)[index].y + bits::UnZigZag(zy);
+    if (x < INT16_MIN || x > INT16_MAX || y < INT16_MIN || y > INT16_MAX) {
+      return OutOfRange("correction " + std::to_string(c) + " moves point " +
+                        std::to_string(index) + " outside int16");
+    }
+    (*out)[index] = {static_cast<int16_t>(x), static_cast<int16_t>(y)};
   }
   if (pos != code.size()) {
     return Status(
         StatusCode::kSizeMismatch,
         "point code: " + std::to_string(code.size() - pos) + " byte(s) after the corrections");
-  }
-  out->reserve(pixels.size());
-  for (size_t i = 0; i < pixels.size(); ++i) {
-    if (xs[i] < INT16_MIN || xs[i] > INT16_MAX || ys[i] < INT16_MIN || ys[i] > INT16_MAX) {
-      return OutOfRange("point " + std::to_string(i) + " (" + std::to_string(xs[i]) + ", " +
-                        std::to_string(ys[i]) + ") is outside int16");
-    }
-    out->push_back({static_cast<int16_t>(xs[i]), static_cast<int16_t>(ys[i])});
   }
   return Status::Ok();
 }
