@@ -469,47 +469,41 @@ Status EncodeViewPoints(std::span<const PointQ> points,
       pixels.push_back(q);
     }
   }
+  // The chain code's order: raster order, in which the pixels must be as many as the points
+  // (two points on one pixel cannot both be coded).
+  std::vector<LatticePixel> raster = std::move(pixels);
+  std::sort(raster.begin(), raster.end(), [](const LatticePixel& a, const LatticePixel& b) {
+    return a.row != b.row ? a.row < b.row : a.col < b.col;
+  });
+  lattice_ok = lattice_ok && std::adjacent_find(raster.begin(), raster.end()) == raster.end();
   std::string chain;
-  if (lattice_ok && EncodeLatticePixels(pixels, &chain).ok()) {
-    std::vector<LatticePixel> raster;
-    lattice_ok = DecodeLatticePixels({reinterpret_cast<const uint8_t*>(chain.data()), chain.size()},
-                                     &raster)
-                     .ok() &&
-                 raster.size() == points.size();  // else two points share a pixel
-    if (lattice_ok) {
-      lattice_code.push_back(static_cast<char>(kModeLattice));
-      bits::PutVarint(chain.size(), &lattice_code);
-      lattice_code += chain;
-      std::string fixes;
-      uint64_t count = 0;
-      size_t last = 0;
-      for (size_t i = 0; i < raster.size(); ++i) {
-        int64_t x = 0, y = 0;
-        lattice.PointOf(raster[i], &x, &y);
-        if (x == points[i].x && y == points[i].y) continue;
-        bits::PutVarint(count == 0 ? i : i - last, &fixes);
-        bits::PutVarint(bits::ZigZag(points[i].x - x), &fixes);
-        bits::PutVarint(bits::ZigZag(points[i].y - y), &fixes);
-        last = i;
-        ++count;
-      }
-      bits::PutVarint(count, &lattice_code);
-      lattice_code += fixes;
-      // The guarantee: mode 0 only if it decodes to exactly these points.
-      std::vector<PointQ> back;
-      lattice_ok =
-          DecodeViewPoints(
-              {reinterpret_cast<const uint8_t*>(lattice_code.data()), lattice_code.size()},
-              scale,
-              centre,
-              &back)
-              .ok() &&
-          back.size() == points.size() &&
-          std::equal(
-              back.begin(), back.end(), points.begin(), [](const PointQ& a, const PointQ& b) {
-                return a.x == b.x && a.y == b.y;
-              });
+  if (lattice_ok && EncodeLatticePixels(raster, &chain).ok()) {
+    lattice_code.push_back(static_cast<char>(kModeLattice));
+    bits::PutVarint(chain.size(), &lattice_code);
+    lattice_code += chain;
+    std::string fixes;
+    uint64_t count = 0;
+    size_t last = 0;
+    for (size_t i = 0; i < raster.size(); ++i) {
+      int64_t x = 0, y = 0;
+      lattice.PointOf(raster[i], &x, &y);
+      if (x == points[i].x && y == points[i].y) continue;
+      bits::PutVarint(count == 0 ? i : i - last, &fixes);
+      bits::PutVarint(bits::ZigZag(points[i].x - x), &fixes);
+      bits::PutVarint(bits::ZigZag(points[i].y - y), &fixes);
+      last = i;
+      ++count;
     }
+    bits::PutVarint(count, &lattice_code);
+    lattice_code += fixes;
+    // The guarantee: mode 0 only if it decodes to exactly these points.
+    std::vector<PointQ> back;
+    lattice_ok =
+        DecodeViewPoints(bits::AsBytes(lattice_code), scale, centre, &back).ok() &&
+        back.size() == points.size() &&
+        std::equal(back.begin(), back.end(), points.begin(), [](const PointQ& a, const PointQ& b) {
+          return a.x == b.x && a.y == b.y;
+        });
   } else {
     lattice_ok = false;
   }
