@@ -169,6 +169,10 @@ std::string SectionName(uint32_t type) {
       return "points";
     case kSectionCoarseFields:
       return "coarse_fields";
+    case kSectionPointCodes:
+      return "point_codes";
+    case kSectionFieldCodes:
+      return "field_codes";
     default:
       return "unknown(" + HexPrefixed(type) + ")";
   }
@@ -508,6 +512,14 @@ void CheckSectionType(LayoutScan& c,
       slot = &layout.coarse_fields;
       want_element = kCoarseFieldSize;
       break;
+    case kSectionPointCodes:
+      slot = &layout.point_codes;
+      want_element = 1;
+      break;
+    case kSectionFieldCodes:
+      slot = &layout.field_codes;
+      want_element = 1;
+      break;
     default:
       if ((s.flags & kSectionFlagRequired) != 0) {
         c.problems->Add("features",
@@ -587,20 +599,47 @@ void CheckFooterPlacement(LayoutScan& c) {
   }
 }
 
-// Metadata, views and points are each present.
+// Metadata, views and points are each present; a coded shard (kFeatureCodedViews) has
+// point_codes and field_codes instead of points and coarse_fields, and only a coded one has them.
 bool CheckRequiredSections(LayoutScan& c) {
   const Layout& layout = *c.layout;
-  for (auto [slot, type] : {std::pair{layout.metadata, kSectionMetadata},
-                            std::pair{layout.views, kSectionViews},
-                            std::pair{layout.points, kSectionPoints}}) {
-    if (slot < 0 && c.bounds_ok) {
+  const bool coded = layout.coded;
+  const std::string why = coded ? " (the header's required_features has the coded-views bit)"
+                                : " (the header's required_features lacks the coded-views bit)";
+  struct Want {
+    int slot;
+    uint32_t type;
+    bool present;
+  };
+  for (const Want& w : {Want{layout.metadata, kSectionMetadata, true},
+                        Want{layout.views, kSectionViews, true},
+                        Want{layout.points, kSectionPoints, !coded},
+                        Want{layout.point_codes, kSectionPointCodes, coded},
+                        Want{layout.field_codes, kSectionFieldCodes, coded}}) {
+    if (w.present && w.slot < 0 && c.bounds_ok) {
       c.problems->Add("layout",
                       StatusCode::kBadLayout,
                       kOffSectionCount,
-                      "no " + Quote(SectionName(type)) + " section in the section table (" +
-                          std::to_string(layout.header.section_count) + " entries)");
+                      "no " + Quote(SectionName(w.type)) + " section in the section table (" +
+                          std::to_string(layout.header.section_count) + " entries)" +
+                          (w.type == kSectionMetadata || w.type == kSectionViews ? "" : why));
+      c.bounds_ok = false;
+    } else if (!w.present && w.slot >= 0) {
+      c.problems->Add("layout",
+                      StatusCode::kBadLayout,
+                      kOffSectionCount,
+                      "section " + std::to_string(w.slot) + " " + Quote(SectionName(w.type)) +
+                          " is not allowed here" + why);
       c.bounds_ok = false;
     }
+  }
+  if (coded && layout.coarse_fields >= 0) {
+    c.problems->Add("layout",
+                    StatusCode::kBadLayout,
+                    kOffSectionCount,
+                    "section " + std::to_string(layout.coarse_fields) +
+                        " 'coarse_fields' is not allowed here" + why);
+    c.bounds_ok = false;
   }
   return !c.problems->done();
 }
@@ -685,6 +724,97 @@ void CheckViewRanges(LayoutScan& c) {
   layout.views_ok = views_ok;
 }
 
+// A coded shard's view records: each view's point_offset is the byte offset of its code in
+// point_codes, starting at 0 and strictly increasing (a code is at least its mode byte), the
+// last code ending at the section's end; the counts add up to the header's num_points; and the
+// field_codes offset table is in bounds and in order. Sets layout->views_ok.
+void CheckCodeRanges(LayoutScan& c) {
+  Layout& layout = *c.layout;
+  const RawSection& vs = layout.sections[layout.views];
+  const RawSection& pc = layout.sections[static_cast<size_t>(layout.point_codes)];
+  const RawSection& fc = layout.sections[static_cast<size_t>(layout.field_codes)];
+  bool views_ok = true;
+  uint64_t points = 0;
+  uint64_t prev = 0;
+  for (uint64_t i = 0; i < vs.count; ++i) {
+    const uint64_t at = vs.offset + i * vs.element_size;
+    const uint8_t* rec = c.b + at;
+    const uint32_t flags = Load<uint32_t>(rec + kViewOffFlags);
+    if (flags != 0 && c.know_minor) {
+      c.problems->Add("reserved",
+                      StatusCode::kNonZeroReserved,
+                      at + kViewOffFlags,
+                      "view " + std::to_string(i) + ": reserved flags are " + HexPrefixed(flags) +
+                          ", expected 0");
+    }
+    const uint64_t off = Load<uint64_t>(rec + kViewOffPointOffset);
+    points += Load<uint32_t>(rec + kViewOffPointCount);
+    const bool first = i == 0;
+    if ((first && off != 0) || (!first && off <= prev) || off >= pc.size) {
+      c.problems->Add(
+          "view-range",
+          StatusCode::kBadLayout,
+          at + kViewOffPointOffset,
+          "view " + std::to_string(i) + ": point code offset is " + std::to_string(off) +
+              ", expected " + (first ? std::string("0") : "more than " + std::to_string(prev)) +
+              " and less than the point_codes section's " + std::to_string(pc.size) + " bytes");
+      views_ok = false;
+    }
+    if (c.problems->done()) return;
+    prev = off;
+  }
+  if (vs.count == 0 && pc.size != 0) {
+    c.problems->Add(
+        "view-range",
+        StatusCode::kBadLayout,
+        pc.offset,
+        "no views, but the point_codes section holds " + std::to_string(pc.size) + " bytes");
+    views_ok = false;
+  }
+  if (points != layout.header.num_points) {
+    c.problems->Add("counts",
+                    StatusCode::kSizeMismatch,
+                    kOffNumPoints,
+                    "header num_points is " + std::to_string(layout.header.num_points) +
+                        " but the views' point counts add up to " + std::to_string(points));
+  }
+  // field_codes: the offset table.
+  const uint64_t table_bytes = 8 * (vs.count + 1);
+  if (fc.size < table_bytes) {
+    c.problems->Add("view-range",
+                    StatusCode::kTruncated,
+                    fc.offset,
+                    "field_codes section is " + std::to_string(fc.size) +
+                        " bytes, too small for its offset table of " +
+                        std::to_string(vs.count + 1) + " entries");
+    layout.views_ok = false;
+    return;
+  }
+  uint64_t last = table_bytes;
+  for (uint64_t i = 0; i <= vs.count; ++i) {
+    const uint64_t at = fc.offset + 8 * i;
+    const uint64_t off = Load<uint64_t>(c.b + at);
+    const bool ok = i == 0 ? off == table_bytes
+                           : (off >= last && off <= fc.size && (i < vs.count || off == fc.size));
+    if (!ok) {
+      c.problems->Add("view-range",
+                      StatusCode::kBadLayout,
+                      at,
+                      "field_codes offset " + std::to_string(i) + " is " + std::to_string(off) +
+                          ", expected " +
+                          (i == 0 ? std::to_string(table_bytes)
+                                  : (i == vs.count ? std::to_string(fc.size)
+                                                   : "between " + std::to_string(last) + " and " +
+                                                         std::to_string(fc.size))));
+      views_ok = false;
+      if (c.problems->done()) return;
+      break;
+    }
+    last = off;
+  }
+  layout.views_ok = views_ok;
+}
+
 }  // namespace
 
 Layout CheckLayout(std::span<const uint8_t> bytes, ProblemList* problems) {
@@ -698,6 +828,7 @@ Layout CheckLayout(std::span<const uint8_t> bytes, ProblemList* problems) {
   if (!CheckMagic(c) || !CheckMinimumSize(c)) return layout;
   layout.header = ParseHeader(bytes);
   c.know_minor = layout.header.version_minor <= kVersionMinor;
+  layout.coded = (layout.header.required_features & kFeatureCodedViews) != 0;
   c.footer_at = c.n - kFooterSize;
   if (!CheckVersion(c) || !CheckHeaderSize(c) || !CheckHeaderChecksum(c) || !CheckFileSize(c) ||
       !CheckRequiredFeatures(c) || !CheckHeaderReserved(c)) {
@@ -712,11 +843,17 @@ Layout CheckLayout(std::span<const uint8_t> bytes, ProblemList* problems) {
   CheckFooterPlacement(c);
   if (!CheckRequiredSections(c)) return layout;
   CheckHeaderCounts(c);
-  if (!c.bounds_ok || layout.metadata < 0 || layout.views < 0 || layout.points < 0) return layout;
+  const bool data_ok =
+      layout.coded ? layout.point_codes >= 0 && layout.field_codes >= 0 : layout.points >= 0;
+  if (!c.bounds_ok || layout.metadata < 0 || layout.views < 0 || !data_ok) return layout;
   layout.structure_ok = true;
   if (problems->done()) return layout;
   layout.view_stride = layout.sections[layout.views].element_size;
-  CheckViewRanges(c);
+  if (layout.coded) {
+    CheckCodeRanges(c);
+  } else {
+    CheckViewRanges(c);
+  }
   return layout;
 }
 

@@ -26,7 +26,10 @@ static_assert(std::endian::native == std::endian::little,
 // `type` on DOS (after PNG).
 constexpr std::array<uint8_t, 8> kMagic = {0x89, 'H', 'D', 'B', '\r', '\n', 0x1a, '\n'};
 constexpr uint16_t kVersionMajor = 1;
-constexpr uint16_t kVersionMinor = 1;  // 1.1: the optional coarse-fields section
+// 1.1: the optional coarse-fields section. 1.2: coded views (kFeatureCodedViews), written only
+// by a writer asked for them; every other shard is still written as 1.1.
+constexpr uint16_t kVersionMinor = 2;
+constexpr uint16_t kVersionMinorPlain = 1;
 
 constexpr uint64_t kAlignment = 64;
 constexpr uint32_t kHeaderSize = 128;       // v1.0 header; newer minors may grow it
@@ -52,8 +55,12 @@ constexpr size_t kOffSectionTableChecksum = 72;
 constexpr size_t kOffHeaderReserved = 80;  // up to header_size - 8, zero
 // The header checksum is the last 8 bytes of the header (offset header_size - 8).
 
-// Feature bits known to this reader (v1.0 defines none). Unknown required bits are refused.
-constexpr uint64_t kKnownRequiredFeatures = 0;
+// Required feature bits. v1.2 defines one: the shard's points and coarse fields are coded
+// (format/point_codec.h, format/field_codec.h) in the point_codes and field_codes sections
+// instead of the points and coarse_fields sections (docs/format.md section 10). A reader that
+// does not know a required bit refuses the file (a v1.1 reader finds no points to read).
+constexpr uint64_t kFeatureCodedViews = 1u << 0;
+constexpr uint64_t kKnownRequiredFeatures = kFeatureCodedViews;
 
 // Section types.
 constexpr uint32_t kSectionMetadata = 1;  // UTF-8 JSON object, element_size 1
@@ -63,6 +70,15 @@ constexpr uint32_t kSectionPoints = 3;    // PointQ array, element_size 4
 // element_size kCoarseFieldSize, count = num_views. Readers that do not know it skip it.
 constexpr uint32_t kSectionCoarseFields = 4;
 constexpr uint32_t kCoarseFieldSize = 1849;  // CoarseGrid::kCells
+// v1.2, required in a shard with kFeatureCodedViews (and only there), element_size 1:
+// point_codes: each view's EncodeViewPoints code, in view order, back to back; the record's
+// point_offset is the byte offset of its code, which ends where the next view's begins (the last
+// at the section's end); point_count is the number of points the code decodes to.
+constexpr uint32_t kSectionPointCodes = 5;
+// field_codes: num_views + 1 u64 byte offsets (relative to the section; the first is
+// 8 (num_views + 1), the last the section's size, non-decreasing), then each view's
+// EncodeCoarseField code in view order: view i's is [offset[i], offset[i + 1]).
+constexpr uint32_t kSectionFieldCodes = 6;
 // Section flags.
 constexpr uint32_t kSectionFlagRequired = 1u
                                           << 0;  // a reader that does not know the type must refuse
@@ -225,9 +241,13 @@ struct Layout {
   int views = -1;
   int points = -1;
   int coarse_fields = -1;  // optional (v1.1)
+  int point_codes = -1;    // v1.2, coded shards (header bit kFeatureCodedViews) only
+  int field_codes = -1;
+  bool coded = false;  // the header has kFeatureCodedViews
   uint32_t view_stride = kViewRecordSize;
   bool structure_ok = false;  // header, table, section bounds and footer are usable
   bool views_ok = false;      // every view's point range lies inside the points section
+                              // (coded: every view's code and field code lie inside theirs)
 };
 
 // Cheap checks at open: header (magic, version, size, features, reserved, checksum), section table

@@ -6,6 +6,9 @@
 
 #include "base/json_schema.h"
 #include "base/mapped_file.h"
+#include "format/coarse_field.h"
+#include "format/field_codec.h"
+#include "format/point_codec.h"
 #include "format/shard_layout.h"
 
 namespace handdb {
@@ -26,8 +29,47 @@ struct ShardReader::Impl {
   const PointQ* points = nullptr;
   uint64_t num_points = 0;
   std::string_view metadata;
+  // Coded shards (v1.2): the two code sections.
+  bool coded = false;
+  std::span<const uint8_t> point_codes;
+  std::span<const uint8_t> field_codes;
 
   const uint8_t* record(size_t i) const { return views + i * view_stride; }
+  // View i's point code: from its offset to the next view's (checked at open).
+  std::span<const uint8_t> point_code(size_t i) const {
+    const uint64_t begin = Load<uint64_t>(record(i) + kViewOffPointOffset);
+    const uint64_t end = i + 1 < num_views ? Load<uint64_t>(record(i + 1) + kViewOffPointOffset)
+                                           : point_codes.size();
+    return point_codes.subspan(begin, end - begin);
+  }
+  std::span<const uint8_t> field_code(size_t i) const {
+    const uint64_t begin = Load<uint64_t>(field_codes.data() + 8 * i);
+    const uint64_t end = Load<uint64_t>(field_codes.data() + 8 * (i + 1));
+    return field_codes.subspan(begin, end - begin);
+  }
+  Status DecodeCodedPoints(size_t i, std::vector<PointQ>* out) const {
+    const uint8_t* r = record(i);
+    const std::span<const uint8_t> code = point_code(i);
+    const Status s = DecodeViewPoints(
+        code,
+        Load<float>(r + kViewOffScale),
+        {Load<float>(r + kViewOffSourceCentre), Load<float>(r + kViewOffSourceCentre + 4)},
+        out);
+    const uint64_t at = static_cast<uint64_t>(code.data() - bytes.data());
+    if (!s.ok()) {
+      return Status(s.code(),
+                    name + ": offset " + std::to_string(at) + ": view " + std::to_string(i) +
+                        ": point code: " + s.message());
+    }
+    const uint32_t want = Load<uint32_t>(r + kViewOffPointCount);
+    if (out->size() != want) {
+      return Status(StatusCode::kSizeMismatch,
+                    name + ": offset " + std::to_string(at) + ": view " + std::to_string(i) +
+                        ": point code decodes to " + std::to_string(out->size()) +
+                        " points, its record says " + std::to_string(want));
+    }
+    return Status::Ok();
+  }
 };
 
 ShardReader::ShardReader(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
@@ -106,9 +148,18 @@ Result<ShardReader> ShardReader::Init(std::unique_ptr<Impl> impl) {
   impl->views = b + views.offset;
   impl->view_stride = views.element_size;
   impl->num_views = static_cast<size_t>(views.count);
-  const RawSection& points = layout.sections[layout.points];
-  impl->points = reinterpret_cast<const PointQ*>(b + points.offset);
-  impl->num_points = points.count;
+  impl->coded = layout.coded;
+  if (layout.coded) {
+    const RawSection& pc = layout.sections[static_cast<size_t>(layout.point_codes)];
+    const RawSection& fc = layout.sections[static_cast<size_t>(layout.field_codes)];
+    impl->point_codes = impl->bytes.subspan(pc.offset, pc.size);
+    impl->field_codes = impl->bytes.subspan(fc.offset, fc.size);
+    impl->num_points = h.num_points;  // the records' counts add up to it (checked)
+  } else {
+    const RawSection& points = layout.sections[layout.points];
+    impl->points = reinterpret_cast<const PointQ*>(b + points.offset);
+    impl->num_points = points.count;
+  }
   return ShardReader(std::move(impl));
 }
 
@@ -164,6 +215,51 @@ void ShardReader::ReleaseCoarseFieldPages() const {
   ReleaseSectionPages(r.file, r.layout.sections[static_cast<size_t>(r.layout.coarse_fields)]);
 }
 
+bool ShardReader::coded() const { return impl_->coded; }
+
+uint32_t ShardReader::point_count(size_t i) const {
+  THROW_CHECK_LT(i, impl_->num_views);
+  return Load<uint32_t>(impl_->record(i) + kViewOffPointCount);
+}
+
+std::span<const uint8_t> ShardReader::point_code(size_t i) const {
+  THROW_CHECK_LT(i, impl_->num_views);
+  return impl_->coded ? impl_->point_code(i) : std::span<const uint8_t>();
+}
+
+std::span<const uint8_t> ShardReader::field_code(size_t i) const {
+  THROW_CHECK_LT(i, impl_->num_views);
+  return impl_->coded ? impl_->field_code(i) : std::span<const uint8_t>();
+}
+
+Status ShardReader::DecodePoints(size_t i, std::vector<PointQ>* out) const {
+  THROW_CHECK_LT(i, impl_->num_views);
+  if (impl_->coded) return impl_->DecodeCodedPoints(i, out);
+  const std::span<const PointQ> pts = points(i);
+  out->assign(pts.begin(), pts.end());
+  return Status::Ok();
+}
+
+Status ShardReader::DecodeCoarseField(size_t i, uint8_t* out) const {
+  THROW_CHECK_LT(i, impl_->num_views);
+  const Impl& r = *impl_;
+  if (!r.coded) {
+    const uint8_t* field = coarse_field(i);
+    if (field == nullptr) {
+      return Status(StatusCode::kNotFound, r.name + ": has no coarse fields (a v1.0 shard)");
+    }
+    std::memcpy(out, field, kCoarseFieldSize);
+    return Status::Ok();
+  }
+  const std::span<const uint8_t> code = r.field_code(i);
+  const Status s = handdb::DecodeCoarseField(
+      code, std::span<uint8_t, CoarseGrid::kCells>(out, kCoarseFieldSize));
+  if (s.ok()) return s;
+  return Status(s.code(),
+                r.name + ": offset " + std::to_string(code.data() - r.bytes.data()) + ": view " +
+                    std::to_string(i) + ": field code: " + s.message());
+}
+
 ViewLabel ShardReader::label(size_t i) const {
   THROW_CHECK_LT(i, impl_->num_views);
   return DecodeViewLabel(impl_->record(i));
@@ -171,11 +267,14 @@ ViewLabel ShardReader::label(size_t i) const {
 
 uint64_t ShardReader::point_offset(size_t i) const {
   THROW_CHECK_LT(i, impl_->num_views);
+  THROW_CHECK_MSG(!impl_->coded, impl_->name + ": a coded shard has no point offsets");
   return Load<uint64_t>(impl_->record(i) + kViewOffPointOffset);
 }
 
 std::span<const PointQ> ShardReader::points(size_t i) const {
   THROW_CHECK_LT(i, impl_->num_views);
+  THROW_CHECK_MSG(!impl_->coded,
+                  impl_->name + ": a coded shard's points are decoded (ShardReader::DecodePoints)");
   const uint8_t* r = impl_->record(i);
   const uint64_t off = Load<uint64_t>(r + kViewOffPointOffset);
   const uint32_t cnt = Load<uint32_t>(r + kViewOffPointCount);
@@ -183,6 +282,7 @@ std::span<const PointQ> ShardReader::points(size_t i) const {
 }
 
 std::span<const PointQ> ShardReader::all_points() const {
+  if (impl_->coded) return {};
   return std::span<const PointQ>(impl_->points, static_cast<size_t>(impl_->num_points));
 }
 
@@ -214,25 +314,35 @@ Status ShardReader::ScanViews(const ViewCallback& fn, const ScanOptions& options
   const Impl& r = *impl_;
   const Layout& layout = r.layout;
   const RawSection& vs = layout.sections[layout.views];
-  const RawSection& ps = layout.sections[layout.points];
+  // The data read in view order: the points, or a coded shard's point codes.
+  const RawSection& ps =
+      layout.sections[static_cast<size_t>(r.coded ? layout.point_codes : layout.points)];
   const uint8_t* base = r.bytes.data();
   const SequentialAdvice views_advice(r.file, vs.offset, vs.size);
   const SequentialAdvice points_advice(r.file, ps.offset, ps.size);
   StreamingChecksum views_hash;
   StreamingChecksum points_hash;
+  std::vector<PointQ> decoded;
   for (size_t i = 0; i < r.num_views; ++i) {
     const uint8_t* rec = r.record(i);
-    const uint64_t off = Load<uint64_t>(rec + kViewOffPointOffset);
-    const uint32_t cnt = Load<uint32_t>(rec + kViewOffPointCount);
-    std::span<const PointQ> pts(r.points + off, cnt);
-    if (options.verify_checksums) {
-      views_hash.Update(rec, r.view_stride);
-      points_hash.Update(pts.data(), pts.size_bytes());
+    std::span<const PointQ> pts;
+    if (r.coded) {
+      const std::span<const uint8_t> code = r.point_code(i);
+      if (options.verify_checksums) points_hash.Update(code.data(), code.size());
+      HANDDB_RETURN_IF_ERROR(r.DecodeCodedPoints(i, &decoded));
+      pts = decoded;
+    } else {
+      const uint64_t off = Load<uint64_t>(rec + kViewOffPointOffset);
+      const uint32_t cnt = Load<uint32_t>(rec + kViewOffPointCount);
+      pts = std::span<const PointQ>(r.points + off, cnt);
+      if (options.verify_checksums) points_hash.Update(pts.data(), pts.size_bytes());
     }
+    if (options.verify_checksums) views_hash.Update(rec, r.view_stride);
     HANDDB_RETURN_IF_ERROR(fn(i, DecodeViewLabel(rec), pts));
   }
   if (options.verify_checksums) {
-    // Views cover the points contiguously (checked at open), so these are the section hashes.
+    // Views cover the points (or codes) contiguously (checked at open), so these are the section
+    // hashes.
     ProblemList problems(r.name, /*stop_at_first=*/true);
     auto compare = [&](const RawSection& s, uint64_t computed) {
       if (computed != s.checksum) {
@@ -247,7 +357,7 @@ Status ShardReader::ScanViews(const ViewCallback& fn, const ScanOptions& options
     compare(vs, views_hash.Digest());
     compare(ps, points_hash.Digest());
     if (!problems.empty()) return problems.FirstStatus();
-    // The small sections (header, table, metadata, unknown optional ones).
+    // The small sections (header, table, metadata, fields, unknown optional ones).
     for (const RawSection& s : layout.sections) {
       if (&s == &vs || &s == &ps) continue;
       compare(s, Checksum(base + s.offset, s.size));

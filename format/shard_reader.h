@@ -71,19 +71,39 @@ class ShardReader {
   const std::string& name() const;
 
   size_t num_views() const;
-  ViewLabel label(size_t i) const;                 // bounds-checked (THROW_CHECK)
+  ViewLabel label(size_t i) const;  // bounds-checked (THROW_CHECK)
+  // A plain shard's points of view i, zero-copy. A coded shard (coded()) has no stored points:
+  // points() and point_offset() THROW_CHECK, all_points() is empty; use DecodePoints().
   std::span<const PointQ> points(size_t i) const;  // bounds-checked, zero-copy
   std::span<const PointQ> all_points() const;      // the whole flat array
   uint64_t point_offset(size_t i) const;           // index into all_points()
 
-  // Sequential streaming mode: calls fn for every view in file order, advising the kernel that
+  // True for a v1.2 shard with coded views (docs/format.md section 10): points and coarse
+  // fields are stored as codes and decoded on demand (~10 us per view each).
+  bool coded() const;
+  // Number of points of view i (the record's count; for a coded shard, what its code decodes to).
+  uint32_t point_count(size_t i) const;
+  // View i's points into *out (replaced): a copy for a plain shard, decoded for a coded one.
+  // A code that does not decode, or decodes to another count than its record's, is kBadLayout /
+  // kTruncated / kSizeMismatch naming the file, the view and the byte offset.
+  Status DecodePoints(size_t i, std::vector<PointQ>* out) const;
+  // View i's coarse field (shard::kCoarseFieldSize bytes) into `out`: copied from the v1.1
+  // section or decoded from field_codes; kNotFound for a plain shard without coarse fields.
+  Status DecodeCoarseField(size_t i, uint8_t* out) const;
+  // The codes themselves (empty spans for a plain shard), for tools and the validator.
+  std::span<const uint8_t> point_code(size_t i) const;
+  std::span<const uint8_t> field_code(size_t i) const;
+
+  // Sequential streaming mode: calls fn for every view in file order (a coded shard's points
+  // decoded into a buffer that lives until fn returns), advising the kernel that
   // the views and points are read sequentially (MADV_SEQUENTIAL: aggressive read-ahead, pages
   // dropped behind), so a scan of a shard larger than the page cache streams at disk speed.
   // Stops at fn's first error.
   Status ScanViews(const ViewCallback& fn, const ScanOptions& options = {}) const;
 
   // The v1.1 coarse-fields section (format/coarse_field.h): num_views() fields of
-  // shard::kCoarseFieldSize bytes in view order, zero-copy; empty for a shard without one.
+  // shard::kCoarseFieldSize bytes in view order, zero-copy; empty for a shard without one (and
+  // for a coded shard, whose fields DecodeCoarseField() decodes).
   std::span<const uint8_t> coarse_fields() const;
   bool has_coarse_fields() const;
   // View i's field, or nullptr without the section. Bounds-checked (THROW_CHECK).

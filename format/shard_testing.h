@@ -3,11 +3,13 @@
 // theta/phi, scale * source diameter = 192 px) so the validator accepts them.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
 #include <random>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "format/shard_writer.h"
@@ -59,6 +61,33 @@ inline std::vector<PointQ> SyntheticPoints(uint32_t i, size_t n) {
               static_cast<int16_t>(std::lround(r * std::sin(t) * kPointScale))};
   }
   return pts;
+}
+
+// Points as the converter makes them from a render (edges/normalise.cc): the pixels of a noisy
+// closed contour in the label's source image, normalised in double with the label's scale and
+// centre, unique and sorted by (y, x), so a coded shard stores them with the lattice code.
+inline std::vector<PointQ> LatticePoints(const ViewLabel& label, uint32_t i) {
+  uint64_t s = 0x5eed + i;
+  const double radius_px = 0.5 * label.source_diameter_px;
+  std::vector<std::pair<int, int>> pixels;  // (row, col)
+  const int n = 400;
+  for (int k = 0; k < n; ++k) {
+    const double t = 6.283185307179586 * k / n;
+    const double r = radius_px * (0.8 + 0.2 * std::sin(5 * t)) + Uniform(&s, -0.7f, 0.7f);
+    pixels.emplace_back(static_cast<int>(label.source_centre_px[1] + r * std::sin(t)),
+                        static_cast<int>(label.source_centre_px[0] + r * std::cos(t)));
+  }
+  std::sort(pixels.begin(), pixels.end());
+  pixels.erase(std::unique(pixels.begin(), pixels.end()), pixels.end());
+  std::vector<PointQ> out;
+  for (const auto& [row, col] : pixels) {
+    out.push_back(
+        {static_cast<int16_t>(std::nearbyint((col + 0.5 - label.source_centre_px[0]) *
+                                             static_cast<double>(label.scale) * kPointScale)),
+         static_cast<int16_t>(std::nearbyint((row + 0.5 - label.source_centre_px[1]) *
+                                             static_cast<double>(label.scale) * kPointScale))});
+  }
+  return out;  // rows ascending, columns ascending within a row: sorted by (y, x)
 }
 
 // 20 joint limits [0, 1.6] rad in the metadata JSON, as the converter writes them.

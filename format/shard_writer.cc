@@ -6,6 +6,8 @@
 
 #include "base/atomic_file.h"
 #include "format/coarse_field.h"
+#include "format/field_codec.h"
+#include "format/point_codec.h"
 #include "format/shard_layout.h"
 
 namespace handdb {
@@ -39,7 +41,8 @@ bool ShardWriterOptions::Check() const {
   CHECK_OPTION(!metadata_json.empty());
   for (const auto& s : extra_sections) {
     CHECK_OPTION(s.type != kSectionMetadata && s.type != kSectionViews &&
-                 s.type != kSectionPoints && s.type != kSectionCoarseFields);
+                 s.type != kSectionPoints && s.type != kSectionCoarseFields &&
+                 s.type != kSectionPointCodes && s.type != kSectionFieldCodes);
     CHECK_OPTION(s.type != 0);
     CHECK_OPTION((s.flags & ~kKnownSectionFlags) == 0);
   }
@@ -52,6 +55,12 @@ struct ShardWriter::Impl {
   std::vector<uint8_t> buffer;      // pending bytes not yet handed to the file
   std::vector<uint8_t> view_table;  // kViewRecordSize per view, written at Finish()
   std::vector<uint8_t> coarse;      // kCoarseFieldSize per view, written at Finish()
+  // Coded shards: the field codes and their end offsets (relative to the first code), written at
+  // Finish(); the point codes stream out where a plain shard's points go.
+  std::string field_codes;
+  std::vector<uint64_t> field_code_ends;
+  std::string code;  // one view's point code (reused)
+  uint64_t code_bytes = 0;
   StreamingChecksum points_hash;
   uint64_t num_points = 0;
   uint64_t points_offset = 0;
@@ -94,7 +103,8 @@ Status ShardWriter::Open(const std::filesystem::path& path, const ShardWriterOpt
   HANDDB_RETURN_IF_ERROR(w.file.Open(path));
   w.open = true;
   // Header and section table are placeholders, patched by Finish() once sizes are known.
-  w.num_sections = 3 + (options.coarse_fields ? 1 : 0) + options.extra_sections.size();
+  w.num_sections =
+      3 + (options.coarse_fields || options.coded ? 1 : 0) + options.extra_sections.size();
   std::vector<uint8_t> head(kHeaderSize + w.num_sections * kSectionEntrySize, 0);
   HANDDB_RETURN_IF_ERROR(w.Append(head.data(), head.size()));
   HANDDB_RETURN_IF_ERROR(w.PadTo64());
@@ -138,6 +148,22 @@ Status ShardWriter::AddView(const ViewLabel& label, std::span<const PointQ> poin
                         std::to_string(kMaxAbsPointCoord) + " (1/16 px)");
     }
   }
+  if (w.options.coded) {
+    w.code.clear();
+    HANDDB_RETURN_IF_ERROR(EncodeViewPoints(points, label.scale, label.source_centre_px, &w.code));
+    HANDDB_RETURN_IF_ERROR(w.Append(w.code.data(), w.code.size()));
+    w.points_hash.Update(w.code.data(), w.code.size());
+    const size_t at = w.view_table.size();
+    w.view_table.resize(at + kViewRecordSize);
+    EncodeViewRecord(label, w.code_bytes, static_cast<uint32_t>(points.size()), &w.view_table[at]);
+    w.code_bytes += w.code.size();
+    w.num_points += points.size();
+    std::array<uint8_t, kCoarseFieldSize> field;
+    ComputeCoarseField(points, field.data());
+    EncodeCoarseField(field, &w.field_codes);
+    w.field_code_ends.push_back(w.field_codes.size());
+    return Status::Ok();
+  }
   const size_t bytes = points.size() * sizeof(PointQ);
   HANDDB_RETURN_IF_ERROR(w.Append(points.data(), bytes));
   w.points_hash.Update(points.data(), bytes);
@@ -167,14 +193,25 @@ Result<ShardSummary> ShardWriter::Finish() {
                       1,
                       0,
                       Checksum(meta.data(), meta.size())});
-  sections.push_back({kSectionPoints,
-                      kSectionFlagRequired,
-                      w.points_offset,
-                      w.num_points * kPointSize,
-                      w.num_points,
-                      kPointSize,
-                      0,
-                      w.points_hash.Digest()});
+  if (w.options.coded) {
+    sections.push_back({kSectionPointCodes,
+                        kSectionFlagRequired,
+                        w.points_offset,
+                        w.code_bytes,
+                        w.code_bytes,
+                        1,
+                        0,
+                        w.points_hash.Digest()});
+  } else {
+    sections.push_back({kSectionPoints,
+                        kSectionFlagRequired,
+                        w.points_offset,
+                        w.num_points * kPointSize,
+                        w.num_points,
+                        kPointSize,
+                        0,
+                        w.points_hash.Digest()});
+  }
   HANDDB_RETURN_IF_ERROR(w.PadTo64());
   const uint64_t num_views = w.view_table.size() / kViewRecordSize;
   sections.push_back({kSectionViews,
@@ -187,7 +224,25 @@ Result<ShardSummary> ShardWriter::Finish() {
                       Checksum(w.view_table.data(), w.view_table.size())});
   HANDDB_RETURN_IF_ERROR(w.Append(w.view_table.data(), w.view_table.size()));
   std::vector<uint8_t>().swap(w.view_table);
-  if (w.options.coarse_fields) {
+  if (w.options.coded) {
+    // The offset table (num_views + 1 entries, relative to the section), then the codes.
+    const uint64_t table_bytes = 8 * (num_views + 1);
+    std::vector<uint8_t> table(table_bytes);
+    Store<uint64_t>(table.data(), table_bytes);
+    for (uint64_t i = 0; i < num_views; ++i) {
+      Store<uint64_t>(table.data() + 8 * (i + 1), table_bytes + w.field_code_ends[i]);
+    }
+    StreamingChecksum hash;
+    hash.Update(table.data(), table.size());
+    hash.Update(w.field_codes.data(), w.field_codes.size());
+    HANDDB_RETURN_IF_ERROR(w.PadTo64());
+    const uint64_t size = table_bytes + w.field_codes.size();
+    sections.push_back(
+        {kSectionFieldCodes, kSectionFlagRequired, w.Position(), size, size, 1, 0, hash.Digest()});
+    HANDDB_RETURN_IF_ERROR(w.Append(table.data(), table.size()));
+    HANDDB_RETURN_IF_ERROR(w.Append(w.field_codes.data(), w.field_codes.size()));
+    std::string().swap(w.field_codes);
+  } else if (w.options.coarse_fields) {
     HANDDB_RETURN_IF_ERROR(w.PadTo64());
     sections.push_back({kSectionCoarseFields,
                         0,
@@ -227,7 +282,8 @@ Result<ShardSummary> ShardWriter::Finish() {
   RawHeader h;
   h.magic = kMagic;
   h.version_major = kVersionMajor;
-  h.version_minor = kVersionMinor;
+  h.version_minor = w.options.coded ? kVersionMinor : kVersionMinorPlain;
+  h.required_features = w.options.coded ? kFeatureCodedViews : 0;
   h.header_size = kHeaderSize;
   h.file_size = file_size;
   h.num_views = num_views;

@@ -30,6 +30,12 @@ struct ShardWriterOptions {
   // search's query -> view bound reads instead of computing it on open. Off: a v1.1 shard with
   // the three v1.0 sections only (tests of the fallback).
   bool coarse_fields = true;
+  // Write a v1.2 coded shard (docs/format.md section 10): each view's points as its
+  // EncodeViewPoints code (~160 bytes for a converted view instead of ~2,200) and its coarse
+  // field as its EncodeCoarseField code (~600 instead of 1,849), read back by decoding. For
+  // databases searched through an index (handdb index), which decodes only its candidates; an
+  // exact search decodes what it reads. Implies coarse fields (coarse_fields is ignored).
+  bool coded = false;
   bool Check() const;
 };
 

@@ -17,7 +17,9 @@
 #include "base/mapped_file.h"
 #include "base/progress.h"
 #include "format/coarse_field.h"
+#include "format/field_codec.h"
 #include "format/manifest.h"
+#include "format/point_codec.h"
 #include "format/shard_layout.h"
 
 namespace handdb {
@@ -227,6 +229,83 @@ void CheckCoarseField(const uint8_t* b,
   }
 }
 
+// A coded shard's view i (v1.2, docs/format.md section 10): its point code decodes to its
+// record's count of points, each in range, and its field code decodes to the field its points
+// give. `code_at`, `field_at`: file offsets of the two codes.
+void CheckCodedView(std::span<const uint8_t> bytes,
+                    const Layout& layout,
+                    uint64_t i,
+                    const uint8_t* rec,
+                    ProblemList* problems) {
+  const uint8_t* b = bytes.data();
+  const RawSection& vs = layout.sections[layout.views];
+  const RawSection& pc = layout.sections[static_cast<size_t>(layout.point_codes)];
+  const RawSection& fc = layout.sections[static_cast<size_t>(layout.field_codes)];
+  const std::string view = "view " + std::to_string(i) + ": ";
+  const uint64_t begin = Load<uint64_t>(rec + kViewOffPointOffset);
+  const uint64_t end =
+      i + 1 < vs.count
+          ? Load<uint64_t>(b + vs.offset + (i + 1) * layout.view_stride + kViewOffPointOffset)
+          : pc.size;
+  const uint64_t code_at = pc.offset + begin;
+  std::vector<PointQ> points;
+  const Status decoded = DecodeViewPoints(
+      bytes.subspan(code_at, end - begin),
+      Load<float>(rec + kViewOffScale),
+      {Load<float>(rec + kViewOffSourceCentre), Load<float>(rec + kViewOffSourceCentre + 4)},
+      &points);
+  if (!decoded.ok()) {
+    problems->Add("point-code", decoded.code(), code_at, view + "point code: " + decoded.message());
+    return;
+  }
+  const uint32_t count = Load<uint32_t>(rec + kViewOffPointCount);
+  if (points.size() != count) {
+    problems->Add("point-code",
+                  StatusCode::kSizeMismatch,
+                  code_at,
+                  view + "point code decodes to " + std::to_string(points.size()) +
+                      " points, its record says " + std::to_string(count));
+    return;
+  }
+  for (size_t k = 0; k < points.size(); ++k) {
+    if (std::abs(points[k].x) > kMaxAbsPointCoord || std::abs(points[k].y) > kMaxAbsPointCoord) {
+      problems->Add("points-range",
+                    StatusCode::kOutOfRange,
+                    code_at,
+                    view + "decoded point " + std::to_string(k) + " (" +
+                        std::to_string(points[k].x) + ", " + std::to_string(points[k].y) +
+                        ") exceeds |x|,|y| <= " + std::to_string(kMaxAbsPointCoord) +
+                        " (1/16 px, i.e. 384 px)");
+      return;
+    }
+  }
+  const uint64_t field_begin = Load<uint64_t>(b + fc.offset + 8 * i);
+  const uint64_t field_end = Load<uint64_t>(b + fc.offset + 8 * (i + 1));
+  std::array<uint8_t, kCoarseFieldSize> field;
+  const Status field_decoded =
+      DecodeCoarseField(bytes.subspan(fc.offset + field_begin, field_end - field_begin), field);
+  if (!field_decoded.ok()) {
+    problems->Add("coarse-field",
+                  field_decoded.code(),
+                  fc.offset + field_begin,
+                  view + "field code: " + field_decoded.message());
+    return;
+  }
+  std::array<uint8_t, kCoarseFieldSize> want;
+  ComputeCoarseField(points, want.data());
+  for (uint32_t c = 0; c < kCoarseFieldSize; ++c) {
+    if (field[c] != want[c]) {
+      problems->Add("coarse-field",
+                    StatusCode::kOutOfRange,
+                    fc.offset + field_begin,
+                    view + "coarse field cell " + std::to_string(c) + " decodes to " +
+                        std::to_string(field[c]) + ", its points give " + std::to_string(want[c]) +
+                        " (1/2 px)");
+      return;
+    }
+  }
+}
+
 ValidationReport ToReport(const ProblemList& problems) {
   ValidationReport report;
   for (const auto& p : problems.problems()) {
@@ -264,7 +343,7 @@ ValidationReport ValidateBytes(std::span<const uint8_t> bytes,
     const std::optional<RecordedLimits> limits = ParseMetadata(meta, ms.offset, &problems, &parsed);
     if (metadata != nullptr) *metadata = std::move(parsed);
     const RawSection& vs = layout.sections[layout.views];
-    const RawSection& ps = layout.sections[layout.points];
+    const RawSection* ps = layout.coded ? nullptr : &layout.sections[layout.points];
     for (uint64_t i = 0; i < vs.count; ++i) {
       const uint64_t at = vs.offset + i * layout.view_stride;
       CheckLabel(b + at, at, i, limits, options, &problems);
@@ -280,18 +359,20 @@ ValidationReport ValidateBytes(std::span<const uint8_t> bytes,
                            " already appears in " + it->second);
         }
       }
-      if (layout.views_ok) {
+      if (layout.views_ok && layout.coded) {
+        CheckCodedView(bytes, layout, i, b + at, &problems);
+      } else if (layout.views_ok) {
         const uint64_t off = Load<uint64_t>(b + at + kViewOffPointOffset);
         const uint32_t cnt = Load<uint32_t>(b + at + kViewOffPointCount);
-        CheckPoints(b, ps.offset, off, cnt, "view " + std::to_string(i) + ": ", &problems);
+        CheckPoints(b, ps->offset, off, cnt, "view " + std::to_string(i) + ": ", &problems);
         if (layout.coarse_fields >= 0) {
-          CheckCoarseField(b, ps.offset + off * kPointSize, cnt, layout, i, &problems);
+          CheckCoarseField(b, ps->offset + off * kPointSize, cnt, layout, i, &problems);
         }
       }
     }
-    if (!layout.views_ok) CheckPoints(b, ps.offset, 0, ps.count, "", &problems);
+    if (!layout.views_ok && ps != nullptr) CheckPoints(b, ps->offset, 0, ps->count, "", &problems);
     counts.views = vs.count;
-    counts.points = ps.count;
+    counts.points = layout.coded ? layout.header.num_points : ps->count;
   }
   ValidationReport report = ToReport(problems);
   report.files = counts.files;

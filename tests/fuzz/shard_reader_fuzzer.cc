@@ -18,9 +18,19 @@ void Exercise(std::span<const uint8_t> bytes) {
   if (reader.ok()) {
     (void)reader->VerifyChecksums();
     int64_t acc = 0;
+    std::vector<handdb::PointQ> decoded;
+    uint8_t field[handdb::shard::kCoarseFieldSize];
     for (size_t i = 0; i < reader->num_views(); ++i) {
       const handdb::ViewLabel label = reader->label(i);
       acc += label.render_id;
+      if (reader->coded()) {  // a coded shard (v1.2): its codes decode or fail cleanly
+        if (reader->DecodePoints(i, &decoded).ok()) {
+          for (const handdb::PointQ& p : decoded) acc += p.x - p.y;
+        }
+        if (reader->DecodeCoarseField(i, field).ok()) acc += field[0];
+        acc += static_cast<int64_t>(reader->point_code(i).size() + reader->field_code(i).size());
+        continue;
+      }
       for (const handdb::PointQ& p : reader->points(i)) acc += p.x - p.y;
       acc += static_cast<int64_t>(reader->point_offset(i));
     }
