@@ -62,16 +62,19 @@ CoarseFields::CoarseFields(const Database& db, int num_threads, FieldKind kind)
   std::vector<size_t> computed(num_blocks(), 0);
   ParallelFor(num_blocks(), ResolveNumThreads(num_threads), [&](size_t b, int) {
     std::vector<uint8_t> scratch(CoarseGrid::kCells);
+    std::vector<uint8_t> decoded(CoarseGrid::kCells);
+    std::vector<PointQ> points;  // a coded view's, decoded (not kept: every view passes here)
     uint8_t* plane = planes_.data() + b * CoarseGrid::kCells * kBlock;
     for (size_t i = 0; i < kBlock && b * kBlock + i < num_views_; ++i) {
       const auto v = static_cast<view_id_t>(b * kBlock + i);
-      const uint8_t* field = kind == FieldKind::kBox ? db.coarse_field(v) : nullptr;
+      const uint8_t* field =
+          kind == FieldKind::kBox ? db.ViewCoarseField(v, decoded.data()) : nullptr;
       if (kind == FieldKind::kCentre) {
-        ComputeCentreField(db.points(v), scratch.data());
+        ComputeCentreField(db.ViewPoints(v, &points), scratch.data());
         field = scratch.data();
         ++computed[b];
       } else if (field == nullptr) {  // a shard without the section (v1.0): computed here
-        ComputeCoarseField(db.points(v), scratch.data());
+        ComputeCoarseField(db.ViewPoints(v, &points), scratch.data());
         field = scratch.data();
         ++computed[b];
       }
@@ -443,13 +446,14 @@ ViewHistograms::ViewHistograms(const Database& db, int num_threads) {
     std::vector<uint16_t> ids;
     std::vector<uint16_t> entry_cells;
     std::vector<uint32_t> entry_counts;
+    std::vector<PointQ> decoded;  // a coded view's points (not kept)
     std::vector<uint16_t> cells;
     std::vector<uint8_t> counts;
     std::vector<uint32_t> sizes;
     for (size_t v = k * kChunk; v < std::min(num_views, (k + 1) * kChunk); ++v) {
       // Every point's cell (an off-grid point goes to a spare counter), then the counts, then
       // the cells in the order first met (the sums do not care about the order).
-      const std::span<const PointQ> pts = db.points(static_cast<view_id_t>(v));
+      const std::span<const PointQ> pts = db.ViewPoints(static_cast<view_id_t>(v), &decoded);
       ids.resize(pts.size());
       uint16_t* id = ids.data();
       uint32_t* cnt = count.data();

@@ -4,7 +4,9 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "base/thread_pool.h"
 #include "format/manifest.h"
+#include "format/shard_layout.h"
 #include "format/shard_reader.h"
 
 namespace handdb {
@@ -41,7 +43,12 @@ std::vector<std::string> ShapeNamesFromMetadata(std::string_view metadata) {
 }  // namespace
 
 Database::Database() = default;
-Database::~Database() = default;
+Database::~Database() {
+  for (size_t v = 0; decoded_points_ != nullptr && v < views_.size(); ++v) {
+    delete[] decoded_points_[v].load(std::memory_order_relaxed);
+    delete[] decoded_fields_[v].load(std::memory_order_relaxed);
+  }
+}
 Database::Database(Database&&) noexcept = default;
 Database& Database::operator=(Database&&) noexcept = default;
 
@@ -58,7 +65,9 @@ Database Database::FromMemory(std::vector<ViewLabel> labels,
   db.shape_names_ = std::move(shape_names);
   db.views_.resize(db.memory_points_.size());
   for (size_t i = 0; i < db.memory_points_.size(); ++i) {
-    db.views_[i] = {0, static_cast<uint32_t>(i), db.memory_points_[i]};
+    db.views_[i].points = db.memory_points_[i].data();
+    db.views_[i].num_points = static_cast<uint32_t>(db.memory_points_[i].size());
+    db.views_[i].index = static_cast<uint32_t>(i);
     db.num_points_ += db.memory_points_[i].size();
   }
   db.size_bytes_ = db.num_points_ * sizeof(PointQ) + db.memory_labels_.size() * sizeof(ViewLabel);
@@ -111,11 +120,19 @@ Result<Database> Database::OpenOnce(const std::filesystem::path& dir, bool verif
     auto owned = std::make_unique<ShardReader>(std::move(reader).value());
     if (db.shape_names_.empty()) db.shape_names_ = ShapeNamesFromMetadata(owned->metadata_json());
     for (size_t i = 0; i < owned->num_views(); ++i) {
-      db.views_.push_back(
-          {shard_index, static_cast<uint32_t>(i), owned->points(i), owned->coarse_field(i)});
-      db.num_points_ += db.views_.back().points.size();
+      ViewRef ref;
+      ref.shard = shard_index;
+      ref.index = static_cast<uint32_t>(i);
+      ref.num_points = owned->point_count(i);
+      ref.coded = owned->coded();
+      if (!ref.coded) {
+        ref.points = owned->points(i).data();
+        ref.coarse_field = owned->coarse_field(i);
+      }
+      db.views_.push_back(ref);
+      db.num_points_ += ref.num_points;
     }
-    if (!owned->has_coarse_fields()) ++db.shards_without_coarse_fields_;
+    if (!owned->has_coarse_fields() && !owned->coded()) ++db.shards_without_coarse_fields_;
     // The point spans are copied out; labels are read again only for the top-k of a search.
     owned->ReleaseViewTablePages();
     db.size_bytes_ += header.file_size;
@@ -125,7 +142,113 @@ Result<Database> Database::OpenOnce(const std::filesystem::path& dir, bool verif
     return Status(StatusCode::kOutOfRange, dir.string() + ": too many views");
   }
   db.manifest_ = std::move(manifest).value();
+  const bool any_coded =
+      std::any_of(db.shards_.begin(), db.shards_.end(), [](const auto& s) { return s->coded(); });
+  if (any_coded) {
+    const size_t n = db.views_.size();
+    db.decoded_points_ = std::make_unique<std::atomic<PointQ*>[]>(n);
+    db.decoded_fields_ = std::make_unique<std::atomic<uint8_t*>[]>(n);
+    db.decoded_bytes_ = std::make_unique<std::atomic<uint64_t>>(0);
+    for (size_t v = 0; v < n; ++v) {
+      db.decoded_points_[v].store(nullptr, std::memory_order_relaxed);
+      db.decoded_fields_[v].store(nullptr, std::memory_order_relaxed);
+    }
+    HANDDB_RETURN_IF_ERROR(db.SummariseViews(ResolveNumThreads(-1)));
+  }
   return db;
+}
+
+// Decodes every view once (a chunk of views per task, one scratch buffer each): a code that does
+// not decode is reported here, by Open, naming the shard, the view and the byte offset; the
+// searcher reads the summaries instead of every view's points.
+Status Database::SummariseViews(int num_threads) {
+  constexpr size_t kChunk = 1024;
+  const size_t n = views_.size();
+  summaries_.assign(n, PointSummary{});
+  return ParallelForStatus((n + kChunk - 1) / kChunk, num_threads, nullptr, [&](size_t k) {
+    std::vector<PointQ> scratch;
+    const size_t end = std::min(n, (k + 1) * kChunk);
+    for (size_t v = k * kChunk; v < end; ++v) {
+      const ViewRef& r = views_[v];
+      std::span<const PointQ> pts(r.points, r.num_points);
+      if (r.coded) {
+        HANDDB_RETURN_IF_ERROR(shards_[r.shard]->DecodePoints(r.index, &scratch));
+        pts = scratch;
+      }
+      int32_t m = 0;
+      for (const PointQ& p : pts) {
+        m = std::max({m, std::abs(static_cast<int32_t>(p.x)), std::abs(static_cast<int32_t>(p.y))});
+      }
+      summaries_[v].max_abs = m;
+      summaries_[v].sorted_by_y =
+          std::is_sorted(pts.begin(), pts.end(), [](PointQ a, PointQ b) { return a.y < b.y; });
+    }
+    return Status::Ok();
+  });
+}
+
+std::span<const PointQ> Database::DecodedPoints(view_id_t v) const {
+  const ViewRef& r = views_[v];
+  if (r.num_points == 0) return {};
+  std::atomic<PointQ*>& slot = decoded_points_[v];
+  PointQ* p = slot.load(std::memory_order_acquire);
+  if (p == nullptr) {
+    std::vector<PointQ> pts;
+    const Status s = shards_[r.shard]->DecodePoints(r.index, &pts);
+    // Every code decoded at open (SummariseViews), and shards are never rewritten in place.
+    THROW_CHECK_MSG(s.ok(), s.ToString());
+    auto fresh = std::make_unique<PointQ[]>(pts.size());
+    std::copy(pts.begin(), pts.end(), fresh.get());
+    PointQ* expected = nullptr;
+    if (slot.compare_exchange_strong(expected, fresh.get(), std::memory_order_acq_rel)) {
+      p = fresh.release();
+      decoded_bytes_->fetch_add(pts.size() * sizeof(PointQ), std::memory_order_relaxed);
+    } else {
+      p = expected;  // another thread decoded it first
+    }
+  }
+  return std::span<const PointQ>(p, r.num_points);
+}
+
+const uint8_t* Database::DecodedField(view_id_t v) const {
+  const ViewRef& r = views_[v];
+  std::atomic<uint8_t*>& slot = decoded_fields_[v];
+  uint8_t* f = slot.load(std::memory_order_acquire);
+  if (f == nullptr) {
+    auto fresh = std::make_unique<uint8_t[]>(shard::kCoarseFieldSize);
+    const Status s = shards_[r.shard]->DecodeCoarseField(r.index, fresh.get());
+    THROW_CHECK_MSG(s.ok(), s.ToString());
+    uint8_t* expected = nullptr;
+    if (slot.compare_exchange_strong(expected, fresh.get(), std::memory_order_acq_rel)) {
+      f = fresh.release();
+      decoded_bytes_->fetch_add(shard::kCoarseFieldSize, std::memory_order_relaxed);
+    } else {
+      f = expected;
+    }
+  }
+  return f;
+}
+
+std::span<const PointQ> Database::ViewPoints(view_id_t v, std::vector<PointQ>* scratch) const {
+  THROW_CHECK_LT(v, views_.size());
+  const ViewRef& r = views_[v];
+  if (!r.coded) return std::span<const PointQ>(r.points, r.num_points);
+  PointQ* cached = decoded_points_[v].load(std::memory_order_acquire);
+  if (cached != nullptr) return std::span<const PointQ>(cached, r.num_points);
+  const Status s = shards_[r.shard]->DecodePoints(r.index, scratch);
+  THROW_CHECK_MSG(s.ok(), s.ToString());
+  return *scratch;
+}
+
+const uint8_t* Database::ViewCoarseField(view_id_t v, uint8_t* scratch) const {
+  THROW_CHECK_LT(v, views_.size());
+  const ViewRef& r = views_[v];
+  if (!r.coded) return r.coarse_field;
+  uint8_t* cached = decoded_fields_[v].load(std::memory_order_acquire);
+  if (cached != nullptr) return cached;
+  const Status s = shards_[r.shard]->DecodeCoarseField(r.index, scratch);
+  THROW_CHECK_MSG(s.ok(), s.ToString());
+  return scratch;
 }
 
 void Database::ReleaseCoarseFieldPages() const {

@@ -4,6 +4,7 @@
 // All accessors are const and safe from many threads.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <filesystem>
 #include <memory>
@@ -47,17 +48,46 @@ class Database {
   uint32_t num_rolls() const { return num_rolls_; }
   uint64_t num_virtual_views() const { return static_cast<uint64_t>(num_views()) * num_rolls_; }
   uint64_t num_points() const { return num_points_; }
-  // Canonical (roll 0) points of view v, zero-copy. Inline: the search calls it per pair.
+  // Canonical (roll 0) points of view v. Inline: the search calls it per pair. Zero-copy from a
+  // plain shard; a coded shard's view (docs/format.md section 10) is decoded on its first call
+  // and kept for the Database's lifetime (decoded_bytes()), so a search that reads a few
+  // thousand candidates holds only those. Safe from many threads.
   std::span<const PointQ> points(view_id_t v) const {
     THROW_CHECK_LT(v, views_.size());
-    return views_[v].points;
+    const ViewRef& r = views_[v];
+    if (!r.coded) return std::span<const PointQ>(r.points, r.num_points);
+    return DecodedPoints(v);
   }
+  // Number of points of view v (no decoding).
+  uint32_t point_count(view_id_t v) const {
+    THROW_CHECK_LT(v, views_.size());
+    return views_[v].num_points;
+  }
+  // For a pass over every view that should not keep decoded copies (index builds, exact-search
+  // preparation, exports): points(v) for a plain view, else decoded into *scratch.
+  std::span<const PointQ> ViewPoints(view_id_t v, std::vector<PointQ>* scratch) const;
   ViewLabel label(view_id_t v) const;
   // View v's coarse field (format/coarse_field.h) from its shard's v1.1 section, zero-copy, or
-  // nullptr when that shard has none (v1.0 shards, FromMemory databases).
+  // decoded from a coded shard's field_codes (and kept, as points() does), or nullptr when that
+  // shard has none (v1.0 shards, FromMemory databases).
   const uint8_t* coarse_field(view_id_t v) const {
     THROW_CHECK_LT(v, views_.size());
-    return views_[v].coarse_field;
+    if (!views_[v].coded) return views_[v].coarse_field;
+    return DecodedField(v);
+  }
+  // coarse_field(v) without keeping a decoded copy: decoded into scratch (kCoarseFieldSize bytes).
+  const uint8_t* ViewCoarseField(view_id_t v, uint8_t* scratch) const;
+  // True when a shard is coded; then every view was decoded once at open (a code that does not
+  // decode is an error of Open) and its summary kept here, for the searcher's per-view extents.
+  bool coded() const { return !summaries_.empty(); }
+  struct PointSummary {
+    int32_t max_abs = 0;       // largest |x|, |y| of its points (PointQ units)
+    bool sorted_by_y = false;  // points sorted by y
+  };
+  const std::vector<PointSummary>& point_summaries() const { return summaries_; }
+  // Bytes of decoded points and fields held (0 for a database without coded shards).
+  uint64_t decoded_bytes() const {
+    return decoded_bytes_ ? decoded_bytes_->load(std::memory_order_relaxed) : 0;
   }
   // True when every view has one (then the search reads them instead of computing them).
   bool has_coarse_fields() const { return !shards_.empty() && shards_without_coarse_fields_ == 0; }
@@ -80,11 +110,16 @@ class Database {
  private:
   static Result<Database> OpenOnce(const std::filesystem::path& dir, bool verify_checksums);
   struct ViewRef {
+    const PointQ* points = nullptr;  // plain: in the shard's mapping or memory_points_
+    uint32_t num_points = 0;
     uint32_t shard = 0;
     uint32_t index = 0;  // inside the shard
-    std::span<const PointQ> points;
+    bool coded = false;  // points and field are decoded on demand (DecodedPoints/DecodedField)
     const uint8_t* coarse_field = nullptr;  // in the shard's mapping, if it has the section
   };
+  std::span<const PointQ> DecodedPoints(view_id_t v) const;
+  const uint8_t* DecodedField(view_id_t v) const;
+  Status SummariseViews(int num_threads);
   size_t shards_without_coarse_fields_ = 0;
   std::vector<ViewRef> views_;
   uint32_t num_rolls_ = 1;
@@ -95,6 +130,12 @@ class Database {
   Manifest manifest_;
   std::string manifest_metadata_json_ = "{}";
   std::vector<std::unique_ptr<ShardReader>> shards_;
+  // Coded shards: per view, the decoded points and field once read (owned, freed by the
+  // destructor), and every view's summary.
+  std::unique_ptr<std::atomic<PointQ*>[]> decoded_points_;
+  std::unique_ptr<std::atomic<uint8_t*>[]> decoded_fields_;
+  std::unique_ptr<std::atomic<uint64_t>> decoded_bytes_;
+  std::vector<PointSummary> summaries_;
   // FromMemory storage.
   std::vector<ViewLabel> memory_labels_;
   std::vector<std::vector<PointQ>> memory_points_;

@@ -610,23 +610,34 @@ Searcher::Searcher(std::shared_ptr<const Database> db) : db_(std::move(db)) {
   max_abs_.resize(db_->num_views());
   y_sorted_.resize(db_->num_views());
   // Every view's points are read once here, in parallel (on a 10M-virtual-view database ~0.5 GB
-  // of mapped points).
-  constexpr size_t kChunk = 4096;
-  ParallelFor((db_->num_views() + kChunk - 1) / kChunk, ResolveNumThreads(-1), [&](size_t k, int) {
-    const size_t end = std::min<size_t>(db_->num_views(), (k + 1) * kChunk);
-    for (size_t v = k * kChunk; v < end; ++v) {
-      const std::span<const PointQ> pts = db_->points(static_cast<view_id_t>(v));
-      int32_t m = 0;
-      for (const PointQ& p : pts) {
-        m = std::max({m, std::abs(static_cast<int32_t>(p.x)), std::abs(static_cast<int32_t>(p.y))});
-      }
-      max_abs_[v] = m;
-      y_sorted_[v] =
-          m < CoarseGrid::kHalfUnits &&
-          std::is_sorted(pts.begin(), pts.end(), [](PointQ a, PointQ b) { return a.y < b.y; });
+  // of mapped points); a database with coded shards summarised them at open.
+  if (db_->coded()) {
+    const auto& summaries = db_->point_summaries();
+    for (size_t v = 0; v < summaries.size(); ++v) {
+      max_abs_[v] = summaries[v].max_abs;
+      y_sorted_[v] = summaries[v].max_abs < CoarseGrid::kHalfUnits && summaries[v].sorted_by_y;
     }
-    return true;
-  });
+  } else {
+    constexpr size_t kChunk = 4096;
+    ParallelFor(
+        (db_->num_views() + kChunk - 1) / kChunk, ResolveNumThreads(-1), [&](size_t k, int) {
+          const size_t end = std::min<size_t>(db_->num_views(), (k + 1) * kChunk);
+          for (size_t v = k * kChunk; v < end; ++v) {
+            const std::span<const PointQ> pts = db_->points(static_cast<view_id_t>(v));
+            int32_t m = 0;
+            for (const PointQ& p : pts) {
+              m = std::max(
+                  {m, std::abs(static_cast<int32_t>(p.x)), std::abs(static_cast<int32_t>(p.y))});
+            }
+            max_abs_[v] = m;
+            y_sorted_[v] = m < CoarseGrid::kHalfUnits &&
+                           std::is_sorted(pts.begin(), pts.end(), [](PointQ a, PointQ b) {
+                             return a.y < b.y;
+                           });
+          }
+          return true;
+        });
+  }
   // The grid holds distances to the rolled query, looked up only at view points; its bounds
   // are the same at every node whatever the extent (it grows to contain the query), so the
   // smallest extent that keeps every view on the grid gives identical bounds at the least cost.
@@ -771,7 +782,7 @@ class QueryRun {
         num_views_,
         threads_,
         [&](size_t v, int worker) {
-          if (!db_.points(static_cast<view_id_t>(v)).empty()) {
+          if (db_.point_count(static_cast<view_id_t>(v)) != 0) {
             for (size_t s = 0; s < num_slots(); ++s) {
               Scored sc;
               ctx_.Score(static_cast<view_id_t>(v), s, kInf, 0.0, worker, &sc);
@@ -951,7 +962,7 @@ class QueryRun {
   // L_A of one pair as CoarseBounds() computes it (kNoBound for a view without points, 0 without
   // coarse fields): sum_c n(c) F_v(c) is the same exact integer as the streaming product's.
   Bound PairCoarseBound(size_t v, size_t s) const {
-    if (db_.points(static_cast<view_id_t>(v)).empty()) return kNoBound;
+    if (db_.point_count(static_cast<view_id_t>(v)) == 0) return kNoBound;
     if (coarse_ == nullptr) return 0;
     return CoarseABound(coarse_->PairSum(ctx_.histogram(s), v), s);
   }
@@ -962,7 +973,7 @@ class QueryRun {
     if (coarse_ == nullptr) {
       for (size_t s = 0; s < num_slots(); ++s) {
         for (view_id_t v = 0; v < num_views_; ++v) {
-          if (db_.points(v).empty()) la_[s * num_views_ + v] = kNoBound;
+          if (db_.point_count(v) == 0) la_[s * num_views_ + v] = kNoBound;
         }
       }
       return;
@@ -971,7 +982,7 @@ class QueryRun {
       for (size_t s = 0; s < num_slots(); ++s) {
         coarse_->BlockSums(ctx_.histogram(s), b, sums, /*neighbours=*/false);
         for (size_t v = v0; v < v1; ++v) {
-          la_[s * num_views_ + v] = db_.points(static_cast<view_id_t>(v)).empty()
+          la_[s * num_views_ + v] = db_.point_count(static_cast<view_id_t>(v)) == 0
                                         ? kNoBound
                                         : CoarseABound(sums[v - v0], s);
         }
@@ -1068,7 +1079,7 @@ class QueryRun {
     thread_local std::vector<uint32_t> sums;
     sums.resize(slot_fields_.stride());
     for (size_t v = v0; v < v1; ++v) {
-      const size_t ny = db_.points(static_cast<view_id_t>(v)).size();
+      const size_t ny = db_.point_count(static_cast<view_id_t>(v));
       if (ny == 0) continue;
       view_histograms_->Sums(v, slot_fields_, sums.data());
       const FloorDivider divider(ny);

@@ -136,9 +136,11 @@ Result<ViewIndex> ViewIndex::Build(const Database& db, const IndexBuildOptions& 
     ParallelFor(sample.size(), threads, [&](size_t i, int) {
       const view_id_t v = sample[i];
       rows[i].resize(D);
-      ViewVector(grid, db.points(v), 1.0f, rows[i].data());
+      std::vector<PointQ> decoded;  // a coded view's points (not kept)
+      const std::span<const PointQ> view = db.ViewPoints(v, &decoded);
+      ViewVector(grid, view, 1.0f, rows[i].data());
       std::vector<Point2f> pts;
-      RollPoints(db.points(v), RollAngle(static_cast<roll_id_t>((7 * i + 3) % rolls), rolls), &pts);
+      RollPoints(view, RollAngle(static_cast<roll_id_t>((7 * i + 3) % rolls), rolls), &pts);
       if (i % 2 == 1) {
         for (Point2f& p : pts) p.x = -p.x;
       }
@@ -216,7 +218,9 @@ Result<ViewIndex> ViewIndex::Build(const Database& db, const IndexBuildOptions& 
     Progress progress("index embed", n, options.progress, "views");
     ParallelFor(n, threads, [&](size_t vi, int) {
       std::vector<float> e(D);
-      ViewVector(grid, db.points(static_cast<view_id_t>(vi)), index.weight_, e.data());
+      thread_local std::vector<PointQ> decoded;  // a coded view's points (not kept)
+      ViewVector(
+          grid, db.ViewPoints(static_cast<view_id_t>(vi), &decoded), index.weight_, e.data());
       for (int j = 0; j < D; ++j) e[j] -= index.mean_[j];
       float* out = z.data() + vi * static_cast<size_t>(d);
       for (int k = 0; k < d; ++k) {
