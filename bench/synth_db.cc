@@ -1,7 +1,7 @@
 // Synthetic databases for issue 12's scaling measurements: N canonical views made from a real
 // database's views without Blender, so that 10M and 50M virtual views can be built in minutes.
 //
-//   synth_db --from DB --out DIR --views N [--per-shard 4096] [--seed 1] [--threads 2]
+//   synth_db --from DB --out DIR --views N [--per-shard 4096] [--seed 1] [--threads 2] [--coded]
 //
 // View i copies source view i mod |DB| (label included, render_id set to i) with its edge points
 // moved by a random similarity close to the identity (scale 0.96-1.04, rotation +-3 degrees,
@@ -11,6 +11,11 @@
 // project's writer (coarse fields included), each with the source's shard metadata (its unit
 // number replaced), and the manifest records {"synthetic": {...}} beside the source's metadata;
 // `handdb validate` and `handdb index` work on the result like on any database.
+// --coded writes coded shards (format v1.2, docs/format.md section 10) and snaps every warped
+// point back onto its source view's render lattice (the pixel it falls in, normalised with the
+// view's record), unique and sorted, as a converted view's points are: so the synthetic views
+// take the lattice code, as real ones do, instead of the raw fallback.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -40,12 +45,13 @@ struct Args {
   uint64_t per_shard = 4096;
   uint32_t seed = 1;
   int threads = 2;
+  bool coded = false;
 };
 
 [[noreturn]] void Usage(const std::string& problem) {
   std::fprintf(stderr,
                "synth_db: %s\nusage: synth_db --from DB --out DIR --views N [--per-shard 4096] "
-               "[--seed 1] [--threads 2]\n",
+               "[--seed 1] [--threads 2] [--coded]\n",
                problem.c_str());
   std::exit(2);
 }
@@ -70,6 +76,8 @@ Args Parse(int argc, char** argv) {
       a.seed = static_cast<uint32_t>(std::stoul(next()));
     else if (k == "--threads")
       a.threads = std::stoi(next());
+    else if (k == "--coded")
+      a.coded = true;
     else
       Usage("unknown argument " + k);
   }
@@ -100,6 +108,31 @@ std::vector<PointQ> Warp(std::span<const PointQ> src, uint32_t seed, uint64_t vi
     out.push_back({q(x), q(y)});
   }
   if (out.empty()) out.push_back(src.front());
+  return out;
+}
+
+// The points of the render pixels `pts` fall in, normalised with the label's float scale and
+// centre as the point code's decoder does (format/point_codec.cc), unique, sorted by (y, x).
+std::vector<PointQ> SnapToLattice(const std::vector<PointQ>& pts, const ViewLabel& label) {
+  const double s = static_cast<double>(label.scale) * kPointScale;
+  const double cx = label.source_centre_px[0], cy = label.source_centre_px[1];
+  std::vector<PointQ> out;
+  out.reserve(pts.size());
+  for (const PointQ& p : pts) {
+    const double col = std::nearbyint(p.x / s + cx - 0.5);
+    const double row = std::nearbyint(p.y / s + cy - 0.5);
+    const double x = std::nearbyint((col + 0.5 - cx) * s);
+    const double y = std::nearbyint((row + 0.5 - cy) * s);
+    if (std::fabs(x) > 6144 || std::fabs(y) > 6144) continue;
+    out.push_back({static_cast<int16_t>(x), static_cast<int16_t>(y)});
+  }
+  std::sort(out.begin(), out.end(), [](const PointQ& a, const PointQ& b) {
+    return a.y != b.y ? a.y < b.y : a.x < b.x;
+  });
+  out.erase(std::unique(out.begin(),
+                        out.end(),
+                        [](const PointQ& a, const PointQ& b) { return a.x == b.x && a.y == b.y; }),
+            out.end());
   return out;
 }
 
@@ -144,6 +177,7 @@ int Main(int argc, char** argv) {
     meta["skipped"] = json::array();
     ShardWriterOptions wopt;
     wopt.metadata_json = meta.dump();
+    wopt.coded = args.coded;
     ShardWriter writer;
     HANDDB_RETURN_IF_ERROR(writer.Open(fs::path(args.out) / ShardName(u), wopt));
     const uint64_t begin = u * args.per_shard;
@@ -152,7 +186,8 @@ int Main(int argc, char** argv) {
       const auto v = static_cast<view_id_t>(i % n_src);
       ViewLabel label = db->label(v);
       label.render_id = static_cast<render_id_t>(i);
-      const std::vector<PointQ> pts = Warp(db->points(v), args.seed, i);
+      std::vector<PointQ> pts = Warp(db->points(v), args.seed, i);
+      if (args.coded && label.scale > 0) pts = SnapToLattice(pts, label);
       HANDDB_RETURN_IF_ERROR(writer.AddView(label, pts));
     }
     auto done = writer.Finish();
@@ -174,7 +209,12 @@ int Main(int argc, char** argv) {
                              {"seed", args.seed},
                              {"warp",
                               "similarity: scale 0.96-1.04, rotation +-3 deg, shift +-2 px; "
-                              "jitter +-0.6 px; 5% of points dropped"}};
+                              "jitter +-0.6 px; 5% of points dropped"},
+                             {"coded", args.coded}};
+  if (args.coded) {
+    m.metadata["synthetic"]["lattice"] =
+        "points snapped to their source view's render pixels, unique, sorted";
+  }
   for (const ShardSummary& s : summaries) m.AddShard(s);
   const Status w = WriteManifest(args.out, m);
   if (!w.ok()) {

@@ -23,19 +23,23 @@ namespace {
 namespace fs = std::filesystem;
 using json = nlohmann::json;
 
-// The edge options and --skip-bad of `handdb unit convert|finalize|status`, spelled as in
+// The edge options, --skip-bad and --coded of `handdb unit convert|finalize|status`, spelled as in
 // `handdb generate`, which passes its own on verbatim.
 struct ConvertFlags {
   EdgeFlags edges;
   bool skip_bad = false;
+  bool coded = false;
   void Add(CLI::App& app) {
     edges.Add(app, "depth difference that makes a joint-pair border an occlusion edge");
     app.add_flag("--skip-bad", skip_bad, "leave bad views out instead of failing");
+    app.add_flag(
+        "--coded", coded, "write coded shards (format v1.2), as `handdb generate --coded`");
   }
   ConvertOptions Get(int threads, bool progress) const {
     ConvertOptions o;
     o.edges = edges.Get();
     o.skip_bad = skip_bad;
+    o.coded = coded;
     o.num_threads = threads;
     o.progress = progress;
     return o;

@@ -130,10 +130,10 @@ json JointPairsJson(const HandModel& hand) {
 
 // What a shard's content depends on besides the render files themselves. A shard whose
 // metadata carries the same key (and valid checksums) is kept on a rerun.
-json ConversionKey(const RunContext& ctx, uint32_t unit_id, const EdgeOptions& edges) {
-  json edges_json = edges.ToJson();
+json ConversionKey(const RunContext& ctx, uint32_t unit_id, const ConvertOptions& options) {
+  json edges_json = options.edges.ToJson();
   edges_json["joint_pairs"] = JointPairsJson(ctx.hand);
-  return {
+  json key = {
       {"unit", unit_id},
       {"plan_sha256", ctx.plan_sha256},
       {"tool_version", HANDDB_VERSION},
@@ -143,6 +143,9 @@ json ConversionKey(const RunContext& ctx, uint32_t unit_id, const EdgeOptions& e
         {"centre", "area centroid of the silhouette convex hull"},
         {"point_scale", kPointScale}}},
   };
+  // Only when set, so the keys of plain shards (every database before v1.2) stay as they were.
+  if (options.coded) key["coded"] = true;
+  return key;
 }
 
 json HandModelJson(const HandModel& hand) {
@@ -253,7 +256,7 @@ bool KeepShardFile(UnitState* st, const fs::path& path, bool skip_bad) {
   st->file = path;
   st->manifest_shard.file = path.filename().string();
   st->manifest_shard.views = reader->num_views();
-  st->manifest_shard.points = reader->all_points().size();
+  st->manifest_shard.points = reader->header().num_points;
   st->manifest_shard.bytes = bytes.size();
   st->manifest_shard.xxh3 = Hex64(XXH3_64bits(bytes.data(), bytes.size()));
   return true;
@@ -378,7 +381,7 @@ Result<std::vector<UnitState>> PrepareUnits(const RunContext& ctx,
     st.unit = &ctx.plan.units[u];
     st.shard_path = db_dir / ShardFileName(st.unit->id);
     st.staging_path = db_dir / ShardStagingFileName(st.unit->id);
-    st.key = ConversionKey(ctx, st.unit->id, options.edges);
+    st.key = ConversionKey(ctx, st.unit->id, options);
     if (!selected[u] || check_only) continue;
     const fs::path unit_dir = ctx.render_dir / "units" / UnitDirName(st.unit->id);
     std::error_code ec;
@@ -524,6 +527,7 @@ Status WriteShards(const RunContext& ctx,
                  {"skipped", SkippedJson(st.skipped)}};
     ShardWriterOptions wopt;
     wopt.metadata_json = meta.dump();
+    wopt.coded = options.coded;
     ShardWriter writer;
     HANDDB_RETURN_IF_ERROR(writer.Open(st.file, wopt));
     for (size_t r = 0; r < st.errors.size(); ++r) {

@@ -33,6 +33,9 @@ struct ConvertOptions {
   int num_threads = -1;  // -1: all cores
   bool skip_bad = false;
   EdgeOptions edges;
+  // Write coded shards (format v1.2, docs/format.md section 10): ~4x smaller, points and fields
+  // decoded on read. Part of each shard's conversion key: switching it rewrites every shard.
+  bool coded = false;
   bool progress = true;
   // Converted units are kept in memory between the checking pass and the writing pass up to this
   // many bytes; units beyond it are converted again when written (same result, more time).
