@@ -261,10 +261,11 @@ int Run(const Args& args) {
   }
   std::printf(
       "\nmemory: peak RSS %.1f MB (%.1f MB before the queries); shards + index on disk "
-      "%.1f MB\n",
+      "%.1f MB; decoded views held %.1f MB (coded shards)\n",
       static_cast<double>(PeakRssKb()) / 1024,
       static_cast<double>(rss_before) / 1024,
-      static_cast<double>(db.size_bytes() + index_bytes) / 1048576.0);
+      static_cast<double>(db.size_bytes() + index_bytes) / 1048576.0,
+      static_cast<double>(db.decoded_bytes()) / 1048576.0);
   return 0;
 }
 

@@ -122,14 +122,17 @@ int InfoDatabase(const fs::path& dir, bool as_json) {
   // Shards with the v1.1 coarse-fields section: the search computes the others' on open. The
   // manifest and the shards come from one database even while a convert rewrites it.
   size_t with_fields = 0;
+  size_t coded = 0;  // v1.2 coded shards (their fields are coded too)
   auto manifest = ReadWithStableManifest(dir, [&]() -> Result<Manifest> {
     with_fields = 0;
+    coded = 0;
     Result<Manifest> read = ReadManifest(dir);
     if (!read.ok()) return read;
     for (const auto& s : read->shards) {
       auto reader = ShardReader::Open(dir / s.file);
       if (!reader.ok()) return reader.status();
-      if (reader->has_coarse_fields()) ++with_fields;
+      if (reader->has_coarse_fields() || reader->coded()) ++with_fields;
+      if (reader->coded()) ++coded;
     }
     return read;
   });
@@ -148,6 +151,7 @@ int InfoDatabase(const fs::path& dir, bool as_json) {
                 {"total_bytes", bytes},
                 {"total_points", points},
                 {"shards_with_coarse_fields", with_fields},
+                {"coded_shards", coded},
                 {"manifest", ManifestToJson(m)}};
     std::printf("%s\n", out.dump(2).c_str());
     return kExitOk;
@@ -166,6 +170,13 @@ int InfoDatabase(const fs::path& dir, bool as_json) {
               points,
               m.num_views ? static_cast<double>(points) / static_cast<double>(m.num_views) : 0.0);
   std::printf("  skipped       %zu renders\n", m.skipped.size());
+  if (coded > 0) {
+    std::printf(
+        "  coded         %zu of %zu shards (format v1.2: points and fields decoded when "
+        "read)\n",
+        coded,
+        m.shards.size());
+  }
   std::printf("  coarse fields stored in %zu of %zu shards%s\n",
               with_fields,
               m.shards.size(),

@@ -209,6 +209,12 @@ void ShardReader::ReleaseViewTablePages() const {
   ReleaseSectionPages(r.file, r.layout.sections[r.layout.views]);
 }
 
+void ShardReader::ReleasePointCodePages() const {
+  const Impl& r = *impl_;
+  if (r.layout.point_codes < 0) return;
+  ReleaseSectionPages(r.file, r.layout.sections[static_cast<size_t>(r.layout.point_codes)]);
+}
+
 void ShardReader::ReleaseCoarseFieldPages() const {
   const Impl& r = *impl_;
   if (r.layout.coarse_fields < 0) return;

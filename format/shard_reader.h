@@ -123,6 +123,9 @@ class ShardReader {
   // The same for the coarse-fields section, for a caller that keeps its own copy of the fields
   // (the search's cell-major one, query/coarse_bound.h): coarse_field() still works afterwards.
   void ReleaseCoarseFieldPages() const;
+  // The same for a coded shard's point codes, for a caller that has decoded what it needs (the
+  // query's Database, after the open's pass over every view); no-op for a plain shard.
+  void ReleasePointCodePages() const;
 
  private:
   struct Impl;

@@ -322,12 +322,17 @@ class PyDatabase {
     py::array_t<int64_t> offsets(count + 1);
     int64_t* off = offsets.mutable_data();
     off[0] = 0;
-    bool contiguous = true;
-    const PointQ* first = count ? db_->points(static_cast<view_id_t>(start)).data() : nullptr;
+    // A coded database's views are decoded into the copy (not kept by the Database).
+    bool contiguous = !db_->coded();
+    const PointQ* first =
+        count && contiguous ? db_->points(static_cast<view_id_t>(start)).data() : nullptr;
     for (py::ssize_t k = 0; k < count; ++k) {
-      const auto pts = db_->points(static_cast<view_id_t>(start + k));
-      if (pts.data() != first + off[k] && !pts.empty()) contiguous = false;
-      off[k + 1] = off[k] + static_cast<int64_t>(pts.size());
+      const auto v = static_cast<view_id_t>(start + k);
+      if (contiguous) {
+        const auto pts = db_->points(v);
+        if (pts.data() != first + off[k] && !pts.empty()) contiguous = false;
+      }
+      off[k + 1] = off[k] + static_cast<int64_t>(db_->point_count(v));
     }
     py::array points;
     if (contiguous) {
@@ -337,8 +342,9 @@ class PyDatabase {
       auto* dst = reinterpret_cast<PointQ*>(copy.mutable_data());
       {
         py::gil_scoped_release release;
+        std::vector<PointQ> scratch;
         for (py::ssize_t k = 0; k < count; ++k) {
-          const auto pts = db_->points(static_cast<view_id_t>(start + k));
+          const auto pts = db_->ViewPoints(static_cast<view_id_t>(start + k), &scratch);
           std::memcpy(dst + off[k], pts.data(), pts.size_bytes());
         }
       }

@@ -187,7 +187,7 @@ class CoarseFields {
   // Where F_v(cell) is, and how far apart two horizontally adjacent cells of one view are.
   const uint8_t* At(size_t v, int cell) const {
     if (rows_ != nullptr) {
-      return rows_->coarse_field(static_cast<view_id_t>(v)) + static_cast<size_t>(cell);
+      return rows_->SearchCoarseField(static_cast<view_id_t>(v)) + static_cast<size_t>(cell);
     }
     return planes_.data() +
            ((v / kBlock) * CoarseGrid::kCells + static_cast<size_t>(cell)) * kBlock + v % kBlock;

@@ -47,7 +47,13 @@ Database::~Database() {
   for (size_t v = 0; decoded_points_ != nullptr && v < views_.size(); ++v) {
     delete[] decoded_points_[v].load(std::memory_order_relaxed);
     delete[] decoded_fields_[v].load(std::memory_order_relaxed);
+    delete[] search_points_[v].load(std::memory_order_relaxed);
+    delete[] search_fields_[v].load(std::memory_order_relaxed);
   }
+}
+
+Database::SearchPin::SearchPin(const Database& db) {
+  if (db.search_points_ != nullptr) lock_ = std::shared_lock<std::shared_mutex>(*db.search_mutex_);
 }
 Database::Database(Database&&) noexcept = default;
 Database& Database::operator=(Database&&) noexcept = default;
@@ -149,11 +155,21 @@ Result<Database> Database::OpenOnce(const std::filesystem::path& dir, bool verif
     db.decoded_points_ = std::make_unique<std::atomic<PointQ*>[]>(n);
     db.decoded_fields_ = std::make_unique<std::atomic<uint8_t*>[]>(n);
     db.decoded_bytes_ = std::make_unique<std::atomic<uint64_t>>(0);
+    db.search_points_ = std::make_unique<std::atomic<PointQ*>[]>(n);
+    db.search_fields_ = std::make_unique<std::atomic<uint8_t*>[]>(n);
+    db.search_bytes_ = std::make_unique<std::atomic<uint64_t>>(0);
     for (size_t v = 0; v < n; ++v) {
       db.decoded_points_[v].store(nullptr, std::memory_order_relaxed);
       db.decoded_fields_[v].store(nullptr, std::memory_order_relaxed);
+      db.search_points_[v].store(nullptr, std::memory_order_relaxed);
+      db.search_fields_[v].store(nullptr, std::memory_order_relaxed);
     }
     HANDDB_RETURN_IF_ERROR(db.SummariseViews(ResolveNumThreads(-1)));
+    // That pass read every record and every point code: a search reads only its candidates'.
+    for (const auto& shard : db.shards_) {
+      shard->ReleaseViewTablePages();
+      shard->ReleasePointCodePages();
+    }
   }
   return db;
 }
@@ -187,46 +203,86 @@ Status Database::SummariseViews(int num_threads) {
   });
 }
 
+namespace {
+
+// Decodes into a slot once: the first thread to publish wins, the others free theirs. `decode`
+// fills a buffer of `size` elements; `bytes` counts what is kept.
+template <typename T, typename Decode>
+T* DecodeOnce(std::atomic<T*>& slot, size_t size, std::atomic<uint64_t>& bytes, Decode&& decode) {
+  T* p = slot.load(std::memory_order_acquire);
+  if (p != nullptr) return p;
+  auto fresh = std::make_unique<T[]>(size);
+  decode(fresh.get());
+  T* expected = nullptr;
+  if (slot.compare_exchange_strong(expected, fresh.get(), std::memory_order_acq_rel)) {
+    bytes.fetch_add(size * sizeof(T), std::memory_order_relaxed);
+    return fresh.release();
+  }
+  return expected;  // another thread decoded it first
+}
+
+}  // namespace
+
+// Every code decoded at open (SummariseViews), and shards are never rewritten in place: a decode
+// failure here is a broken invariant (THROW_CHECK).
 std::span<const PointQ> Database::DecodedPoints(view_id_t v) const {
   const ViewRef& r = views_[v];
   if (r.num_points == 0) return {};
-  std::atomic<PointQ*>& slot = decoded_points_[v];
-  PointQ* p = slot.load(std::memory_order_acquire);
-  if (p == nullptr) {
+  const ShardReader& shard = *shards_[r.shard];
+  PointQ* p = DecodeOnce(decoded_points_[v], r.num_points, *decoded_bytes_, [&](PointQ* out) {
     std::vector<PointQ> pts;
-    const Status s = shards_[r.shard]->DecodePoints(r.index, &pts);
-    // Every code decoded at open (SummariseViews), and shards are never rewritten in place.
+    const Status s = shard.DecodePoints(r.index, &pts);
     THROW_CHECK_MSG(s.ok(), s.ToString());
-    auto fresh = std::make_unique<PointQ[]>(pts.size());
-    std::copy(pts.begin(), pts.end(), fresh.get());
-    PointQ* expected = nullptr;
-    if (slot.compare_exchange_strong(expected, fresh.get(), std::memory_order_acq_rel)) {
-      p = fresh.release();
-      decoded_bytes_->fetch_add(pts.size() * sizeof(PointQ), std::memory_order_relaxed);
-    } else {
-      p = expected;  // another thread decoded it first
-    }
-  }
+    std::copy(pts.begin(), pts.end(), out);
+  });
   return std::span<const PointQ>(p, r.num_points);
 }
 
 const uint8_t* Database::DecodedField(view_id_t v) const {
   const ViewRef& r = views_[v];
-  std::atomic<uint8_t*>& slot = decoded_fields_[v];
-  uint8_t* f = slot.load(std::memory_order_acquire);
-  if (f == nullptr) {
-    auto fresh = std::make_unique<uint8_t[]>(shard::kCoarseFieldSize);
-    const Status s = shards_[r.shard]->DecodeCoarseField(r.index, fresh.get());
+  const ShardReader& shard = *shards_[r.shard];
+  return DecodeOnce(
+      decoded_fields_[v], shard::kCoarseFieldSize, *decoded_bytes_, [&](uint8_t* out) {
+        const Status s = shard.DecodeCoarseField(r.index, out);
+        THROW_CHECK_MSG(s.ok(), s.ToString());
+      });
+}
+
+std::span<const PointQ> Database::SearchDecodedPoints(view_id_t v) const {
+  const ViewRef& r = views_[v];
+  if (r.num_points == 0) return {};
+  const ShardReader& shard = *shards_[r.shard];
+  PointQ* p = DecodeOnce(search_points_[v], r.num_points, *search_bytes_, [&](PointQ* out) {
+    thread_local std::vector<PointQ> pts;
+    const Status s = shard.DecodePoints(r.index, &pts);
     THROW_CHECK_MSG(s.ok(), s.ToString());
-    uint8_t* expected = nullptr;
-    if (slot.compare_exchange_strong(expected, fresh.get(), std::memory_order_acq_rel)) {
-      f = fresh.release();
-      decoded_bytes_->fetch_add(shard::kCoarseFieldSize, std::memory_order_relaxed);
-    } else {
-      f = expected;
-    }
+    std::copy(pts.begin(), pts.end(), out);
+  });
+  return std::span<const PointQ>(p, r.num_points);
+}
+
+const uint8_t* Database::SearchDecodedField(view_id_t v) const {
+  const ViewRef& r = views_[v];
+  const ShardReader& shard = *shards_[r.shard];
+  return DecodeOnce(search_fields_[v], shard::kCoarseFieldSize, *search_bytes_, [&](uint8_t* out) {
+    const Status s = shard.DecodeCoarseField(r.index, out);
+    THROW_CHECK_MSG(s.ok(), s.ToString());
+  });
+}
+
+void Database::TrimSearchCache() const {
+  if (search_points_ == nullptr ||
+      search_bytes_->load(std::memory_order_relaxed) <= search_budget_) {
+    return;
   }
-  return f;
+  // Only when no search holds a pin: a running one may be reading any slot.
+  std::unique_lock<std::shared_mutex> lock(*search_mutex_, std::try_to_lock);
+  if (!lock.owns_lock()) return;
+  for (size_t v = 0; v < views_.size(); ++v) {
+    delete[] search_points_[v].exchange(nullptr, std::memory_order_relaxed);
+    delete[] search_fields_[v].exchange(nullptr, std::memory_order_relaxed);
+  }
+  search_bytes_->store(0, std::memory_order_relaxed);
 }
 
 std::span<const PointQ> Database::ViewPoints(view_id_t v, std::vector<PointQ>* scratch) const {

@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <memory>
+#include <shared_mutex>
 #include <span>
 #include <string>
 #include <string_view>
@@ -85,10 +86,41 @@ class Database {
     bool sorted_by_y = false;  // points sorted by y
   };
   const std::vector<PointSummary>& point_summaries() const { return summaries_; }
-  // Bytes of decoded points and fields held (0 for a database without coded shards).
+  // Bytes of decoded points and fields held (0 for a database without coded shards): those kept
+  // by points()/coarse_field() plus the searches' cache below.
   uint64_t decoded_bytes() const {
-    return decoded_bytes_ ? decoded_bytes_->load(std::memory_order_relaxed) : 0;
+    return (decoded_bytes_ ? decoded_bytes_->load(std::memory_order_relaxed) : 0) +
+           (search_bytes_ ? search_bytes_->load(std::memory_order_relaxed) : 0);
   }
+
+  // The searches' own cache of decoded views (a coded database's candidates). Search* read it
+  // only while holding a SearchPin; TrimSearchCache() frees it when it holds more than
+  // search_cache_budget() bytes and no search holds a pin (else it waits for a later call), so
+  // a long-running process does not accumulate every view it ever refined (docs/format.md
+  // section 10). Spans from SearchPoints/SearchCoarseField are valid while the pin is held.
+  // For a plain database these are points()/coarse_field() and the pin costs nothing.
+  class SearchPin {
+   public:
+    explicit SearchPin(const Database& db);
+
+   private:
+    std::shared_lock<std::shared_mutex> lock_;
+  };
+  std::span<const PointQ> SearchPoints(view_id_t v) const {
+    THROW_CHECK_LT(v, views_.size());
+    const ViewRef& r = views_[v];
+    if (!r.coded) return std::span<const PointQ>(r.points, r.num_points);
+    return SearchDecodedPoints(v);
+  }
+  const uint8_t* SearchCoarseField(view_id_t v) const {
+    THROW_CHECK_LT(v, views_.size());
+    if (!views_[v].coded) return views_[v].coarse_field;
+    return SearchDecodedField(v);
+  }
+  void TrimSearchCache() const;
+  // Default 64 MiB (about 17,000 views' points and fields: the candidates of ~8 indexed queries).
+  void set_search_cache_budget(uint64_t bytes) { search_budget_ = bytes; }
+  uint64_t search_cache_budget() const { return search_budget_; }
   // True when every view has one (then the search reads them instead of computing them).
   bool has_coarse_fields() const { return !shards_.empty() && shards_without_coarse_fields_ == 0; }
   size_t shards_without_coarse_fields() const { return shards_without_coarse_fields_; }
@@ -119,6 +151,8 @@ class Database {
   };
   std::span<const PointQ> DecodedPoints(view_id_t v) const;
   const uint8_t* DecodedField(view_id_t v) const;
+  std::span<const PointQ> SearchDecodedPoints(view_id_t v) const;
+  const uint8_t* SearchDecodedField(view_id_t v) const;
   Status SummariseViews(int num_threads);
   size_t shards_without_coarse_fields_ = 0;
   std::vector<ViewRef> views_;
@@ -135,6 +169,11 @@ class Database {
   std::unique_ptr<std::atomic<PointQ*>[]> decoded_points_;
   std::unique_ptr<std::atomic<uint8_t*>[]> decoded_fields_;
   std::unique_ptr<std::atomic<uint64_t>> decoded_bytes_;
+  std::unique_ptr<std::atomic<PointQ*>[]> search_points_;
+  std::unique_ptr<std::atomic<uint8_t*>[]> search_fields_;
+  std::unique_ptr<std::atomic<uint64_t>> search_bytes_;
+  std::unique_ptr<std::shared_mutex> search_mutex_ = std::make_unique<std::shared_mutex>();
+  uint64_t search_budget_ = uint64_t{64} << 20;
   std::vector<PointSummary> summaries_;
   // FromMemory storage.
   std::vector<ViewLabel> memory_labels_;

@@ -278,7 +278,7 @@ class QueryContext {
     if (cache.size() < kBucketCacheSize) cache.emplace_back();
     std::rotate(cache.begin(), cache.end() - 1, cache.end());
     cache.front().first = v;
-    cache.front().second.Build(db_.points(v));
+    cache.front().second.Build(db_.SearchPoints(v));
     return cache.front().second;
   }
 
@@ -295,7 +295,7 @@ class QueryContext {
     if (cache.size() < kBucketCacheSize) cache.emplace_back();
     std::rotate(cache.begin(), cache.end() - 1, cache.end());  // the oldest entry, reused
     cache.front().first = v;
-    cache.front().second.Build(db_.points(v));
+    cache.front().second.Build(db_.SearchPoints(v));
     return cache.front().second;
   }
 
@@ -346,7 +346,7 @@ class QueryContext {
       }
     }
     if (cache.size() == kTreeCacheSize) cache.pop_back();
-    cache.emplace(cache.begin(), v, std::make_unique<KdTree>(db_.points(v), options_.kdtree));
+    cache.emplace(cache.begin(), v, std::make_unique<KdTree>(db_.SearchPoints(v), options_.kdtree));
     num_view_trees_.fetch_add(1, std::memory_order_relaxed);
     return *cache.front().second;
   }
@@ -355,7 +355,7 @@ class QueryContext {
   // bound_b_px <= B (0 if unknown): A goes first, abandoned as soon as bound_b + a lower bound of
   // A exceeds the threshold, then B, abandoned once A + partial B does.
   bool Score(view_id_t v, size_t s, double threshold, double bound_b_px, int worker, Scored* out) {
-    const std::span<const PointQ> view = db_.points(v);
+    const std::span<const PointQ> view = db_.SearchPoints(v);
     const std::span<const PointQ> q = rolled_[s];
     const double nv = static_cast<double>(view.size());
     const double nq = static_cast<double>(q.size());
@@ -403,7 +403,7 @@ class QueryContext {
   // abandoned gets the same sum as the kd-tree path, bit for bit: the nearest squared distances are
   // exact integers either way, and they are summed in the query's order.
   bool ScanA(view_id_t v, size_t s, double limit, int worker, double* sum_out) {
-    const std::span<const PointQ> view = db_.points(v);
+    const std::span<const PointQ> view = db_.SearchPoints(v);
     const std::span<const PointQ> q = rolled_[s];
     std::vector<int32_t>& d2 = scan_d2_[worker];
     d2.resize(q.size());
@@ -1186,7 +1186,7 @@ class QueryRun {
       const double threshold = top_.threshold();
       if (la == kNoBound || TotalPx(e) > threshold) continue;
       const auto v = static_cast<view_id_t>(PairOf(e) % num_views_);
-      const std::span<const PointQ> pts = db_.points(v);
+      const std::span<const PointQ> pts = db_.SearchPoints(v);
       const double n = static_cast<double>(pts.size());
       const double limit = Limit(threshold, BoundPx(la), n) + m.gap_px * n;
       const bool fast = grid.Covers(max_abs_[v]);
@@ -1385,6 +1385,13 @@ Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
     }
   }
 
+  // A coded database's views decoded for this search stay valid until it returns (the pin);
+  // then the searches' cache is trimmed if it outgrew its budget (query/database.h).
+  struct TrimAfter {
+    const Database& db;
+    ~TrimAfter() { db.TrimSearchCache(); }
+  } trim_after{*db_};
+  const Database::SearchPin pin(*db_);
   const int threads = ResolveNumThreads(options.num_threads);
   // One pool for the query's parallel loops; the calling thread is worker 0.
   std::optional<ThreadPool> pool_storage;

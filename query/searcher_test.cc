@@ -4,9 +4,14 @@
 
 #include <chrono>
 #include <cmath>
+#include <fstream>
 #include <random>
 #include <vector>
 
+#include "base/testing.h"
+#include "format/manifest.h"
+#include "format/shard_layout.h"
+#include "format/shard_writer.h"
 #include "query/search_testing.h"
 
 namespace handdb {
@@ -452,6 +457,101 @@ TEST(Searcher, MissingDatabaseDirectory) {
   const auto res = Searcher::Open("/nonexistent/handdb-db");
   ASSERT_FALSE(res.ok());
   EXPECT_EQ(res.status().code(), StatusCode::kNotFound);
+}
+
+// A database directory of the sorted test views in two shards, plain (v1.1) or coded (v1.2).
+std::filesystem::path WriteTestDatabase(const std::string& name, bool coded) {
+  const std::filesystem::path dir = ::handdb::testing::TempDir(name);
+  const Database& src = *SortedTestDatabase();
+  Manifest m;
+  m.tool_version = "test";
+  m.rolls = kRolls;
+  for (int shard = 0; shard < 2; ++shard) {
+    ShardWriterOptions options;
+    options.coded = coded;
+    ShardWriter writer;
+    const auto path = dir / ("shard-0000" + std::to_string(shard) + ".hdb");
+    THROW_CHECK(writer.Open(path, options).ok());
+    for (view_id_t v = shard * kViews / 2; v < (shard + 1) * kViews / 2; ++v) {
+      THROW_CHECK(writer.AddView(src.label(v), src.points(v)).ok());
+    }
+    auto summary = writer.Finish();
+    THROW_CHECK(summary.ok());
+    m.AddShard(*summary);
+  }
+  THROW_CHECK(WriteManifest(dir, m).ok());
+  return dir;
+}
+
+TEST(Searcher, CodedShardsSearchExactlyLikePlainOnes) {
+  auto plain = Database::Open(WriteTestDatabase("coded_search_plain", false));
+  auto coded = Database::Open(WriteTestDatabase("coded_search_coded", true));
+  ASSERT_TRUE(plain.ok()) << plain.status().ToString();
+  ASSERT_TRUE(coded.ok()) << coded.status().ToString();
+  EXPECT_FALSE(plain->coded());
+  EXPECT_TRUE(coded->coded());
+  EXPECT_LT(coded->size_bytes(), plain->size_bytes());
+  EXPECT_EQ(coded->num_points(), plain->num_points());
+  EXPECT_TRUE(coded->has_coarse_fields());
+  EXPECT_EQ(coded->decoded_bytes(), 0u);
+  std::vector<PointQ> scratch;
+  for (view_id_t v = 0; v < kViews; ++v) {
+    const auto a = plain->points(v);
+    const auto b = coded->ViewPoints(v, &scratch);
+    ASSERT_EQ(a.size(), b.size());
+    EXPECT_TRUE(std::equal(a.begin(), a.end(), b.begin(), [](PointQ x, PointQ y) {
+      return x.x == y.x && x.y == y.y;
+    }));
+    EXPECT_EQ(coded->point_count(v), a.size());
+  }
+  EXPECT_EQ(coded->decoded_bytes(), 0u);  // ViewPoints keeps nothing
+  auto plain_db = std::make_shared<const Database>(std::move(plain).value());
+  auto coded_db = std::make_shared<const Database>(std::move(coded).value());
+  Searcher ps(plain_db);
+  Searcher cs(coded_db);
+  cs.SetExactFieldKind(FieldKind::kBox);  // reads the decoded fields
+  ps.SetExactFieldKind(FieldKind::kBox);
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<uint32_t> view(0, kViews - 1);
+  std::uniform_int_distribution<uint32_t> roll(0, kRolls - 1);
+  for (int i = 0; i < 12; ++i) {
+    const auto q =
+        Transform(RolledView(*plain_db, view(rng), roll(rng)), 0.1f, 1.0f, -1.0f, 0.8, i);
+    SearchOptions o = Options(5, 1 + i % 2);
+    o.hand = i % 3 == 0 ? Hand::kEither : Hand::kRight;
+    o.brute_force = i % 4 == 1;
+    auto a = ps.Search(q, o);
+    auto b = cs.Search(q, o);
+    ASSERT_TRUE(a.ok() && b.ok());
+    ExpectSameResults(*a, *b);
+  }
+  EXPECT_GT(coded_db->decoded_bytes(), 0u);
+  EXPECT_EQ(plain_db->decoded_bytes(), 0u);
+}
+
+TEST(Database, ACodedViewThatDoesNotDecodeIsAnErrorOfOpen) {
+  const std::filesystem::path dir = WriteTestDatabase("coded_bad", true);
+  const std::filesystem::path shard = dir / "shard-00001.hdb";
+  std::vector<uint8_t> bytes = ::handdb::testing::ReadBytes(shard);
+  // The first view's point code begins the point_codes section: make its mode byte unknown.
+  const shard::RawHeader h = shard::ParseHeader(bytes);
+  for (uint32_t i = 0; i < h.section_count; ++i) {
+    const shard::RawSection sec =
+        shard::ParseSection(bytes.data() + h.section_table_offset + i * h.section_entry_size);
+    if (sec.type == shard::kSectionPointCodes) bytes[sec.offset] = 0x7f;
+  }
+  ASSERT_TRUE(shard::RewriteChecksums(bytes));
+  {
+    std::ofstream out(shard, std::ios::binary | std::ios::trunc);
+    out.write(reinterpret_cast<const char*>(bytes.data()),
+              static_cast<std::streamsize>(bytes.size()));
+  }
+  auto db = Database::Open(dir);
+  ASSERT_FALSE(db.ok());
+  EXPECT_NE(db.status().message().find("shard-00001.hdb: offset"), std::string::npos)
+      << db.status().ToString();
+  EXPECT_NE(db.status().message().find("view 0: point code"), std::string::npos)
+      << db.status().ToString();
 }
 
 }  // namespace
