@@ -1,9 +1,11 @@
 // write_test_database DIR [--shapes N] [--directions N] [--rolls R] [--shards N] [--points N]
+//                     [--coded 1]
 //
 // A small database without Blender for the install and Python tests (issue 13): hand-like
 // synthetic views (query/search_testing.h: a palm outline and five fingers per shape, foreshortened
 // and turned per direction), self-consistent labels, shape names in the manifest, split over
-// --shards shards. Deterministic: the same arguments give byte-identical files.
+// --shards shards (coded shards, format v1.2, with --coded 1). Deterministic: the same arguments
+// give byte-identical files.
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -20,7 +22,7 @@ namespace fs = std::filesystem;
 int Usage() {
   std::fprintf(stderr,
                "usage: write_test_database DIR [--shapes N] [--directions N] [--rolls R] "
-               "[--shards N] [--points N]\n");
+               "[--shards N] [--points N] [--coded 1]\n");
   return 2;
 }
 
@@ -31,6 +33,7 @@ int main(int argc, char** argv) {
   if (argc < 2) return Usage();
   const fs::path dir = argv[1];
   uint32_t shapes = 4, directions = 12, rolls = 12, shards = 2, points = 300;
+  ShardWriterOptions options;
   for (int i = 2; i + 1 < argc; i += 2) {
     const std::string flag = argv[i];
     const auto value = static_cast<uint32_t>(std::strtoul(argv[i + 1], nullptr, 10));
@@ -45,6 +48,8 @@ int main(int argc, char** argv) {
       shards = value;
     } else if (flag == "--points") {
       points = value;
+    } else if (flag == "--coded") {
+      options.coded = true;
     } else {
       return Usage();
     }
@@ -71,7 +76,7 @@ int main(int argc, char** argv) {
     char file[32];
     std::snprintf(file, sizeof(file), "shard-%05u.hdb", unit);
     ShardWriter writer;
-    Status st = writer.Open(dir / file, ShardWriterOptions{});
+    Status st = writer.Open(dir / file, options);
     for (uint32_t v = first; st.ok() && v < std::min(num_views, first + per_shard); ++v) {
       st = writer.AddView(
           testing::SyntheticViewLabel(v, directions),

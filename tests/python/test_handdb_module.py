@@ -8,6 +8,7 @@ import multiprocessing
 import os
 import pydoc
 import shutil
+import subprocess
 
 import numpy as np
 import pytest
@@ -289,3 +290,23 @@ def test_photo_search_equals_query_json(handdb, db, db_dir, flags, options):
     assert (len(edges), edges.kind, edges.hand_pixels) == (
         cli["query"]["edge_points"], "photo", cli["query"]["hand_pixels"])
     assert edges.centre_px == tuple(cli["query"]["centre_px"]) and edges.scale == cli["query"]["scale"]
+
+
+def test_coded_database_reads_and_searches_like_the_plain_one(handdb, db, tmp_path, view_image):
+    """The same views written as coded shards (format v1.2): the columns, the views' points and
+    the search results are the plain database's."""
+    from handdb_testing import WRITER
+
+    coded_dir = tmp_path / "coded"
+    subprocess.run([WRITER, str(coded_dir), "--coded", "1"], check=True, capture_output=True)
+    coded = handdb.Database(str(coded_dir))
+    assert len(coded) == len(db) and coded.num_points == db.num_points
+    a, b = db.read(), coded.read()
+    assert np.array_equal(a["point_offsets"], b["point_offsets"])
+    assert np.array_equal(a["points"], b["points"])
+    for i in [0, len(db) // 2, len(db) - 1]:
+        assert np.array_equal(db[i].points, coded[i].points)
+    for hand in ["either", "right"]:
+        want = db.search(view_image, top_k=10, threads=2, hand=hand)
+        got = coded.search(view_image, top_k=10, threads=2, hand=hand)
+        assert [m.to_dict() for m in got] == [m.to_dict() for m in want]
