@@ -430,13 +430,18 @@ def main():
             "`bench/point_codec_bench` on the paper database (index built): each view's points chain-coded "
             "on the render's pixel lattice (format/point_codec.h) and its coarse field predictively coded "
             "(format/field_codec.h), both checked lossless against the shards, decode time per view on one "
-            "thread, and the bytes per canonical and per virtual view they would give (docs/format.md "
-            "section 10; the shard format does not carry them yet).")
+            "thread, and the bytes per canonical and per virtual view they give (docs/format.md "
+            "section 10; coded shards carry them since session 18, `handdb generate --coded`).")
     for size in ("10m", "50m"):
         if results["steps"].get(f"index_bench_synth_{size}") is not None:
             section(f"Indexed search at {size[:-1]}M virtual views (synthetic)", f"index_bench_synth_{size}",
                     f"`bench/synth_db` near-copies of a real database's views, {size[:-1]}M virtual views, "
                     "indexed and measured like the paper database (`HANDDB_BENCH_SCALE=1`).")
+    if results["steps"].get("index_bench_synth_10m_coded") is not None:
+        section("Indexed search at 10M virtual views, coded shards (synthetic)", "index_bench_synth_10m_coded",
+                "`bench/synth_db --coded`: the 10M synthetic database with coded shards (format v1.2, "
+                "docs/format.md section 10), its points snapped to the render lattice; indexed and measured "
+                "like the plain one.")
     if results["steps"].get("plot_scaling") is not None:
         md += ["![median latency against the number of virtual views](images/latency_vs_size.png)", ""]
     notes = read(os.path.join(out, "notes.md"))

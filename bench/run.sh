@@ -30,7 +30,8 @@
 #   scale     (HANDDB_BENCH_SCALE=1) issue 12's scaling runs: bench/synth_db makes 10M and 50M
 #             virtual views from pca-large (or the paper database when pca-large is not built),
 #             handdb index, index_bench on each (fewer queries at 50M: exact search takes
-#             seconds there), and bench/plot_scaling.py draws latency against size
+#             seconds there), the 10M one again with coded shards (synth_db --coded, format
+#             v1.2), and bench/plot_scaling.py draws latency against size
 #   report    bench/report.py -> bench/results.json, docs/results.md
 # Databases and test sets are kept in $HANDDB_BENCH_DIR (default /tmp/handdb-bench) and reused by
 # a rerun (generate and testset resume); the benchmarks themselves always run again.
@@ -190,6 +191,16 @@ if want scale; then
     run index_bench_synth_${size}m "$build/bench/index_bench" --db "$db" --threads "$jobs" \
       "${sets[@]}" "${queries[@]}" --candidates 500,1000 --cache "$db/exact-cache.txt"
   done
+  # The same 10M database coded (format v1.2, docs/format.md section 10): bytes per virtual view,
+  # indexed latency, recall and peak memory of the coded shards.
+  db="$work/db-synth-10m-coded"
+  if [ ! -f "$db/manifest.json" ]; then
+    run synth_10m_coded "$build/bench/synth_db" --from "$src" --out "$db" \
+      --views $(((10000000 + rolls - 1) / rolls)) --threads "$jobs" --coded
+    run index_synth_10m_coded "$handdb" index "$db" -j "$jobs" -q
+  fi
+  run index_bench_synth_10m_coded "$build/bench/index_bench" --db "$db" --threads "$jobs" \
+    "${sets[@]}" --set-queries 20 --perturbed 10 --candidates 1000 --cache "$db/exact-cache.txt"
   mkdir -p docs/images
   inputs=("$out/index_bench_paper.txt")
   for size in 10 50; do inputs+=("$out/index_bench_synth_${size}m.txt"); done
