@@ -27,6 +27,7 @@
 
 #include "base/progress.h"
 #include "base/thread_pool.h"
+#include "edges/normalise.h"
 #include "format/manifest.h"
 #include "format/shard_reader.h"
 #include "format/shard_writer.h"
@@ -111,28 +112,30 @@ std::vector<PointQ> Warp(std::span<const PointQ> src, uint32_t seed, uint64_t vi
   return out;
 }
 
-// The points of the render pixels `pts` fall in, normalised with the label's float scale and
-// centre as the point code's decoder does (format/point_codec.cc), unique, sorted by (y, x).
+// The points of the render pixels `pts` fall in, normalised as the converter does
+// (edges/normalise.h: unique, sorted by (y, x)) with the label's float scale and centre, which
+// is what the point code's decoder uses (format/point_codec.cc); points beyond the shard's
+// range are dropped.
 std::vector<PointQ> SnapToLattice(const std::vector<PointQ>& pts, const ViewLabel& label) {
-  const double s = static_cast<double>(label.scale) * kPointScale;
-  const double cx = label.source_centre_px[0], cy = label.source_centre_px[1];
-  std::vector<PointQ> out;
-  out.reserve(pts.size());
+  Normalisation norm;
+  norm.scale = label.scale;
+  norm.centre_x = label.source_centre_px[0];
+  norm.centre_y = label.source_centre_px[1];
+  const double s = norm.scale * kPointScale;
+  std::vector<EdgePixel> pixels;
+  pixels.reserve(pts.size());
   for (const PointQ& p : pts) {
-    const double col = std::nearbyint(p.x / s + cx - 0.5);
-    const double row = std::nearbyint(p.y / s + cy - 0.5);
-    const double x = std::nearbyint((col + 0.5 - cx) * s);
-    const double y = std::nearbyint((row + 0.5 - cy) * s);
-    if (std::fabs(x) > 6144 || std::fabs(y) > 6144) continue;
-    out.push_back({static_cast<int16_t>(x), static_cast<int16_t>(y)});
+    const double col = std::nearbyint(p.x / s + norm.centre_x - 0.5);
+    const double row = std::nearbyint(p.y / s + norm.centre_y - 0.5);
+    // 8 px of margin: whatever rounds back inside the range is kept, nothing overflows int16.
+    if (std::fabs((col + 0.5 - norm.centre_x) * s) > 6144 + 8 * s ||
+        std::fabs((row + 0.5 - norm.centre_y) * s) > 6144 + 8 * s) {
+      continue;
+    }
+    pixels.push_back({static_cast<int32_t>(col), static_cast<int32_t>(row)});
   }
-  std::sort(out.begin(), out.end(), [](const PointQ& a, const PointQ& b) {
-    return a.y != b.y ? a.y < b.y : a.x < b.x;
-  });
-  out.erase(std::unique(out.begin(),
-                        out.end(),
-                        [](const PointQ& a, const PointQ& b) { return a.x == b.x && a.y == b.y; }),
-            out.end());
+  std::vector<PointQ> out = NormalisePixels(pixels, norm);
+  std::erase_if(out, [](const PointQ& p) { return std::abs(p.x) > 6144 || std::abs(p.y) > 6144; });
   return out;
 }
 

@@ -672,6 +672,18 @@ void CheckHeaderCounts(LayoutScan& c) {
   }
 }
 
+// View i's reserved flags (record at file offset `at`) are zero.
+void CheckViewFlags(LayoutScan& c, uint64_t i, uint64_t at) {
+  const uint32_t flags = Load<uint32_t>(c.b + at + kViewOffFlags);
+  if (flags != 0 && c.know_minor) {
+    c.problems->Add("reserved",
+                    StatusCode::kNonZeroReserved,
+                    at + kViewOffFlags,
+                    "view " + std::to_string(i) + ": reserved flags are " + HexPrefixed(flags) +
+                        ", expected 0");
+  }
+}
+
 // Every view's point range, before anyone takes a span of it: inside the points section, in
 // order, covering it exactly. Sets layout->views_ok (unless stopped early).
 void CheckViewRanges(LayoutScan& c) {
@@ -683,14 +695,7 @@ void CheckViewRanges(LayoutScan& c) {
   for (uint64_t i = 0; i < vs.count; ++i) {
     const uint64_t at = vs.offset + i * vs.element_size;
     const uint8_t* rec = c.b + at;
-    const uint32_t flags = Load<uint32_t>(rec + kViewOffFlags);
-    if (flags != 0 && c.know_minor) {
-      c.problems->Add("reserved",
-                      StatusCode::kNonZeroReserved,
-                      at + kViewOffFlags,
-                      "view " + std::to_string(i) + ": reserved flags are " + HexPrefixed(flags) +
-                          ", expected 0");
-    }
+    CheckViewFlags(c, i, at);
     const uint64_t off = Load<uint64_t>(rec + kViewOffPointOffset);
     const uint32_t cnt = Load<uint32_t>(rec + kViewOffPointCount);
     if (off > ps.count || cnt > ps.count - off) {
@@ -739,14 +744,7 @@ void CheckCodeRanges(LayoutScan& c) {
   for (uint64_t i = 0; i < vs.count; ++i) {
     const uint64_t at = vs.offset + i * vs.element_size;
     const uint8_t* rec = c.b + at;
-    const uint32_t flags = Load<uint32_t>(rec + kViewOffFlags);
-    if (flags != 0 && c.know_minor) {
-      c.problems->Add("reserved",
-                      StatusCode::kNonZeroReserved,
-                      at + kViewOffFlags,
-                      "view " + std::to_string(i) + ": reserved flags are " + HexPrefixed(flags) +
-                          ", expected 0");
-    }
+    CheckViewFlags(c, i, at);
     const uint64_t off = Load<uint64_t>(rec + kViewOffPointOffset);
     points += Load<uint32_t>(rec + kViewOffPointCount);
     const bool first = i == 0;
