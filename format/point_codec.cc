@@ -5,6 +5,7 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <limits>
 
@@ -314,6 +315,8 @@ struct Lattice {
 };
 
 constexpr uint8_t kModeLattice = 0;
+// Largest |dx|, |dy| of a mode-0 correction (PointQ units).
+constexpr int64_t kMaxCorrection = 1;
 // The zigzag code of the largest step between two int16 values (65535): larger ones are damage.
 constexpr uint64_t kMaxZigZagStep = 2 * 65535;
 constexpr uint8_t kModeRaw = 1;
@@ -424,8 +427,17 @@ Status DecodeLatticeMode(std::span<const uint8_t> code,
       return OutOfRange("correction " + std::to_string(c) + " names point " +
                         std::to_string(index) + " of " + std::to_string(pixels.size()));
     }
-    const int64_t x = (*out)[index].x + bits::UnZigZag(zx);
-    const int64_t y = (*out)[index].y + bits::UnZigZag(zy);
+    // A correction is the 1/16 px by which float and double normalisation round apart; anything
+    // larger is damage (and would break the box bound PeekViewPoints gives).
+    const int64_t dx = bits::UnZigZag(zx), dy = bits::UnZigZag(zy);
+    if (dx < -kMaxCorrection || dx > kMaxCorrection || dy < -kMaxCorrection ||
+        dy > kMaxCorrection) {
+      return OutOfRange("correction " + std::to_string(c) + " moves point " +
+                        std::to_string(index) + " by (" + std::to_string(dx) + ", " +
+                        std::to_string(dy) + "), more than 1/16 px");
+    }
+    const int64_t x = (*out)[index].x + dx;
+    const int64_t y = (*out)[index].y + dy;
     if (x < INT16_MIN || x > INT16_MAX || y < INT16_MIN || y > INT16_MAX) {
       return OutOfRange("correction " + std::to_string(c) + " moves point " +
                         std::to_string(index) + " outside int16");
@@ -510,6 +522,51 @@ Status EncodeViewPoints(std::span<const PointQ> points,
   const bool use_lattice = lattice_ok && lattice_code.size() <= raw.size();
   *out += use_lattice ? lattice_code : raw;
   if (mode) *mode = use_lattice ? kModeLattice : kModeRaw;
+  return Status::Ok();
+}
+
+Status PeekViewPoints(std::span<const uint8_t> code,
+                      float scale,
+                      std::array<float, 2> centre,
+                      ViewPointsExtent* out) {
+  *out = ViewPointsExtent{};
+  if (code.empty()) return Status(StatusCode::kTruncated, "point code: empty");
+  if (code[0] == kModeRaw) return Status::Ok();  // known only by decoding
+  if (code[0] != kModeLattice) return OutOfRange("unknown mode " + std::to_string(code[0]));
+  const Lattice lattice(scale, centre);
+  if (!lattice.usable) return OutOfRange("lattice code with an unusable scale or centre");
+  size_t pos = 1;
+  uint64_t lattice_bytes = 0, n = 0, zc = 0, zr = 0, w1 = 0, h1 = 0;
+  if (!bits::GetVarint(code, &pos, &lattice_bytes) || !bits::GetVarint(code, &pos, &n) ||
+      (n > 0 && (!bits::GetVarint(code, &pos, &zc) || !bits::GetVarint(code, &pos, &zr) ||
+                 !bits::GetVarint(code, &pos, &w1) || !bits::GetVarint(code, &pos, &h1)))) {
+    return Status(StatusCode::kTruncated, "point code: lattice header cut off");
+  }
+  out->peeked = true;
+  out->count = n;
+  out->sorted = true;  // a mode-0 decode is sorted by (y, x), or an error
+  if (n == 0) return Status::Ok();
+  if (w1 >= static_cast<uint64_t>(kMaxLatticeSide) ||
+      h1 >= static_cast<uint64_t>(kMaxLatticeSide)) {
+    return OutOfRange("bounding box out of range");
+  }
+  const int64_t min_col = bits::UnZigZag(zc), min_row = bits::UnZigZag(zr);
+  if (min_col < std::numeric_limits<int32_t>::min() ||
+      min_row < std::numeric_limits<int32_t>::min() ||
+      min_col + static_cast<int64_t>(w1) > std::numeric_limits<int32_t>::max() ||
+      min_row + static_cast<int64_t>(h1) > std::numeric_limits<int32_t>::max()) {
+    return OutOfRange("bounding box out of range");
+  }
+  // PointOf is monotonic in the column and the row: the box's corners bound every pixel's point.
+  int64_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+  lattice.PointOf({static_cast<int32_t>(min_col), static_cast<int32_t>(min_row)}, &x0, &y0);
+  lattice.PointOf({static_cast<int32_t>(min_col + static_cast<int64_t>(w1)),
+                   static_cast<int32_t>(min_row + static_cast<int64_t>(h1))},
+                  &x1,
+                  &y1);
+  const int64_t bound =
+      std::max({std::abs(x0), std::abs(x1), std::abs(y0), std::abs(y1)}) + kMaxCorrection;
+  out->max_abs_bound = static_cast<int32_t>(std::min<int64_t>(bound, INT32_MAX));
   return Status::Ok();
 }
 

@@ -86,10 +86,28 @@ Status EncodeViewPoints(std::span<const PointQ> points,
                         int* mode = nullptr);
 
 // The inverse (the same scale and centre). Errors name what is wrong; a mode-0 result is checked
-// to be sorted by (y, x) and unique.
+// to be sorted by (y, x) and unique, and its corrections to move a point by at most 1/16 px in
+// x and y.
 Status DecodeViewPoints(std::span<const uint8_t> code,
                         float scale,
                         std::array<float, 2> centre,
                         std::vector<PointQ>* out);
+
+// What a view's code says about its points without decoding them (a few bytes of its header):
+// for a lattice-mode code (mode 0) peeked is true, count is the number of points, sorted is true
+// (a mode-0 decode is sorted by (y, x) or an error) and max_abs_bound bounds every decoded
+// point's |x| and |y| (the decoder keeps every pixel inside the code's bounding box and every
+// correction within 1/16 px). For a mode-1 code peeked is false: only decoding tells. A header
+// that cannot be read is an error; the rest of the code is not checked (DecodeViewPoints does).
+struct ViewPointsExtent {
+  bool peeked = false;
+  uint64_t count = 0;
+  int32_t max_abs_bound = 0;
+  bool sorted = false;
+};
+Status PeekViewPoints(std::span<const uint8_t> code,
+                      float scale,
+                      std::array<float, 2> centre,
+                      ViewPointsExtent* out);
 
 }  // namespace handdb

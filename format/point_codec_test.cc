@@ -229,6 +229,52 @@ TEST(PointCodec, ViewPointsComeBackExactly) {
   ExpectViewRoundTrip(unsorted, 1.0f, {128.0f, 128.0f}, 1);
 }
 
+TEST(PointCodec, PeekGivesTheCountAndABoundWithoutDecoding) {
+  const std::vector<LatticePixel> pixels = Curves(20, 30);
+  for (const double scale : {0.7312345678, 1.2345678901}) {
+    const float fs = static_cast<float>(scale);
+    const std::array<float, 2> centre = {127.123456789f, 131.987654321f};
+    const std::vector<PointQ> points = Normalised(pixels, scale, centre[0], centre[1]);
+    std::string code;
+    int mode = -1;
+    ASSERT_TRUE(EncodeViewPoints(points, fs, centre, &code, &mode).ok());
+    ASSERT_EQ(mode, 0);
+    ViewPointsExtent e;
+    ASSERT_TRUE(PeekViewPoints(Bytes(code), fs, centre, &e).ok());
+    EXPECT_TRUE(e.peeked && e.sorted);
+    EXPECT_EQ(e.count, points.size());
+    int32_t max_abs = 0;
+    for (const PointQ& p : points) {
+      max_abs = std::max(
+          {max_abs, std::abs(static_cast<int32_t>(p.x)), std::abs(static_cast<int32_t>(p.y))});
+    }
+    EXPECT_GE(e.max_abs_bound, max_abs);
+    EXPECT_LE(e.max_abs_bound, max_abs + 2 * static_cast<int32_t>(scale * 16) + 2);
+    // Every truncation of the header is an error; past it, the peek does not look.
+    for (size_t len = 0; len < 4; ++len) {
+      EXPECT_FALSE(PeekViewPoints(Bytes(code).first(len), fs, centre, &e).ok()) << len;
+    }
+  }
+  // A raw-mode code: only decoding tells.
+  std::string raw;
+  ASSERT_TRUE(EncodeViewPoints(std::vector<PointQ>{{5, 1}, {-3, 0}}, 1.0f, {0, 0}, &raw).ok());
+  ViewPointsExtent e;
+  ASSERT_TRUE(PeekViewPoints(Bytes(raw), 1.0f, {0, 0}, &e).ok());
+  EXPECT_FALSE(e.peeked);
+}
+
+TEST(PointCodec, CorrectionsOfMoreThanASixteenthArePlainCode) {
+  // A point 2/16 px off its pixel's point: the lattice code would need a correction of 2, which
+  // the decoder refuses (it would break PeekViewPoints' bound), so the view takes mode 1.
+  std::vector<PointQ> points = Normalised(Curves(0, 0), 1.1, 120.3, 119.7);
+  ExpectViewRoundTrip(points, 1.1f, {120.3f, 119.7f}, 0);
+  points[points.size() / 2].x = static_cast<int16_t>(points[points.size() / 2].x + 2);
+  std::sort(points.begin(), points.end(), [](const PointQ& a, const PointQ& b) {
+    return a.y != b.y ? a.y < b.y : a.x < b.x;
+  });
+  ExpectViewRoundTrip(points, 1.1f, {120.3f, 119.7f}, 1);
+}
+
 TEST(PointCodec, DamagedViewCodesAreErrorsNeverCrashes) {
   const std::vector<PointQ> points = Normalised(Curves(0, 0), 1.1, 120.3, 119.7);
   for (const float scale : {1.1f, 0.0f}) {  // mode 0, mode 1

@@ -246,6 +246,30 @@ Status ShardReader::DecodePoints(size_t i, std::vector<PointQ>* out) const {
   return Status::Ok();
 }
 
+Status ShardReader::PeekPoints(size_t i, ViewPointsExtent* extent) const {
+  THROW_CHECK_LT(i, impl_->num_views);
+  const Impl& r = *impl_;
+  *extent = ViewPointsExtent{};
+  if (!r.coded) return Status::Ok();
+  const uint8_t* rec = r.record(i);
+  const std::span<const uint8_t> code = r.point_code(i);
+  const Status s = PeekViewPoints(
+      code,
+      Load<float>(rec + kViewOffScale),
+      {Load<float>(rec + kViewOffSourceCentre), Load<float>(rec + kViewOffSourceCentre + 4)},
+      extent);
+  const std::string where = r.name + ": offset " + std::to_string(code.data() - r.bytes.data()) +
+                            ": view " + std::to_string(i) + ": ";
+  if (!s.ok()) return Status(s.code(), where + "point code: " + s.message());
+  const uint32_t want = Load<uint32_t>(rec + kViewOffPointCount);
+  if (extent->peeked && extent->count != want) {
+    return Status(StatusCode::kSizeMismatch,
+                  where + "point code holds " + std::to_string(extent->count) +
+                      " points, its record says " + std::to_string(want));
+  }
+  return Status::Ok();
+}
+
 Status ShardReader::DecodeCoarseField(size_t i, uint8_t* out) const {
   THROW_CHECK_LT(i, impl_->num_views);
   const Impl& r = *impl_;

@@ -18,6 +18,8 @@
 
 namespace handdb {
 
+struct ViewPointsExtent;  // format/point_codec.h (internal to the format library)
+
 struct SectionInfo {
   uint32_t type = 0;
   uint32_t flags = 0;
@@ -87,6 +89,10 @@ class ShardReader {
   // A code that does not decode, or decodes to another count than its record's, is kBadLayout /
   // kTruncated / kSizeMismatch naming the file, the view and the byte offset.
   Status DecodePoints(size_t i, std::vector<PointQ>* out) const;
+  // For a coded shard, what view i's point code's header says (format/point_codec.h,
+  // PeekViewPoints: count, sortedness and a bound on |x|, |y| for a lattice-mode code), with
+  // errors named like DecodePoints'; for a plain shard extent->peeked is false.
+  Status PeekPoints(size_t i, ViewPointsExtent* extent) const;
   // View i's coarse field (shard::kCoarseFieldSize bytes) into `out`: copied from the v1.1
   // section or decoded from field_codes; kNotFound for a plain shard without coarse fields.
   Status DecodeCoarseField(size_t i, uint8_t* out) const;

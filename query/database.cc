@@ -6,6 +6,7 @@
 
 #include "base/thread_pool.h"
 #include "format/manifest.h"
+#include "format/point_codec.h"
 #include "format/shard_layout.h"
 #include "format/shard_reader.h"
 
@@ -174,9 +175,12 @@ Result<Database> Database::OpenOnce(const std::filesystem::path& dir, bool verif
   return db;
 }
 
-// Decodes every view once (a chunk of views per task, one scratch buffer each): a code that does
-// not decode is reported here, by Open, naming the shard, the view and the byte offset; the
-// searcher reads the summaries instead of every view's points.
+// Every view's extent and order for the searcher, without decoding a lattice-mode code: its
+// header gives its count, a bound on |x|, |y| (its bounding box) and that it is sorted
+// (format/point_codec.h, PeekViewPoints); other codes are decoded (a chunk of views per task,
+// one scratch buffer each). A header that cannot be read, or a count that disagrees with the
+// record, is an error of Open naming the shard, the view and the byte offset; a code damaged
+// past its header is found by the search that decodes it (CodedViewError) or by validate.
 Status Database::SummariseViews(int num_threads) {
   constexpr size_t kChunk = 1024;
   const size_t n = views_.size();
@@ -188,6 +192,13 @@ Status Database::SummariseViews(int num_threads) {
       const ViewRef& r = views_[v];
       std::span<const PointQ> pts(r.points, r.num_points);
       if (r.coded) {
+        ViewPointsExtent extent;
+        HANDDB_RETURN_IF_ERROR(shards_[r.shard]->PeekPoints(r.index, &extent));
+        if (extent.peeked) {
+          summaries_[v].max_abs = extent.max_abs_bound;
+          summaries_[v].sorted_by_y = extent.sorted;
+          continue;
+        }
         HANDDB_RETURN_IF_ERROR(shards_[r.shard]->DecodePoints(r.index, &scratch));
         pts = scratch;
       }
@@ -223,8 +234,7 @@ T* DecodeOnce(std::atomic<T*>& slot, size_t size, std::atomic<uint64_t>& bytes, 
 
 }  // namespace
 
-// Every code decoded at open (SummariseViews), and shards are never rewritten in place: a decode
-// failure here is a broken invariant (THROW_CHECK).
+// A code that does not decode throws CodedViewError (Searcher::Search returns its status).
 std::span<const PointQ> Database::DecodedPoints(view_id_t v) const {
   const ViewRef& r = views_[v];
   if (r.num_points == 0) return {};
@@ -232,7 +242,7 @@ std::span<const PointQ> Database::DecodedPoints(view_id_t v) const {
   PointQ* p = DecodeOnce(decoded_points_[v], r.num_points, *decoded_bytes_, [&](PointQ* out) {
     std::vector<PointQ> pts;
     const Status s = shard.DecodePoints(r.index, &pts);
-    THROW_CHECK_MSG(s.ok(), s.ToString());
+    if (!s.ok()) throw CodedViewError(s);
     std::copy(pts.begin(), pts.end(), out);
   });
   return std::span<const PointQ>(p, r.num_points);
@@ -244,7 +254,7 @@ const uint8_t* Database::DecodedField(view_id_t v) const {
   return DecodeOnce(
       decoded_fields_[v], shard::kCoarseFieldSize, *decoded_bytes_, [&](uint8_t* out) {
         const Status s = shard.DecodeCoarseField(r.index, out);
-        THROW_CHECK_MSG(s.ok(), s.ToString());
+        if (!s.ok()) throw CodedViewError(s);
       });
 }
 
@@ -255,7 +265,7 @@ std::span<const PointQ> Database::SearchDecodedPoints(view_id_t v) const {
   PointQ* p = DecodeOnce(search_points_[v], r.num_points, *search_bytes_, [&](PointQ* out) {
     thread_local std::vector<PointQ> pts;
     const Status s = shard.DecodePoints(r.index, &pts);
-    THROW_CHECK_MSG(s.ok(), s.ToString());
+    if (!s.ok()) throw CodedViewError(s);
     std::copy(pts.begin(), pts.end(), out);
   });
   return std::span<const PointQ>(p, r.num_points);
@@ -266,7 +276,7 @@ const uint8_t* Database::SearchDecodedField(view_id_t v) const {
   const ShardReader& shard = *shards_[r.shard];
   return DecodeOnce(search_fields_[v], shard::kCoarseFieldSize, *search_bytes_, [&](uint8_t* out) {
     const Status s = shard.DecodeCoarseField(r.index, out);
-    THROW_CHECK_MSG(s.ok(), s.ToString());
+    if (!s.ok()) throw CodedViewError(s);
   });
 }
 
@@ -292,7 +302,7 @@ std::span<const PointQ> Database::ViewPoints(view_id_t v, std::vector<PointQ>* s
   PointQ* cached = decoded_points_[v].load(std::memory_order_acquire);
   if (cached != nullptr) return std::span<const PointQ>(cached, r.num_points);
   const Status s = shards_[r.shard]->DecodePoints(r.index, scratch);
-  THROW_CHECK_MSG(s.ok(), s.ToString());
+  if (!s.ok()) throw CodedViewError(s);
   return *scratch;
 }
 
@@ -303,7 +313,7 @@ const uint8_t* Database::ViewCoarseField(view_id_t v, uint8_t* scratch) const {
   uint8_t* cached = decoded_fields_[v].load(std::memory_order_acquire);
   if (cached != nullptr) return cached;
   const Status s = shards_[r.shard]->DecodeCoarseField(r.index, scratch);
-  THROW_CHECK_MSG(s.ok(), s.ToString());
+  if (!s.ok()) throw CodedViewError(s);
   return scratch;
 }
 

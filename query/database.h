@@ -10,6 +10,7 @@
 #include <memory>
 #include <shared_mutex>
 #include <span>
+#include <stdexcept>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -21,6 +22,18 @@
 namespace handdb {
 
 class ShardReader;
+
+// A coded view whose code does not decode (damaged past the header Open reads; `handdb validate`
+// decodes every view). Thrown by the accessors that decode; Searcher::Search returns status().
+class CodedViewError : public std::runtime_error {
+ public:
+  explicit CodedViewError(Status status)
+      : std::runtime_error(status.ToString()), status_(std::move(status)) {}
+  const Status& status() const { return status_; }
+
+ private:
+  Status status_;
+};
 
 class Database {
  public:
@@ -78,11 +91,11 @@ class Database {
   }
   // coarse_field(v) without keeping a decoded copy: decoded into scratch (kCoarseFieldSize bytes).
   const uint8_t* ViewCoarseField(view_id_t v, uint8_t* scratch) const;
-  // True when a shard is coded; then every view was decoded once at open (a code that does not
-  // decode is an error of Open) and its summary kept here, for the searcher's per-view extents.
+  // True when a shard is coded; then Open read every view's code header (or decoded it) for its
+  // summary, kept here for the searcher's per-view extents (max_abs is then a bound).
   bool coded() const { return !summaries_.empty(); }
   struct PointSummary {
-    int32_t max_abs = 0;       // largest |x|, |y| of its points (PointQ units)
+    int32_t max_abs = 0;       // largest |x|, |y| of its points, or a bound on it (PointQ units)
     bool sorted_by_y = false;  // points sorted by y
   };
   const std::vector<PointSummary>& point_summaries() const { return summaries_; }

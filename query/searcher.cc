@@ -1369,6 +1369,19 @@ ViewLabel MirrorLabel(const ViewLabel& label) {
 Result<std::vector<Match>> Searcher::Search(std::span<const Point2f> query_px,
                                             const SearchOptions& options,
                                             SearchStats* stats) const {
+  try {
+    return SearchImpl(query_px, options, stats);
+  } catch (const CodedViewError& e) {
+    // A coded view that does not decode (query/database.h): the search's error, not a crash.
+    return Status(e.status().code(),
+                  e.status().message() + " (run 'handdb validate " + db_->path().string() +
+                      "' for every problem)");
+  }
+}
+
+Result<std::vector<Match>> Searcher::SearchImpl(std::span<const Point2f> query_px,
+                                                const SearchOptions& options,
+                                                SearchStats* stats) const {
   const auto start = std::chrono::steady_clock::now();
   if (Status s = CheckQuery(query_px, options); !s.ok()) return s;
   const bool indexed = options.mode == SearchMode::kIndexed && !options.brute_force;

@@ -157,6 +157,9 @@ class Searcher {
   const ViewIndex* index() const { return index_.get(); }
 
  private:
+  Result<std::vector<Match>> SearchImpl(std::span<const Point2f> query_px,
+                                        const SearchOptions& options,
+                                        SearchStats* stats) const;
   std::shared_ptr<const Database> db_;
   std::vector<int32_t> max_abs_;  // per view: max |x|, |y| of its points (PointQ units)
   // Per view: 1 if its points are sorted by y and on the coarse grid (every converted view), so

@@ -11,6 +11,7 @@
 #include "base/testing.h"
 #include "format/manifest.h"
 #include "format/shard_layout.h"
+#include "format/shard_testing.h"
 #include "format/shard_writer.h"
 #include "query/search_testing.h"
 
@@ -527,6 +528,59 @@ TEST(Searcher, CodedShardsSearchExactlyLikePlainOnes) {
   }
   EXPECT_GT(coded_db->decoded_bytes(), 0u);
   EXPECT_EQ(plain_db->decoded_bytes(), 0u);
+}
+
+// A coded view damaged past its header: Open reads only a lattice-mode code's header, so it
+// succeeds, and a search that decodes the view returns the error instead of crashing.
+TEST(Database, ACodedViewDamagedPastItsHeaderIsAnErrorOfTheSearch) {
+  const std::filesystem::path dir = ::handdb::testing::TempDir("coded_bad_tail");
+  Manifest m;
+  m.tool_version = "test";
+  m.rolls = 4;
+  ShardWriterOptions options;
+  options.coded = true;
+  ShardWriter writer;
+  ASSERT_TRUE(writer.Open(dir / "shard-00000.hdb", options).ok());
+  for (uint32_t v = 0; v < 6; ++v) {  // converted-like views: lattice-mode codes
+    const ViewLabel label = testing::SyntheticViewLabel(v, 6);
+    ASSERT_TRUE(writer.AddView(label, ::handdb::testing::LatticePoints(label, v)).ok());
+  }
+  auto summary = writer.Finish();
+  ASSERT_TRUE(summary.ok());
+  m.AddShard(*summary);
+  ASSERT_TRUE(WriteManifest(dir, m).ok());
+  auto good = Database::Open(dir);
+  ASSERT_TRUE(good.ok()) << good.status().ToString();
+  const std::vector<Point2f> query = RolledView(*good, 2, 1);
+
+  std::vector<uint8_t> bytes = ::handdb::testing::ReadBytes(dir / "shard-00000.hdb");
+  const shard::RawHeader h = shard::ParseHeader(bytes);
+  for (uint32_t i = 0; i < h.section_count; ++i) {
+    const shard::RawSection sec =
+        shard::ParseSection(bytes.data() + h.section_table_offset + i * h.section_entry_size);
+    // View 0's code: mode, lengths, count and box in the first ~12 bytes, then the chains.
+    if (sec.type == shard::kSectionPointCodes) {
+      for (size_t k = 20; k < 40; ++k) bytes[sec.offset + k] = 0xff;
+    }
+  }
+  ASSERT_TRUE(shard::RewriteChecksums(bytes));
+  {
+    std::ofstream out(dir / "shard-00000.hdb", std::ios::binary | std::ios::trunc);
+    out.write(reinterpret_cast<const char*>(bytes.data()),
+              static_cast<std::streamsize>(bytes.size()));
+  }
+  auto db = Database::Open(dir);
+  ASSERT_TRUE(db.ok()) << db.status().ToString();
+  Searcher searcher(std::make_shared<const Database>(std::move(db).value()));
+  SearchOptions o = Options(3, 2);
+  o.brute_force = true;  // every view is decoded
+  auto result = searcher.Search(query, o);
+  ASSERT_FALSE(result.ok());
+  EXPECT_NE(result.status().message().find("shard-00000.hdb: offset"), std::string::npos)
+      << result.status().ToString();
+  EXPECT_NE(result.status().message().find("view 0: point code"), std::string::npos)
+      << result.status().ToString();
+  EXPECT_NE(result.status().message().find("handdb validate"), std::string::npos);
 }
 
 TEST(Database, ACodedViewThatDoesNotDecodeIsAnErrorOfOpen) {
