@@ -2,7 +2,8 @@
 // scripts/fuzz.sh). The first byte picks the decoder (mod 3): 0 lattice pixels, 1 a view's
 // points (the next 12 bytes are three floats: the scale, the centre's x and y), 2 a coarse field;
 // the rest is the code. What a decoder accepts must survive its encoder: the
-// re-encoded code decodes to the same pixels, points or field.
+// re-encoded code decodes to the same pixels, points or field; and a view code's header
+// (PeekViewPoints) must agree with what the code decodes to (count, bound, order).
 #include <array>
 #include <cstdint>
 #include <cstdlib>
@@ -49,7 +50,22 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       std::memcpy(&scale, input.data(), 4);
       std::memcpy(centre.data(), input.data() + 4, 8);
       std::vector<handdb::PointQ> points, again;
+      handdb::ViewPointsExtent extent;
+      const bool peek_ok = handdb::PeekViewPoints(input.subspan(12), scale, centre, &extent).ok();
+      const bool peeked = peek_ok && extent.peeked;
       if (!handdb::DecodeViewPoints(input.subspan(12), scale, centre, &points).ok()) return 0;
+      if (!peek_ok) std::abort();  // a header the peek refuses, on a code that decodes
+      // What the header promised (the query's Database relies on it without decoding).
+      if (peeked) {
+        if (extent.count != points.size()) std::abort();
+        for (size_t i = 0; i < points.size(); ++i) {
+          if (std::abs(static_cast<int32_t>(points[i].x)) > extent.max_abs_bound ||
+              std::abs(static_cast<int32_t>(points[i].y)) > extent.max_abs_bound ||
+              (i > 0 && points[i - 1].y > points[i].y)) {
+            std::abort();
+          }
+        }
+      }
       std::string code;
       if (!handdb::EncodeViewPoints(points, scale, centre, &code).ok()) std::abort();
       if (!handdb::DecodeViewPoints(Bytes(code), scale, centre, &again).ok() ||
