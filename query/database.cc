@@ -234,35 +234,16 @@ T* DecodeOnce(std::atomic<T*>& slot, size_t size, std::atomic<uint64_t>& bytes, 
 
 }  // namespace
 
-// A code that does not decode throws CodedViewError (Searcher::Search returns its status).
-std::span<const PointQ> Database::DecodedPoints(view_id_t v) const {
+// View v's points or field decoded into one of the two caches (slot v of `points` / `fields`,
+// kept bytes counted in `bytes`). A code that does not decode throws CodedViewError
+// (Searcher::Search returns its status).
+std::span<const PointQ> Database::DecodePointsOnce(view_id_t v,
+                                                   std::atomic<PointQ*>* points,
+                                                   std::atomic<uint64_t>& bytes) const {
   const ViewRef& r = views_[v];
   if (r.num_points == 0) return {};
   const ShardReader& shard = *shards_[r.shard];
-  PointQ* p = DecodeOnce(decoded_points_[v], r.num_points, *decoded_bytes_, [&](PointQ* out) {
-    std::vector<PointQ> pts;
-    const Status s = shard.DecodePoints(r.index, &pts);
-    if (!s.ok()) throw CodedViewError(s);
-    std::copy(pts.begin(), pts.end(), out);
-  });
-  return std::span<const PointQ>(p, r.num_points);
-}
-
-const uint8_t* Database::DecodedField(view_id_t v) const {
-  const ViewRef& r = views_[v];
-  const ShardReader& shard = *shards_[r.shard];
-  return DecodeOnce(
-      decoded_fields_[v], shard::kCoarseFieldSize, *decoded_bytes_, [&](uint8_t* out) {
-        const Status s = shard.DecodeCoarseField(r.index, out);
-        if (!s.ok()) throw CodedViewError(s);
-      });
-}
-
-std::span<const PointQ> Database::SearchDecodedPoints(view_id_t v) const {
-  const ViewRef& r = views_[v];
-  if (r.num_points == 0) return {};
-  const ShardReader& shard = *shards_[r.shard];
-  PointQ* p = DecodeOnce(search_points_[v], r.num_points, *search_bytes_, [&](PointQ* out) {
+  PointQ* p = DecodeOnce(points[v], r.num_points, bytes, [&](PointQ* out) {
     thread_local std::vector<PointQ> pts;
     const Status s = shard.DecodePoints(r.index, &pts);
     if (!s.ok()) throw CodedViewError(s);
@@ -271,13 +252,31 @@ std::span<const PointQ> Database::SearchDecodedPoints(view_id_t v) const {
   return std::span<const PointQ>(p, r.num_points);
 }
 
-const uint8_t* Database::SearchDecodedField(view_id_t v) const {
+const uint8_t* Database::DecodeFieldOnce(view_id_t v,
+                                         std::atomic<uint8_t*>* fields,
+                                         std::atomic<uint64_t>& bytes) const {
   const ViewRef& r = views_[v];
   const ShardReader& shard = *shards_[r.shard];
-  return DecodeOnce(search_fields_[v], shard::kCoarseFieldSize, *search_bytes_, [&](uint8_t* out) {
+  return DecodeOnce(fields[v], shard::kCoarseFieldSize, bytes, [&](uint8_t* out) {
     const Status s = shard.DecodeCoarseField(r.index, out);
     if (!s.ok()) throw CodedViewError(s);
   });
+}
+
+std::span<const PointQ> Database::DecodedPoints(view_id_t v) const {
+  return DecodePointsOnce(v, decoded_points_.get(), *decoded_bytes_);
+}
+
+const uint8_t* Database::DecodedField(view_id_t v) const {
+  return DecodeFieldOnce(v, decoded_fields_.get(), *decoded_bytes_);
+}
+
+std::span<const PointQ> Database::SearchDecodedPoints(view_id_t v) const {
+  return DecodePointsOnce(v, search_points_.get(), *search_bytes_);
+}
+
+const uint8_t* Database::SearchDecodedField(view_id_t v) const {
+  return DecodeFieldOnce(v, search_fields_.get(), *search_bytes_);
 }
 
 void Database::TrimSearchCache() const {

@@ -166,6 +166,12 @@ class Database {
   const uint8_t* DecodedField(view_id_t v) const;
   std::span<const PointQ> SearchDecodedPoints(view_id_t v) const;
   const uint8_t* SearchDecodedField(view_id_t v) const;
+  std::span<const PointQ> DecodePointsOnce(view_id_t v,
+                                           std::atomic<PointQ*>* points,
+                                           std::atomic<uint64_t>& bytes) const;
+  const uint8_t* DecodeFieldOnce(view_id_t v,
+                                 std::atomic<uint8_t*>* fields,
+                                 std::atomic<uint64_t>& bytes) const;
   Status SummariseViews(int num_threads);
   size_t shards_without_coarse_fields_ = 0;
   std::vector<ViewRef> views_;
