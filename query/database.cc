@@ -202,16 +202,21 @@ Status Database::SummariseViews(int num_threads) {
         HANDDB_RETURN_IF_ERROR(shards_[r.shard]->DecodePoints(r.index, &scratch));
         pts = scratch;
       }
-      int32_t m = 0;
-      for (const PointQ& p : pts) {
-        m = std::max({m, std::abs(static_cast<int32_t>(p.x)), std::abs(static_cast<int32_t>(p.y))});
-      }
-      summaries_[v].max_abs = m;
-      summaries_[v].sorted_by_y =
-          std::is_sorted(pts.begin(), pts.end(), [](PointQ a, PointQ b) { return a.y < b.y; });
+      summaries_[v] = Summarise(pts);
     }
     return Status::Ok();
   });
+}
+
+Database::PointSummary Database::Summarise(std::span<const PointQ> points) {
+  PointSummary out;
+  for (const PointQ& p : points) {
+    out.max_abs = std::max(
+        {out.max_abs, std::abs(static_cast<int32_t>(p.x)), std::abs(static_cast<int32_t>(p.y))});
+  }
+  out.sorted_by_y =
+      std::is_sorted(points.begin(), points.end(), [](PointQ a, PointQ b) { return a.y < b.y; });
+  return out;
 }
 
 namespace {

@@ -99,6 +99,9 @@ class Database {
     bool sorted_by_y = false;  // points sorted by y
   };
   const std::vector<PointSummary>& point_summaries() const { return summaries_; }
+  // The exact summary of a point set (what Open keeps for a raw-mode coded view, and what the
+  // searcher computes for a plain one).
+  static PointSummary Summarise(std::span<const PointQ> points);
   // Bytes of decoded points and fields held (0 for a database without coded shards): those kept
   // by points()/coarse_field() plus the searches' cache below.
   uint64_t decoded_bytes() const {
