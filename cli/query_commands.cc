@@ -148,6 +148,12 @@ void QueryFlags::Add(CLI::App& app) {
   app.add_option("--top", search.top_k, "number of matches")
       ->check(CLI::Range(1, 100000))
       ->capture_default_str();
+  app.add_option("--per-shape",
+                 search.max_per_shape,
+                 "at most this many matches per basic shape (0: no limit); 1 ranks shapes: "
+                 "the --top nearest shapes, each by its best view")
+      ->check(CLI::Range(0, 100000))
+      ->capture_default_str();
   app.add_flag("--json", as_json, "print the result as JSON (schemas/query_result.schema.json)");
   app.add_option("--sheet", sheet, "write a contact sheet PNG: input, its edges, the top matches");
   app.add_option("--threads", search.num_threads, "worker threads (-1: all cores)")
@@ -299,6 +305,7 @@ json ResultJson(const QueryFlags& flags,
           {"query", query_json},
           {"options",
            {{"top_k", search.top_k},
+            {"max_per_shape", search.max_per_shape},
             {"threads", ResolveNumThreads(search.num_threads)},
             {"brute_force", search.brute_force},
             {"hand", flags.hand.name},

@@ -554,9 +554,11 @@ py::object Search(const PyDatabase& self,
                   float dt_cell_px,
                   bool coarse_bound,
                   bool return_stats,
+                  int per_shape,
                   const py::kwargs& edge_kwargs) {
   SearchOptions options;
   options.top_k = top_k;
+  options.max_per_shape = per_shape;
   options.num_threads = threads;
   options.brute_force = brute_force;
   options.dt_cell_px = dt_cell_px;
@@ -568,6 +570,7 @@ py::object Search(const PyDatabase& self,
   if (!k.ok()) throw py::value_error("kdtree must be nanoflann or pcl");
   options.kdtree = *k;
   if (top_k < 1) throw py::value_error("top_k must be >= 1");
+  if (per_shape < 0) throw py::value_error("per_shape must be >= 0");
   if (threads == 0 || threads < -1) throw py::value_error("threads must be -1 or >= 1");
 
   std::optional<QueryEdges> edges;
@@ -1025,6 +1028,7 @@ PYBIND11_MODULE(_handdb, m) {
           py::arg("dt_cell_px") = 1.0f,
           py::arg("coarse_bound") = true,
           py::arg("return_stats") = false,
+          py::arg("per_shape") = 0,
           "Exact top-k (view, roll) by the chamfer distance (docs/query.md), best first, as a list "
           "of Match; the GIL is released while searching.\n\n"
           "query: an image path (photo, edge image or label EXR: converted like `handdb query "
@@ -1033,7 +1037,8 @@ PYBIND11_MODULE(_handdb, m) {
           "int16: 1/16 px, e.g. a View's points).\n"
           "hand: 'either' (default, as `handdb query`), 'right' or 'left'. threads: -1 = all "
           "cores. return_stats=True returns (matches, stats) with the stats of `handdb query "
-          "--json`.")
+          "--json`. per_shape: at most this many matches per basic shape (0: no limit; 1: the "
+          "top_k nearest shapes, each by its best view, as `handdb query --per-shape 1`).")
       .def("__repr__",
            [](const PyDatabase& d) {
              return "<handdb.Database '" + d.path().string() +

@@ -37,6 +37,7 @@ struct Scored {
   view_id_t view = 0;
   roll_id_t roll = 0;
   Hand hand = Hand::kRight;
+  shape_id_t shape = kInvalidShapeId;  // set by TopK when it limits matches per shape
 };
 
 // The total order of results: distance, then view id, then roll, then right before left.
@@ -48,19 +49,63 @@ bool Before(const Scored& x, const Scored& y) {
 }
 
 // Shared top-k under a mutex; threshold() is the k-th best distance (+inf until k are known),
-// readable without the lock.
+// readable without the lock. With a per-shape limit m > 0 (SearchOptions::max_per_shape) it keeps
+// the k best pairs among each shape's m best: a pair whose shape already holds m better pairs is
+// refused, a better one replaces that shape's worst; a pair pushed out never returns, since every
+// position of the list only improves. Each shape also has its own bound, the m-th best distance
+// of its pairs scored so far: a pair above it cannot enter (m better pairs of its shape exist),
+// so ThresholdFor(view) = min(k-th best, the view's shape's bound) prunes like threshold() does,
+// and far more on the shapes that fill the top of the list (a shape's other rolls and views).
 class TopK {
  public:
-  // `bound`: pairs above it are never wanted (+inf: every pair may be).
-  TopK(size_t k, double bound) : k_(k), threshold_(bound) { items_.reserve(k + 1); }
+  // `bound`: pairs above it are never wanted (+inf: every pair may be). `shape_of`: each view's
+  // dense shape index (< num_shapes), needed when max_per_shape > 0.
+  TopK(size_t k,
+       double bound,
+       int max_per_shape,
+       std::span<const uint32_t> shape_of,
+       size_t num_shapes)
+      : k_(k),
+        max_per_shape_(max_per_shape),
+        shape_of_(shape_of),
+        shape_best_(max_per_shape > 0 ? num_shapes : 0),
+        shape_threshold_(max_per_shape > 0 ? num_shapes : 0),
+        threshold_(bound) {
+    items_.reserve(k + 1);
+    for (std::atomic<double>& t : shape_threshold_) t.store(bound, std::memory_order_relaxed);
+  }
 
-  void Insert(const Scored& s) {
-    if (s.distance > threshold_.load(std::memory_order_relaxed)) return;
+  void Insert(Scored s) {
+    if (max_per_shape_ > 0) s.shape = shape_of_[s.view];
+    if (s.distance > ThresholdFor(s.view)) return;
     std::lock_guard<std::mutex> lock(mu_);
+    if (max_per_shape_ > 0) {
+      // The shape's m best distances scored so far, whether or not they stay in the list.
+      std::vector<double>& best = shape_best_[s.shape];
+      best.insert(std::upper_bound(best.begin(), best.end(), s.distance), s.distance);
+      if (best.size() > static_cast<size_t>(max_per_shape_)) best.pop_back();
+      if (best.size() == static_cast<size_t>(max_per_shape_)) {
+        shape_threshold_[s.shape].store(best.back(), std::memory_order_relaxed);
+      }
+    }
     if (items_.size() == k_ && !Before(s, items_.back())) return;
     // A pair is scored once (ScoreRollBest marks what it scored); kept as a guard.
     for (const Scored& it : items_) {
       if (it.view == s.view && it.roll == s.roll && it.hand == s.hand) return;
+    }
+    if (max_per_shape_ > 0) {
+      int same = 0;
+      size_t worst = 0;
+      for (size_t i = 0; i < items_.size(); ++i) {
+        if (items_[i].shape == s.shape) {
+          ++same;
+          worst = i;
+        }
+      }
+      if (same >= max_per_shape_) {
+        if (!Before(s, items_[worst])) return;
+        items_.erase(items_.begin() + static_cast<std::ptrdiff_t>(worst));
+      }
     }
     items_.insert(std::upper_bound(items_.begin(), items_.end(), s, Before), s);
     if (items_.size() > k_) items_.pop_back();
@@ -69,13 +114,24 @@ class TopK {
                        std::memory_order_relaxed);
     }
   }
+  // The k-th best distance: no pair above it enters.
   double threshold() const { return threshold_.load(std::memory_order_relaxed); }
+  // No pair of view v above it enters (threshold() without a per-shape limit).
+  double ThresholdFor(view_id_t v) const {
+    const double t = threshold();
+    if (max_per_shape_ == 0) return t;
+    return std::min(t, shape_threshold_[shape_of_[v]].load(std::memory_order_relaxed));
+  }
   std::vector<Scored> items() const { return items_; }
 
  private:
   size_t k_;
+  int max_per_shape_;
+  std::span<const uint32_t> shape_of_;
   std::mutex mu_;
   std::vector<Scored> items_;
+  std::vector<std::vector<double>> shape_best_;
+  std::vector<std::atomic<double>> shape_threshold_;
   std::atomic<double> threshold_;
 };
 
@@ -598,6 +654,7 @@ class QueryContext {
 
 bool SearchOptions::Check() const {
   CHECK_OPTION_GT(top_k, 0);
+  CHECK_OPTION_GE(max_per_shape, 0);
   CHECK_OPTION(num_threads == -1 || num_threads >= 1);
   CHECK_OPTION((DistanceGridOptions{dt_cell_px, 170.0f}.Check()));
   CHECK_OPTION_GT(index.candidates, 0);
@@ -650,6 +707,30 @@ void Searcher::PrepareExactSearch() const {
 const ViewHistograms& Searcher::view_histograms() const {
   std::call_once(view_histograms_once_, [this] { view_histograms_ = ViewHistograms(*db_, -1); });
   return view_histograms_;
+}
+
+const Searcher::ShapeIndex& Searcher::shape_index() const {
+  std::call_once(shape_index_once_, [this] {
+    const size_t n = db_->num_views();
+    std::vector<shape_id_t> ids(n);
+    constexpr size_t kChunk = 4096;
+    ParallelFor((n + kChunk - 1) / kChunk, ResolveNumThreads(-1), [&](size_t c, int) {
+      for (size_t v = c * kChunk; v < std::min(n, (c + 1) * kChunk); ++v) {
+        ids[v] = db_->label(static_cast<view_id_t>(v)).shape_id;
+      }
+      return true;
+    });
+    std::vector<shape_id_t> distinct = ids;
+    std::sort(distinct.begin(), distinct.end());
+    distinct.erase(std::unique(distinct.begin(), distinct.end()), distinct.end());
+    shape_index_.of_view.resize(n);
+    for (size_t v = 0; v < n; ++v) {
+      shape_index_.of_view[v] = static_cast<uint32_t>(
+          std::lower_bound(distinct.begin(), distinct.end(), ids[v]) - distinct.begin());
+    }
+    shape_index_.num_shapes = distinct.size();
+  });
+  return shape_index_;
 }
 
 Searcher::~Searcher() = default;
@@ -727,7 +808,9 @@ class QueryRun {
            const SearchOptions& options,
            int threads,
            ThreadPool* pool,
-           std::chrono::steady_clock::time_point progress_since)
+           std::chrono::steady_clock::time_point progress_since,
+           std::span<const uint32_t> shape_of,
+           size_t num_shapes)
       : db_(db),
         max_abs_(max_abs),
         grid_half_extent_px_(grid_half_extent_px),
@@ -746,7 +829,9 @@ class QueryRun {
              query_px,
              MakeSlots(options.hand, db.num_rolls()),
              options),
-        top_(k_, kInf),
+        shape_of_(options.max_per_shape > 0 ? shape_of : std::span<const uint32_t>()),
+        num_shapes_(num_shapes),
+        top_(k_, kInf, options.max_per_shape, shape_of, num_shapes),
         progress_since_(progress_since) {}
 
   size_t num_slots() const { return ctx_.num_slots(); }
@@ -870,11 +955,11 @@ class QueryRun {
     auto by_bound = [&](uint32_t x, uint32_t y) { return ByBound(x, y); };
     const std::vector<uint32_t> first = SmallestPairs(0, n, k_, by_bound);
     Visit(first);
-    const double t0 = top_.threshold();
     std::vector<uint32_t> rest;
     const uint32_t last_first = first.empty() ? 0 : first.back();
     for (uint32_t i = 0; i < n; ++i) {
-      if (la_[i] != kNoBound && TotalPx(i) <= t0 && (first.empty() || by_bound(last_first, i))) {
+      if (la_[i] != kNoBound && TotalPx(i) <= ThresholdFor(i) &&
+          (first.empty() || by_bound(last_first, i))) {
         rest.push_back(i);
       }
     }
@@ -1000,11 +1085,12 @@ class QueryRun {
   void NeighbourBounds() {
     ForEachViewBlock([&](size_t b, size_t v0, size_t v1, uint32_t* sums) {
       for (size_t s = 0; s < num_slots(); ++s) {
-        const double threshold = top_.threshold();
         unsigned groups = 0;
         for (size_t v = v0; v < v1; ++v) {
           const size_t e = s * num_views_ + v;
-          if (la_[e] != kNoBound && TotalPx(e) <= threshold) groups |= 1u << ((v - v0) / 32);
+          if (la_[e] != kNoBound && TotalPx(e) <= top_.ThresholdFor(static_cast<view_id_t>(v))) {
+            groups |= 1u << ((v - v0) / 32);
+          }
         }
         if (groups == 0) continue;
         coarse_->BlockSums(ctx_.histogram(s), b, sums, /*neighbours=*/true, groups);
@@ -1075,6 +1161,11 @@ class QueryRun {
     }
   }
 
+  // No pair i above it can enter the top k (the k-th best, or its view's shape's bound).
+  double ThresholdFor(uint32_t i) const {
+    return top_.ThresholdFor(static_cast<view_id_t>(PairOf(i) % num_views_));
+  }
+
   // Pairs by their bound L_A + L_B, then by index.
   bool ByBound(uint32_t x, uint32_t y) const {
     const uint32_t tx = static_cast<uint32_t>(la_[x]) + lb_[x];
@@ -1104,9 +1195,25 @@ class QueryRun {
   }
 
   // Scores the pairs with the smallest L_A (a few times k), best first, and marks them scored.
+  // With a per-shape limit also each shape's pair of smallest L_A: the seed's pairs are mostly
+  // one shape's rolls and views, which would leave the k-th best shape, the bound of every shape
+  // not yet scored, at +inf.
   void Seed() {
     auto less = [&](uint32_t x, uint32_t y) { return ByBound(x, y); };
-    const std::vector<uint32_t> best = SmallestPairs(0, la_.size(), 2 * k_ + 8, less);
+    std::vector<uint32_t> best = SmallestPairs(0, la_.size(), 2 * k_ + 8, less);
+    if (!shape_of_.empty()) {
+      std::vector<uint32_t> per_shape(num_shapes_, UINT32_MAX);
+      for (uint32_t i = 0; i < la_.size(); ++i) {
+        if (la_[i] == kNoBound) continue;
+        uint32_t& b = per_shape[shape_of_[PairOf(i) % num_views_]];
+        if (b == UINT32_MAX || less(i, b)) b = i;
+      }
+      for (uint32_t i : per_shape) {
+        if (i != UINT32_MAX) best.push_back(i);
+      }
+      std::sort(best.begin(), best.end(), less);
+      best.erase(std::unique(best.begin(), best.end()), best.end());
+    }
     ParallelFor(
         best.size(),
         threads_,
@@ -1169,9 +1276,10 @@ class QueryRun {
     uint64_t bounded = 0;
     for (size_t e = slot_begin_[m.slot]; e < slot_begin_[m.slot + 1]; ++e) {
       const Bound la = la_[e];
-      const double threshold = top_.threshold();
-      if (la == kNoBound || TotalPx(e) > threshold) continue;
+      if (la == kNoBound) continue;
       const auto v = static_cast<view_id_t>(PairOf(e) % num_views_);
+      const double threshold = top_.ThresholdFor(v);
+      if (TotalPx(e) > threshold) continue;
       const std::span<const PointQ> pts = db_.SearchPoints(v);
       const double n = static_cast<double>(pts.size());
       const double limit = Limit(threshold, BoundPx(la), n) + m.gap_px * n;
@@ -1204,7 +1312,7 @@ class QueryRun {
   // that Refine does not score it again (its D_c is in the top k already, or was above the
   // threshold, which only falls).
   void ScorePair(uint32_t i, int worker) {
-    const double threshold = top_.threshold();
+    const double threshold = ThresholdFor(i);
     if (TotalPx(i) > threshold) return;
     ScoreVisited(i, threshold, worker);
     la_[i] = kNoBound;
@@ -1217,8 +1325,9 @@ class QueryRun {
         threads_,
         [&](size_t j, int worker) {
           const uint32_t i = order[j];
-          const double threshold = top_.threshold();
-          if (TotalPx(i) > threshold) return false;  // every later pair: a larger bound
+          if (TotalPx(i) > top_.threshold()) return false;  // every later pair: a larger bound
+          const double threshold = ThresholdFor(i);
+          if (TotalPx(i) > threshold) return true;  // above its shape's bound
           ScoreVisited(i, threshold, worker);
           return true;
         },
@@ -1251,7 +1360,7 @@ class QueryRun {
         [&](size_t r, int worker) {
           for (uint32_t j = runs[r].first; j < runs[r].second; ++j) {
             const uint32_t i = pairs[j];
-            const double threshold = top_.threshold();
+            const double threshold = ThresholdFor(i);
             if (TotalPx(i) > threshold) break;  // the view's later pairs: larger bounds
             if (progress != nullptr) progress->Add();
             ScoreVisited(i, threshold, worker);
@@ -1299,6 +1408,8 @@ class QueryRun {
   const uint32_t num_rolls_;
   const size_t k_;
   QueryContext ctx_;
+  std::span<const uint32_t> shape_of_;  // per view: dense shape index (empty: no per-shape limit)
+  size_t num_shapes_;
   TopK top_;
   // Per pair (indexed search: per candidate pair, pairs_): L_A (kNoBound: a view without points,
   // or a pair already scored) and L_B (0 until computed), both rounded down to 1/64 px;
@@ -1409,19 +1520,23 @@ Result<std::vector<Match>> Searcher::SearchImpl(std::span<const Point2f> query_p
   if (options.coarse_bound && !options.brute_force && db_->num_views() > 0) {
     fields = indexed && !coarse_rows_.empty() ? &coarse_rows_ : &cell_major_fields();
   }
+  const ShapeIndex* shapes = options.max_per_shape > 0 ? &shape_index() : nullptr;
   // Hand::kEither searches both hands' slots in one run with one top k, ordered by (D_c, view
   // id, roll, right before left): exactly the merge of the two brute-force searches.
-  QueryRun run(*db_,
-               max_abs_,
-               y_sorted_,
-               grid_half_extent_px_,
-               fields,
-               fields != nullptr && !indexed ? &view_histograms() : nullptr,
-               query_px,
-               options,
-               threads,
-               pool,
-               progress_since);
+  QueryRun run(
+      *db_,
+      max_abs_,
+      y_sorted_,
+      grid_half_extent_px_,
+      fields,
+      fields != nullptr && !indexed ? &view_histograms() : nullptr,
+      query_px,
+      options,
+      threads,
+      pool,
+      progress_since,
+      shapes != nullptr ? std::span<const uint32_t>(shapes->of_view) : std::span<const uint32_t>(),
+      shapes != nullptr ? shapes->num_shapes : 0);
   if (options.brute_force) {
     run.BruteForce(&local, start);
   } else if (indexed) {

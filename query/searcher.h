@@ -48,6 +48,12 @@ std::string_view SearchModeName(SearchMode mode);  // "exact", "indexed"
 
 struct SearchOptions {
   int top_k = 10;  // number of matches returned
+  // At most this many matches per basic shape (0: no limit). 1 ranks shapes: the top k are the k
+  // shapes with the nearest views, each by its best (view, roll, hand), which is what "the top 5
+  // shapes" means to a user who wants a shape, not five rolls of one view (docs/query.md, "One
+  // match per shape"). The result is exactly the brute-force top k under the limit; views
+  // without a shape id count as one shape.
+  int max_per_shape = 0;
   // kRight: today's search. kLeft: the query is mirrored before searching. kEither: both, in one
   // search with one top-k ordered by (D_c, view id, roll, right before left), which is exactly
   // the merge of the two hands' results; the mirrored rolls share the right hand's distance
@@ -181,6 +187,15 @@ class Searcher {
   const ViewHistograms& view_histograms() const;
   mutable std::once_flag view_histograms_once_;
   mutable ViewHistograms view_histograms_;
+  // Per view: its shape as a dense index (the distinct shape ids in increasing order, views
+  // without one as the last), built by the first search with a per-shape limit.
+  struct ShapeIndex {
+    std::vector<uint32_t> of_view;
+    size_t num_shapes = 0;
+  };
+  const ShapeIndex& shape_index() const;
+  mutable std::once_flag shape_index_once_;
+  mutable ShapeIndex shape_index_;
   std::shared_ptr<const ViewIndex> index_;
 };
 

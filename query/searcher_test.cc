@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <map>
 #include <random>
 #include <vector>
 
@@ -119,6 +120,9 @@ TEST(SearchOptions, Check) {
   EXPECT_FALSE(o.Check());
   o = {};
   o.dt_cell_px = 0.3f;
+  EXPECT_FALSE(o.Check());
+  o = {};
+  o.max_per_shape = -1;
   EXPECT_FALSE(o.Check());
 }
 
@@ -270,6 +274,51 @@ TEST(Searcher, PrunedEqualsBruteForce) {
         }
         EXPECT_DOUBLE_EQ(m.distance, m.a + m.b);
       }
+    }
+  }
+}
+
+// A per-shape limit m keeps each shape's m best pairs, then the k best of those: the pruned
+// search (which also prunes each pair on its own shape's m-th best) equals brute force under the
+// same limit, and both equal the full ranking with each shape's pairs after its m-th dropped.
+// The test database has 6 shapes of 6 views, so k up to 8 with m = 1 asks for more shapes than
+// some queries' neighbourhoods hold.
+TEST(Searcher, PerShapeLimitEqualsTheFullRankingFiltered) {
+  for (const bool sorted : {false, true}) {
+    const Searcher searcher(sorted ? SortedTestDatabase() : TestDatabase());
+    std::mt19937 rng(11);
+    std::uniform_int_distribution<uint32_t> view(0, kViews - 1);
+    std::uniform_int_distribution<uint32_t> roll(0, kRolls - 1);
+    std::uniform_real_distribution<float> u(-1, 1);
+    for (int i = 0; i < 24; ++i) {
+      std::vector<Point2f> q = Transform(RolledView(*TestDatabase(), view(rng), roll(rng)),
+                                         0.3f * u(rng),
+                                         3 * u(rng),
+                                         3 * u(rng),
+                                         0.6 + 0.4 * (u(rng) + 1) / 2,
+                                         300 + i);
+      if (i % 4 == 1) q = Mirrored(q);
+      SearchOptions pruned = Options(1 + i % 8, 1 + i % 2);
+      pruned.max_per_shape = 1 + i % 3 / 2;  // 1, 1, 2, ...
+      pruned.hand = i % 2 ? Hand::kEither : Hand::kRight;
+      pruned.coarse_bound = i % 5 != 4;
+      const std::vector<Match> a = SearchBothWays(searcher, q, pruned);
+
+      SearchOptions all = pruned;
+      all.max_per_shape = 0;
+      all.brute_force = true;
+      all.top_k = static_cast<int>(kViews * kRolls * 2);
+      auto full = searcher.Search(q, all);
+      ASSERT_TRUE(full.ok());
+      std::vector<Match> expected;
+      std::map<shape_id_t, int> per_shape;
+      for (const Match& m : *full) {
+        if (expected.size() == static_cast<size_t>(pruned.top_k)) break;
+        if (per_shape[m.label.shape_id]++ < pruned.max_per_shape) expected.push_back(m);
+      }
+      ExpectSameResults(a, expected);
+      std::map<shape_id_t, int> count;
+      for (const Match& m : a) EXPECT_LE(++count[m.label.shape_id], pruned.max_per_shape);
     }
   }
 }

@@ -132,6 +132,27 @@ def test_search_equals_query_json(handdb, db, db_dir, view_image):
     assert [m.to_dict() for m in q] == [m.to_dict() for m in matches]
 
 
+def test_per_shape_ranks_shapes_like_the_cli(db, db_dir, view_image):
+    """per_shape=1: one match per basic shape, the shapes ranked by their best view, the same
+    matches as `handdb query --per-shape 1`; the first is the unlimited search's first."""
+    cli = handdb_json("query", db_dir, view_image, "--json", "--top", 4, "--threads", 2,
+                      "--per-shape", 1)
+    shapes = db.search(view_image, top_k=4, threads=2, per_shape=1)
+    assert [m.to_dict() for m in shapes] == cli["matches"] and cli["options"]["max_per_shape"] == 1
+    names = [m.shape_name for m in shapes]
+    assert len(set(names)) == len(names) == min(4, len({v.shape_name for v in db}))
+    views = db.search(view_image, top_k=20, threads=2)
+    assert views[0].to_dict() == shapes[0].to_dict()
+    # Each shape's match is its best among the unlimited ranking's (when it is in the top 20).
+    for m in shapes:
+        best = next((v for v in views if v.shape_name == m.shape_name), None)
+        if best is not None:
+            assert (best.view_id, best.roll, best.hand, best.distance) == (
+                m.view_id, m.roll, m.hand, m.distance)
+    with pytest.raises(ValueError, match="per_shape"):
+        db.search(view_image, per_shape=-1)
+
+
 def test_points_query_finds_the_view(db):
     v = db[7]
     for query in [v.points, v.points_px]:
