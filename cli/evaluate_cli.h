@@ -130,6 +130,7 @@ struct PhotoEvaluateFlags {
   bool skip_unknown = false;
   std::string keypoints;  // --keypoints FILE
   HandFlag hand;
+  std::string rank = "shapes";  // --rank shapes|views
   PhotoInputFlags picture;
   PhotoEvaluationOptions options;  // completed by Finish
 

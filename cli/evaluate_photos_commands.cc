@@ -91,6 +91,13 @@ void PhotoEvaluateFlags::Add(CLI::App& app, bool with_input) {
       ->group(kPhotoGroup);
   hand.Add(app, "each photo");
   app.get_option("--hand")->group(kPhotoGroup);
+  app.add_option("--rank",
+                 rank,
+                 "--photos: shapes: top-k = the k nearest shapes (one match per shape, the usual "
+                 "top-k accuracy); views: top-k = the shapes of the k nearest views")
+      ->check(CLI::IsMember({"shapes", "views"}))
+      ->capture_default_str()
+      ->group(kPhotoGroup);
   PhotoInputFlags::Which which;
   which.input = with_input;
   which.mask = false;
@@ -109,13 +116,14 @@ bool PhotoEvaluateFlags::Finish(const std::string& cmd, int threads, bool quiet)
   }
   if (!picture.Finish(cmd)) return false;
   options.hand = hand.Get();
+  options.max_per_shape = rank == "shapes" ? 1 : 0;
   options.num_threads = threads;
   options.progress = !quiet;
   return options.Check();
 }
 
 std::vector<std::string> PhotoEvaluateFlags::Args() const {
-  std::vector<std::string> args = {"--photos", dir, "--hand", hand.name};
+  std::vector<std::string> args = {"--photos", dir, "--hand", hand.name, "--rank", rank};
   if (skip_unknown) args.push_back("--skip-unknown");
   if (!keypoints.empty()) args.insert(args.end(), {"--keypoints", keypoints});
   const auto picture_args = picture.Args();
@@ -200,6 +208,7 @@ bool CheckTestSetEvaluateUsage(const CLI::App& app) {
                            "--skip-unknown",
                            "--keypoints",
                            "--hand",
+                           "--rank",
                            "--roi",
                            "--skin",
                            "--canny",

@@ -355,6 +355,7 @@ Status MergeParts(const fs::path& work_dir,
 json PhotoScoringOptionsToJson(const PhotoEvaluationOptions& options, const json& query_options) {
   return {{"hand", std::string(HandName(options.hand))},
           {"top_k", kPhotoMatches},
+          {"rank", options.max_per_shape == 1 ? "shapes" : "views"},
           {"query", query_options}};
 }
 

@@ -235,6 +235,57 @@ Result<PhotoOutcome> PhotoOutcome::FromJson(const json& j, const std::string& wh
   }
 }
 
+double ChanceOfShapeAmongFirstK(const std::map<std::string, uint64_t>& views_per_shape,
+                                const std::string& shape,
+                                int k) {
+  const auto it = views_per_shape.find(shape);
+  if (it == views_per_shape.end() || it->second == 0 || k < 1) return 0;
+  std::vector<double> others;
+  for (const auto& [name, n] : views_per_shape) {
+    if (name != shape && n > 0) others.push_back(static_cast<double>(n));
+  }
+  if (static_cast<size_t>(k) > others.size()) return 1;
+  // With x = -ln(1 - t): P(T_s < t) = 1 - exp(-n_s x) and the density of T_r dt is
+  // n_r exp(-n_r x) dx; with y = n_r x the integral is of exp(-y) P(fewer than k others by y /
+  // n_r) over y >= 0, by the midpoint rule up to y = 40 (exp(-40): nothing left).
+  const double n_r = static_cast<double>(it->second);
+  // With s = 1 - (1 - t)^n_r, uniform on [0, 1) (T_r's own distribution), P(T_o < t) =
+  // 1 - (1 - s)^(n_o / n_r); the probability is the integral over s of P(fewer than k others
+  // first) (a Poisson-binomial recursion), by adaptive Simpson: the integrand is monotone and
+  // bounded, steep near 0 when other shapes are much larger.
+  std::vector<double> fewer(static_cast<size_t>(k));
+  auto g = [&](double u) {
+    std::fill(fewer.begin(), fewer.end(), 0.0);
+    fewer[0] = 1;
+    const double log_rest = std::log1p(-u);
+    for (double n_o : others) {
+      const double q = std::exp(log_rest * n_o / n_r);  // P(T_o >= t)
+      for (int j = k - 1; j >= 1; --j) fewer[j] = fewer[j] * q + fewer[j - 1] * (1 - q);
+      fewer[0] *= q;
+    }
+    double below_k = 0;
+    for (double f : fewer) below_k += f;
+    return below_k;
+  };
+  std::function<double(double, double, double, double, double, double, int)> simpson =
+      [&](double a, double b, double fa, double fm, double fb, double whole, int depth) {
+        const double m = (a + b) / 2;
+        const double flm = g((a + m) / 2);
+        const double frm = g((m + b) / 2);
+        const double left = (m - a) / 6 * (fa + 4 * flm + fm);
+        const double right = (b - m) / 6 * (fm + 4 * frm + fb);
+        if (depth <= 0 || std::abs(left + right - whole) <= 1e-10) {
+          return left + right + (left + right - whole) / 15;
+        }
+        return simpson(a, m, fa, flm, fm, left, depth - 1) +
+               simpson(m, b, fm, frm, fb, right, depth - 1);
+      };
+  const double hi = 1 - 1e-15;  // g(1) is the limit: every other shape has come
+  const double f0 = g(0), fm = g(hi / 2), f1 = g(hi);
+  const double sum = simpson(0, hi, f0, fm, f1, hi / 6 * (f0 + 4 * fm + f1), 40);
+  return std::clamp(sum, 0.0, 1.0);
+}
+
 int ShapeRank(const PhotoOutcome& outcome) {
   if (!outcome.error.empty()) return 0;
   for (size_t i = 0; i < outcome.match_shapes.size(); ++i) {
@@ -246,6 +297,7 @@ int ShapeRank(const PhotoOutcome& outcome) {
 bool PhotoEvaluationOptions::Check() const {
   CHECK_OPTION(num_threads == -1 || num_threads >= 1);
   CHECK_OPTION(hand == Hand::kRight || hand == Hand::kLeft || hand == Hand::kEither);
+  CHECK_OPTION(max_per_shape == 0 || max_per_shape == 1);
   return true;
 }
 
@@ -316,6 +368,7 @@ void FinishPhotoReport(PhotoReport* report) {
   std::map<std::string, PhotoShapeRow> rows;
   std::map<std::string, std::map<std::string, int64_t>> wrong;  // expected -> top-1 -> count
   std::set<std::string> top1_others;
+  std::map<std::pair<std::string, int>, double> shape_chance;  // (shape, k) -> chance
   for (const PhotoOutcome& o : r.outcomes) {
     const int rank = ShapeRank(o);
     PhotoShapeRow& row = rows[o.expected_shape];
@@ -329,8 +382,21 @@ void FinishPhotoReport(PhotoReport* report) {
       }
       const auto it = r.virtual_views_per_shape.find(o.expected_shape);
       const uint64_t right = it == r.virtual_views_per_shape.end() ? 0 : it->second;
-      r.chance[i] +=
-          ChanceOfCorrectInTopN(r.database_virtual_views, right, static_cast<uint64_t>(r.ks[i]));
+      if (r.max_per_shape == 1) {
+        const auto key = std::make_pair(o.expected_shape, r.ks[i]);
+        auto c = shape_chance.find(key);
+        if (c == shape_chance.end()) {
+          c = shape_chance
+                  .emplace(key,
+                           ChanceOfShapeAmongFirstK(
+                               r.virtual_views_per_shape, o.expected_shape, r.ks[i]))
+                  .first;
+        }
+        r.chance[i] += c->second;
+      } else {
+        r.chance[i] +=
+            ChanceOfCorrectInTopN(r.database_virtual_views, right, static_cast<uint64_t>(r.ks[i]));
+      }
     }
     const std::string top1 = Top1Label(o);
     if (top1 != o.expected_shape) ++wrong[o.expected_shape][top1];
@@ -395,6 +461,7 @@ PhotoReport StartPhotoReport(const Database& db,
   report.photos_dir = photos.dir.string();
   report.skipped_folders = photos.skipped_folders;
   report.hand = options.hand;
+  report.max_per_shape = options.max_per_shape;
   report.keypoints_file = photos.keypoints_file.string();
   report.threads = ResolveNumThreads(options.num_threads);
   return report;
@@ -410,6 +477,7 @@ Result<std::vector<PhotoOutcome>> ScorePhotos(const Searcher& searcher,
   SearchOptions search;
   search.top_k = kPhotoMatches;
   search.hand = options.hand;
+  search.max_per_shape = options.max_per_shape;
   search.num_threads = 1;  // photos run in parallel: no synchronisation inside a search
   std::vector<PhotoOutcome> outcomes(positions.size());
   Progress progress("photos", positions.size(), options.progress, "photos");
@@ -541,12 +609,17 @@ json PhotoReportToJson(const PhotoReport& r) {
           {"search",
            {{"hand", std::string(HandName(r.hand))},
             {"top_k", r.top_k},
+            {"rank", r.max_per_shape == 1 ? "shapes" : "views"},
             {"query_options", r.query_options}}},
           {"photo_count", r.outcomes.size()},
           {"failed_inputs", r.failed_inputs},
           {"top1_hands", {{"right", r.top1_right}, {"left", r.top1_left}}},
           {"chance_rule",
-           "mean over photos of 1 - C(n-m,k)/C(n,k): n virtual views, m of the expected shape"},
+           r.max_per_shape == 1
+               ? "mean over photos of P(the expected shape among the first k distinct shapes of a "
+                 "random ordering of the virtual views)"
+               : "mean over photos of 1 - C(n-m,k)/C(n,k): n virtual views, m of the expected "
+                 "shape"},
           {"accuracy", accuracy},
           {"shapes", shapes},
           {"confusion",
@@ -575,7 +648,10 @@ std::string PhotoReportToText(const PhotoReport& r) {
     for (const std::string& s : r.skipped_folders) os << " " << s;
     os << "\n";
   }
-  os << "search    exact top " << r.top_k << ", --hand " << HandName(r.hand);
+  os << "search    exact top " << r.top_k
+     << (r.max_per_shape == 1 ? " shapes (one match per shape, --rank shapes)"
+                              : " views (--rank views)")
+     << ", --hand " << HandName(r.hand);
   switch (r.hand) {
     case Hand::kRight:
       os << " (photos searched as right hands, the database's)";
@@ -588,14 +664,17 @@ std::string PhotoReportToText(const PhotoReport& r) {
       break;
   }
   os << "; top-1 match a right hand " << r.top1_right << ", a left hand " << r.top1_left << "\n";
-  os << "\nshape accuracy (the expected shape among the shapes of the top k matches)\n";
+  os << (r.max_per_shape == 1
+             ? "\nshape accuracy (the expected shape among the k nearest shapes)\n"
+             : "\nshape accuracy (the expected shape among the shapes of the k nearest views)\n");
   os << "          ";
   for (int k : r.ks) os << Fmt("   top-%-3.0f", k);
   os << "\n  photos  ";
   for (size_t i = 0; i < r.ks.size(); ++i) os << Fmt("  %6.1f%%", 100.0 * r.accuracy[i]) << " ";
   os << "\n  chance  ";
   for (size_t i = 0; i < r.ks.size(); ++i) os << Fmt("  %6.1f%%", 100.0 * r.chance[i]) << " ";
-  os << "  (random ordering of the database's (view, roll) pairs)\n";
+  os << (r.max_per_shape == 1 ? "  (shapes met first in a random ordering of the database)\n"
+                              : "  (random ordering of the database's (view, roll) pairs)\n");
   os << "\nper shape\n";
   char line[256];
   std::snprintf(line, sizeof line, "  %-16s %5s", "shape", "n");

@@ -5,13 +5,18 @@
 // (skin segmentation, Canny, the database's normalisation) and the exact search, as the right
 // hand, the left hand (mirrored query) or either hand (both searched, one merged top-k; the
 // setting `handdb query` defaults to); a photo counts as right at k when its expected shape is
-// among the shapes of the top-k matches. Photos without a usable query (no hand found,
-// unreadable) count as misses at every k and keep their one-line error. The chance baseline at k
-// is the mean over photos of P(a view of the right shape among the first k of a uniformly random
-// ordering of the database's (view, roll) pairs), i.e. 1 - C(n - m, k) / C(n, k) with n virtual
-// views and m of them of the right shape (ChanceOfCorrectInTopN of evaluate/evaluate.h). Photos
-// with 2D keypoint annotations (evaluate/photo_keypoints.h) also get the 2D keypoint error of the
-// top-1 match and of the best of the top 10.
+// among the shapes of the top-k matches. The search ranks shapes by default (one match per
+// shape, SearchOptions::max_per_shape = 1: the top k are the k nearest shapes, the usual top-k
+// accuracy of a classifier); ranking views instead (max_per_shape = 0) counts the shapes among
+// the k nearest (view, roll, hand) triples, which are often k rolls of one view. Photos without a
+// usable query (no hand found, unreadable) count as misses at every k and keep their one-line
+// error. The chance baseline at k is the mean over photos of the same event for a uniformly
+// random ordering of the database's (view, roll) pairs: ranking views, 1 - C(n - m, k) / C(n, k)
+// with n virtual views and m of them of the right shape (ChanceOfCorrectInTopN of
+// evaluate/evaluate.h); ranking shapes, P(the right shape among the first k distinct shapes of
+// that ordering) (ChanceOfShapeAmongFirstK, k / number of shapes when all are the same size).
+// Photos with 2D keypoint annotations (evaluate/photo_keypoints.h) also get the 2D keypoint error
+// of the top-1 match and of the best of the top 10.
 //
 // Like evaluate/evaluate.h an evaluation is (1) the per-photo work, ScorePhotos, over any subset
 // of the photos, and (2) the aggregation, FinishPhotoReport, over the outcomes of all of them.
@@ -124,6 +129,15 @@ struct PhotoShapeRow {
 // Matches searched per photo: top-1/5/10 shape accuracy and the best of the top 10 (keypoints).
 inline constexpr int kPhotoMatches = 10;
 
+// P(shape `shape` is among the first k distinct shapes met in a uniformly random ordering of all
+// the views counted in `views_per_shape`): each shape s first appears at T_s, the minimum of its
+// n_s i.i.d. uniform times, independent across shapes, so the probability is
+// integral of n_r (1-t)^(n_r - 1) P(fewer than k other T_s < t) dt, computed numerically (the
+// inner probability by a Poisson-binomial recursion). k / S for S shapes of equal size.
+double ChanceOfShapeAmongFirstK(const std::map<std::string, uint64_t>& views_per_shape,
+                                const std::string& shape,
+                                int k);
+
 // Label of failed inputs in the confusion matrix and the per-shape table.
 constexpr const char* kNoHandLabel = "no hand";
 
@@ -146,6 +160,7 @@ struct PhotoReport {
   std::vector<std::string> skipped_folders;
   Hand hand = Hand::kRight;   // the search setting
   int top_k = kPhotoMatches;  // matches searched per photo (at least every k of ks)
+  int max_per_shape = 1;      // 1: shapes ranked (one match each); 0: views ranked
   // How pictures became queries (the CLI's photo-path flags), recorded as given; may be null.
   nlohmann::json query_options;
   std::string keypoints_file;  // --keypoints; empty: none
@@ -188,6 +203,9 @@ struct PhotoEvaluationOptions {
   // The search's setting, as SearchOptions::hand (whose default it shares); `handdb evaluate`
   // passes its --hand, which defaults to either like `handdb query`'s.
   Hand hand = SearchOptions{}.hand;
+  // 1: rank shapes (one match per shape: top-k = the k nearest shapes); 0: rank views (top-k =
+  // the shapes of the k nearest (view, roll, hand) triples). `handdb evaluate --rank`.
+  int max_per_shape = 1;
   int num_threads = -1;  // photos searched in parallel, one search thread each
   bool progress = true;
   bool Check() const;

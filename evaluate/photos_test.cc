@@ -27,9 +27,11 @@ PhotoOutcome Outcome(const std::string& photo, std::vector<std::string> shapes) 
   return o;
 }
 
-// 100 virtual views: 50 of shape a, 30 of b, 20 of c; five photos with known ranks.
+// 100 virtual views: 50 of shape a, 30 of b, 20 of c; five photos with known ranks (views
+// ranked: a shape may fill several ranks).
 PhotoReport KnownReport() {
   PhotoReport r;
+  r.max_per_shape = 0;
   r.database_views = 25;
   r.database_rolls = 4;
   r.database_virtual_views = 100;
@@ -83,6 +85,46 @@ TEST(PhotoEvaluation, ChanceIsTheHypergeometricBaselineAveragedOverPhotos) {
   };
   EXPECT_NEAR(r.chance[1], (3 * (1 - none(100, 50)) + 2 * (1 - none(100, 30))) / 5, 1e-12);
   EXPECT_GT(r.chance[2], r.chance[1]);
+}
+
+// Shapes ranked: the chance of the right shape among the first k distinct shapes of a random
+// ordering, against every arrangement of a small multiset of views counted by hand.
+TEST(PhotoEvaluation, ShapeChanceIsTheFirstDistinctShapesOfARandomOrdering) {
+  const std::map<std::string, uint64_t> sizes = {{"a", 1}, {"b", 2}, {"c", 3}, {"d", 1}};
+  std::vector<char> views = {'a', 'b', 'b', 'c', 'c', 'c', 'd'};
+  std::map<char, std::array<int64_t, 5>> among;  // shape -> arrangements with it in the first k
+  int64_t arrangements = 0;
+  do {
+    ++arrangements;
+    std::string first;
+    for (char v : views) {
+      if (first.find(v) == std::string::npos) first += v;
+    }
+    for (size_t k = 1; k <= 4; ++k) {
+      for (size_t i = 0; i < k; ++i) ++among[first[i]][k];
+    }
+  } while (std::next_permutation(views.begin(), views.end()));
+  for (const auto& [name, n] : sizes) {
+    for (int k = 1; k <= 4; ++k) {
+      SCOPED_TRACE(name + " k=" + std::to_string(k));
+      const double expected =
+          static_cast<double>(among[name[0]][k]) / static_cast<double>(arrangements);
+      EXPECT_NEAR(ChanceOfShapeAmongFirstK(sizes, name, k), expected, 1e-5);
+    }
+  }
+  // k = 1 is the share of the shape's views; equal sizes give k / S; unknown shapes never come.
+  EXPECT_NEAR(ChanceOfShapeAmongFirstK({{"a", 50}, {"b", 30}, {"c", 20}}, "b", 1), 0.3, 1e-5);
+  std::map<std::string, uint64_t> equal;
+  for (int s = 0; s < 26; ++s) equal["s" + std::to_string(s)] = 4128;
+  EXPECT_NEAR(ChanceOfShapeAmongFirstK(equal, "s3", 5), 5.0 / 26, 1e-5);
+  EXPECT_EQ(ChanceOfShapeAmongFirstK(equal, "zzz", 5), 0.0);
+  EXPECT_EQ(ChanceOfShapeAmongFirstK(equal, "s3", 26), 1.0);
+
+  PhotoReport r = KnownReport();
+  r.max_per_shape = 1;
+  FinishPhotoReport(&r);
+  EXPECT_NEAR(r.chance[0], (3 * 0.5 + 2 * 0.3) / 5, 1e-5);
+  EXPECT_EQ(r.chance[1], 1.0);  // three shapes: every one is among the first 5
 }
 
 TEST(PhotoEvaluation, PerShapeTableAndConfusion) {
@@ -350,6 +392,29 @@ class ScorePhotosTest : public ::testing::Test {
   }
 };
 
+// Views ranked: the k nearest (view, roll, hand) triples, several of one shape; the top-1 is the
+// same either way.
+TEST_F(ScorePhotosTest, RankingViewsKeepsEveryNearViewOfAShape) {
+  PhotoSet set = Photos();
+  PhotoEvaluationOptions options = Options(Hand::kEither);
+  options.max_per_shape = 0;
+  auto views = EvaluatePhotos(searcher_, set, QueryFn(), options);
+  auto shapes = EvaluatePhotos(searcher_, set, QueryFn(), Options(Hand::kEither));
+  ASSERT_TRUE(views.ok() && shapes.ok());
+  EXPECT_EQ(views->max_per_shape, 0);
+  EXPECT_EQ(PhotoReportToJson(*views)["search"]["rank"], "views");
+  EXPECT_EQ(PhotoReportToJson(*shapes)["search"]["rank"], "shapes");
+  for (size_t i = 0; i < views->outcomes.size(); ++i) {
+    const PhotoOutcome& v = views->outcomes[i];
+    ASSERT_EQ(v.match_shapes.size(), static_cast<size_t>(kPhotoMatches));
+    EXPECT_LT(std::set<std::string>(v.match_shapes.begin(), v.match_shapes.end()).size(),
+              v.match_shapes.size());
+    EXPECT_EQ(v.top1_view, shapes->outcomes[i].top1_view);
+  }
+  options.max_per_shape = 2;
+  EXPECT_FALSE(options.Check());
+}
+
 TEST_F(ScorePhotosTest, EitherHandFindsTheMirroredPhotoAsALeftHandAndPlacesItsKeypoints) {
   PhotoSet set = Photos();
   auto report = EvaluatePhotos(searcher_, set, QueryFn(), Options(Hand::kEither));
@@ -363,7 +428,9 @@ TEST_F(ScorePhotosTest, EitherHandFindsTheMirroredPhotoAsALeftHandAndPlacesItsKe
     const Shown& s = shown_.at(o.photo);
     EXPECT_EQ(o.top1_view, s.view);
     EXPECT_EQ(o.top1_roll, s.roll);
-    ASSERT_EQ(o.match_hands.size(), static_cast<size_t>(kPhotoMatches));
+    // Shapes ranked (the default): one match per shape, the database's 4 shapes.
+    ASSERT_EQ(o.match_hands.size(), 4u);
+    EXPECT_EQ(std::set<std::string>(o.match_shapes.begin(), o.match_shapes.end()).size(), 4u);
     EXPECT_EQ(o.match_hands[0], s.mirrored ? Hand::kLeft : Hand::kRight);
     // The top-1 keypoints land where the photo shows them: the left hand's mirrored back.
     const auto truth = TrueKeypointsPx(s);
