@@ -255,7 +255,7 @@ SearchOptions Options(SearchMode mode, int candidates) {
   return o;
 }
 
-// With every pair a candidate, indexed search is exact search.
+// With every pair a candidate, indexed search is exact search (also with one match per shape).
 TEST(IndexedSearch, AllPairsAsCandidatesGiveTheExactResult) {
   Searcher searcher(TestDatabase());
   searcher.SetIndex(std::make_shared<ViewIndex>(
@@ -271,6 +271,7 @@ TEST(IndexedSearch, AllPairsAsCandidatesGiveTheExactResult) {
       SearchOptions exact = Options(SearchMode::kExact, 1);
       SearchOptions indexed = Options(SearchMode::kIndexed, kViews * kRolls);
       exact.hand = indexed.hand = hand;
+      exact.max_per_shape = indexed.max_per_shape = static_cast<int>(v % 2);
       SearchStats stats;
       auto a = searcher.Search(query, exact);
       auto b = searcher.Search(query, indexed, &stats);
