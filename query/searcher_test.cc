@@ -105,6 +105,20 @@ std::vector<Match> SearchBothWays(const Searcher& searcher,
   return *a;
 }
 
+// A random view of the test database at a random roll, turned by up to 0.3 rad, shifted by up to
+// 3 px and thinned to 60-100% of its points (`seed` picks the points kept).
+std::vector<Point2f> NearViewQuery(std::mt19937& rng, uint32_t seed) {
+  std::uniform_int_distribution<uint32_t> view(0, kViews - 1);
+  std::uniform_int_distribution<uint32_t> roll(0, kRolls - 1);
+  std::uniform_real_distribution<float> u(-1, 1);
+  return Transform(RolledView(*TestDatabase(), view(rng), roll(rng)),
+                   0.3f * u(rng),
+                   3 * u(rng),
+                   3 * u(rng),
+                   0.6 + 0.4 * (u(rng) + 1) / 2,
+                   seed);
+}
+
 std::vector<Point2f> Mirrored(std::vector<Point2f> pts) {
   for (Point2f& p : pts) p.x = -p.x;
   return pts;
@@ -287,16 +301,8 @@ TEST(Searcher, PerShapeLimitEqualsTheFullRankingFiltered) {
   for (const bool sorted : {false, true}) {
     const Searcher searcher(sorted ? SortedTestDatabase() : TestDatabase());
     std::mt19937 rng(11);
-    std::uniform_int_distribution<uint32_t> view(0, kViews - 1);
-    std::uniform_int_distribution<uint32_t> roll(0, kRolls - 1);
-    std::uniform_real_distribution<float> u(-1, 1);
     for (int i = 0; i < 24; ++i) {
-      std::vector<Point2f> q = Transform(RolledView(*TestDatabase(), view(rng), roll(rng)),
-                                         0.3f * u(rng),
-                                         3 * u(rng),
-                                         3 * u(rng),
-                                         0.6 + 0.4 * (u(rng) + 1) / 2,
-                                         300 + i);
+      std::vector<Point2f> q = NearViewQuery(rng, 300 + i);
       if (i % 4 == 1) q = Mirrored(q);
       SearchOptions pruned = Options(1 + i % 8, 1 + i % 2);
       pruned.max_per_shape = 1 + i % 3 / 2;  // 1, 1, 2, ...
@@ -480,17 +486,9 @@ TEST(Searcher, EitherHandPrunedEqualsBruteForce) {
   for (const bool sorted : {false, true}) {
     const Searcher searcher(sorted ? SortedTestDatabase() : TestDatabase());
     std::mt19937 rng(7);
-    std::uniform_int_distribution<uint32_t> view(0, kViews - 1);
-    std::uniform_int_distribution<uint32_t> roll(0, kRolls - 1);
-    std::uniform_real_distribution<float> u(-1, 1);
     int left_won = 0;
     for (int i = 0; i < 24; ++i) {
-      std::vector<Point2f> q = Transform(RolledView(*TestDatabase(), view(rng), roll(rng)),
-                                         0.3f * u(rng),
-                                         3 * u(rng),
-                                         3 * u(rng),
-                                         0.6 + 0.4 * (u(rng) + 1) / 2,
-                                         100 + i);
+      std::vector<Point2f> q = NearViewQuery(rng, 100 + i);
       if (i % 2) q = Mirrored(q);
       SearchOptions pruned = Options(1 + i % 6, 1 + i % 2);
       pruned.hand = i % 3 == 2 ? Hand::kLeft : Hand::kEither;
