@@ -79,21 +79,20 @@ class TopK {
     if (max_per_shape_ > 0) s.shape = shape_of_[s.view];
     if (s.distance > ThresholdFor(s.view)) return;
     std::lock_guard<std::mutex> lock(mu_);
-    if (max_per_shape_ > 0) {
-      // The shape's m best distances scored so far, whether or not they stay in the list.
-      std::vector<double>& best = shape_best_[s.shape];
-      best.insert(std::upper_bound(best.begin(), best.end(), s.distance), s.distance);
-      if (best.size() > static_cast<size_t>(max_per_shape_)) best.pop_back();
-      if (best.size() == static_cast<size_t>(max_per_shape_)) {
-        shape_threshold_[s.shape].store(best.back(), std::memory_order_relaxed);
-      }
-    }
     if (items_.size() == k_ && !Before(s, items_.back())) return;
     // A pair is scored once (ScoreRollBest marks what it scored); kept as a guard.
     for (const Scored& it : items_) {
       if (it.view == s.view && it.roll == s.roll && it.hand == s.hand) return;
     }
     if (max_per_shape_ > 0) {
+      // The shape's m best distances so far (of pairs that reached here: the others are above
+      // the k-th best, so they would never lower a bound below it).
+      std::vector<double>& best = shape_best_[s.shape];
+      best.insert(std::upper_bound(best.begin(), best.end(), s.distance), s.distance);
+      if (best.size() > static_cast<size_t>(max_per_shape_)) best.pop_back();
+      if (best.size() == static_cast<size_t>(max_per_shape_)) {
+        shape_threshold_[s.shape].store(best.back(), std::memory_order_relaxed);
+      }
       int same = 0;
       size_t worst = 0;
       for (size_t i = 0; i < items_.size(); ++i) {
@@ -1085,12 +1084,14 @@ class QueryRun {
   void NeighbourBounds() {
     ForEachViewBlock([&](size_t b, size_t v0, size_t v1, uint32_t* sums) {
       for (size_t s = 0; s < num_slots(); ++s) {
+        const double threshold = top_.threshold();
         unsigned groups = 0;
         for (size_t v = v0; v < v1; ++v) {
           const size_t e = s * num_views_ + v;
-          if (la_[e] != kNoBound && TotalPx(e) <= top_.ThresholdFor(static_cast<view_id_t>(v))) {
-            groups |= 1u << ((v - v0) / 32);
-          }
+          if (la_[e] == kNoBound) continue;
+          const double t =
+              shape_of_.empty() ? threshold : top_.ThresholdFor(static_cast<view_id_t>(v));
+          if (TotalPx(e) <= t) groups |= 1u << ((v - v0) / 32);
         }
         if (groups == 0) continue;
         coarse_->BlockSums(ctx_.histogram(s), b, sums, /*neighbours=*/true, groups);
@@ -1163,6 +1164,7 @@ class QueryRun {
 
   // No pair i above it can enter the top k (the k-th best, or its view's shape's bound).
   double ThresholdFor(uint32_t i) const {
+    if (shape_of_.empty()) return top_.threshold();
     return top_.ThresholdFor(static_cast<view_id_t>(PairOf(i) % num_views_));
   }
 
