@@ -16,7 +16,8 @@
 // evaluate/evaluate.h); ranking shapes, P(the right shape among the first k distinct shapes of
 // that ordering) (ChanceOfShapeAmongFirstK, k / number of shapes when all are the same size).
 // Photos with 2D keypoint annotations (evaluate/photo_keypoints.h) also get the 2D keypoint error
-// of the top-1 match and of the best of the top 10.
+// of the top-1 match and of the best of the top 10 (ranking shapes: of the 10 nearest shapes'
+// best views).
 //
 // Like evaluate/evaluate.h an evaluation is (1) the per-photo work, ScorePhotos, over any subset
 // of the photos, and (2) the aggregation, FinishPhotoReport, over the outcomes of all of them.
@@ -132,8 +133,8 @@ inline constexpr int kPhotoMatches = 10;
 // P(shape `shape` is among the first k distinct shapes met in a uniformly random ordering of all
 // the views counted in `views_per_shape`): each shape s first appears at T_s, the minimum of its
 // n_s i.i.d. uniform times, independent across shapes, so the probability is
-// integral of n_r (1-t)^(n_r - 1) P(fewer than k other T_s < t) dt, computed numerically (the
-// inner probability by a Poisson-binomial recursion). k / S for S shapes of equal size.
+// integral of n_r (1-t)^(n_r - 1) P(fewer than k other T_s < t) dt, computed by adaptive Simpson
+// (the inner probability by a Poisson-binomial recursion). k / S for S shapes of equal size.
 double ChanceOfShapeAmongFirstK(const std::map<std::string, uint64_t>& views_per_shape,
                                 const std::string& shape,
                                 int k);
