@@ -267,22 +267,25 @@ double ChanceOfShapeAmongFirstK(const std::map<std::string, uint64_t>& views_per
     for (double f : fewer) below_k += f;
     return below_k;
   };
-  std::function<double(double, double, double, double, double, double, int)> simpson =
-      [&](double a, double b, double fa, double fm, double fb, double whole, int depth) {
-        const double m = (a + b) / 2;
-        const double flm = g((a + m) / 2);
-        const double frm = g((m + b) / 2);
-        const double left = (m - a) / 6 * (fa + 4 * flm + fm);
-        const double right = (b - m) / 6 * (fm + 4 * frm + fb);
-        if (depth <= 0 || std::abs(left + right - whole) <= 1e-10) {
-          return left + right + (left + right - whole) / 15;
-        }
-        return simpson(a, m, fa, flm, fm, left, depth - 1) +
-               simpson(m, b, fm, frm, fb, right, depth - 1);
-      };
+  // One Simpson panel [a, b] (ends and middle already evaluated), halved until the two halves
+  // agree with the whole to 1e-10.
+  auto simpson =
+      [&](auto& self, double a, double b, double fa, double fm, double fb, double whole, int depth)
+      -> double {
+    const double m = (a + b) / 2;
+    const double flm = g((a + m) / 2);
+    const double frm = g((m + b) / 2);
+    const double left = (m - a) / 6 * (fa + 4 * flm + fm);
+    const double right = (b - m) / 6 * (fm + 4 * frm + fb);
+    if (depth <= 0 || std::abs(left + right - whole) <= 1e-10) {
+      return left + right + (left + right - whole) / 15;
+    }
+    return self(self, a, m, fa, flm, fm, left, depth - 1) +
+           self(self, m, b, fm, frm, fb, right, depth - 1);
+  };
   const double hi = 1 - 1e-15;  // g(1) is the limit: every other shape has come
   const double f0 = g(0), fm = g(hi / 2), f1 = g(hi);
-  const double sum = simpson(0, hi, f0, fm, f1, hi / 6 * (f0 + 4 * fm + f1), 40);
+  const double sum = simpson(simpson, 0, hi, f0, fm, f1, hi / 6 * (f0 + 4 * fm + f1), 40);
   return std::clamp(sum, 0.0, 1.0);
 }
 
