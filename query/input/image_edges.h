@@ -96,8 +96,9 @@ struct ImageEdgeOptions {
   // A second skin region at least this share of the largest (and min_hand_pixels) means two
   // hands, or a hand and a face: refused (crop the picture or give --roi / --mask). 0: never.
   double second_region_share = 0.5;
-  // The hand may leave the picture in one place (the arm); where it touches the border elsewhere
-  // for more than this share of its diameter (fingers cut off), the picture is refused.
+  // The hand may leave the picture in one place (the arm, along at most 2.5 palm radii of the
+  // border); where it touches the border elsewhere, or the arm's stretch goes on round a corner,
+  // for more than this share of its diameter (fingers or a side cut off), the picture is refused.
   double max_cut_share = 0.25;
   // Label EXR: the converter's edge rule (edges/edges.h). Set these to the options the
   // database was converted with (its manifest records them; `handdb query` reads them) so a

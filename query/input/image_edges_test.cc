@@ -398,14 +398,20 @@ TEST_F(ImageEdgesTest, ThePictureSizeDoesNotChangeTheEdges) {
   EXPECT_EQ(b->width, 3 * 320);
 }
 
-TEST_F(ImageEdgesTest, ForearmIsCutOffAtTheWrist) {
-  const SyntheticHand h = Hand(0);
-  // A skin-coloured forearm from the wrist to the bottom of the picture, narrower than the palm.
-  LabelImage with_arm = h.image;
+// The hand's largest inscribed circle's radius, px.
+double PalmRadius(const LabelImage& li) {
   cv::Mat dt;
-  cv::distanceTransform(HandMask(h.image), dt, cv::DIST_L2, 5);
+  cv::distanceTransform(HandMask(li), dt, cv::DIST_L2, 5);
   double palm_radius = 0;
   cv::minMaxLoc(dt, nullptr, &palm_radius);
+  return palm_radius;
+}
+
+// `h` with a skin-coloured forearm (label 1) from the wrist, away from the middle finger, out of
+// the picture; 1.7 palm radii wide, narrower than the palm.
+LabelImage WithForearm(const SyntheticHand& h) {
+  LabelImage with_arm = h.image;
+  const double palm_radius = PalmRadius(h.image);
   const auto& wrist = h.keypoints_px[0];
   const auto& middle = h.keypoints_px[9];
   const double ux = wrist[0] - middle[0], uy = wrist[1] - middle[1];
@@ -423,6 +429,17 @@ TEST_F(ImageEdgesTest, ForearmIsCutOffAtTheWrist) {
       }
     }
   }
+  return with_arm;
+}
+
+TEST_F(ImageEdgesTest, ForearmIsCutOffAtTheWrist) {
+  const SyntheticHand h = Hand(0);
+  const LabelImage with_arm = WithForearm(h);
+  const double palm_radius = PalmRadius(h.image);
+  const auto& wrist = h.keypoints_px[0];
+  const auto& middle = h.keypoints_px[9];
+  const double ux = wrist[0] - middle[0], uy = wrist[1] - middle[1];
+  const double len = std::hypot(ux, uy);
   auto hand = LoadQueryEdges(WritePhoto(h.image, "hand.png"), ImageEdgeOptions{});
   auto cut = LoadQueryEdges(WritePhoto(with_arm, "arm.png"), ImageEdgeOptions{});
   ImageEdgeOptions keep_arm;
@@ -487,6 +504,23 @@ TEST_F(ImageEdgesTest, PicturesTheSearchCannotUseAreRefusedInOneLine) {
   r = LoadQueryEdges(cut_path, o);
   EXPECT_EQ(r.status().code(), StatusCode::kNoHand);
   EXPECT_NE(r.status().message().find("cut.png: the hand is cut by the picture's border"),
+            std::string::npos)
+      << r.status().message();
+
+  // A hand with its arm, cropped through both by the right side: the hand's stretch of that side
+  // runs round the corner into the arm's along the bottom, which may not hide it.
+  const LabelImage with_arm = WithForearm(h);
+  const auto& wrist = h.keypoints_px[0];
+  ASSERT_TRUE(LoadQueryEdges(WritePhoto(with_arm, "arm.png"), o).ok());
+  LabelImage cropped;
+  cropped.width = static_cast<int>(wrist[0]) + 6;
+  cropped.height = with_arm.height;
+  for (int y = 0; y < cropped.height; ++y) {
+    for (int x = 0; x < cropped.width; ++x) cropped.labels.push_back(with_arm.label(x, y));
+  }
+  r = LoadQueryEdges(WritePhoto(cropped, "side.png"), o);
+  EXPECT_EQ(r.status().code(), StatusCode::kNoHand);
+  EXPECT_NE(r.status().message().find("side.png: the hand is cut by the picture's border"),
             std::string::npos)
       << r.status().message();
 
