@@ -407,19 +407,25 @@ double PalmRadius(const LabelImage& li) {
   return palm_radius;
 }
 
-// `h` with a skin-coloured forearm (label 1) from the wrist, away from the middle finger, out of
-// the picture; 1.7 palm radii wide, narrower than the palm.
+// The unit vector from the middle finger's base to the wrist: where `h`'s forearm goes.
+cv::Point2d ArmDirection(const SyntheticHand& h) {
+  const auto& wrist = h.keypoints_px[0];
+  const auto& middle = h.keypoints_px[9];
+  const cv::Point2d u(wrist[0] - middle[0], wrist[1] - middle[1]);
+  return u / std::hypot(u.x, u.y);
+}
+
+// `h` with a skin-coloured forearm (label 1) from the wrist along ArmDirection out of the
+// picture; 1.7 palm radii wide, narrower than the palm.
 LabelImage WithForearm(const SyntheticHand& h) {
   LabelImage with_arm = h.image;
   const double palm_radius = PalmRadius(h.image);
   const auto& wrist = h.keypoints_px[0];
-  const auto& middle = h.keypoints_px[9];
-  const double ux = wrist[0] - middle[0], uy = wrist[1] - middle[1];
-  const double len = std::hypot(ux, uy);
+  const cv::Point2d u = ArmDirection(h);
   cv::Mat arm = cv::Mat::zeros(with_arm.height, with_arm.width, CV_8U);
   cv::line(arm,
            cv::Point(int(wrist[0]), int(wrist[1])),
-           cv::Point(int(wrist[0] + 1000 * ux / len), int(wrist[1] + 1000 * uy / len)),
+           cv::Point(int(wrist[0] + 1000 * u.x), int(wrist[1] + 1000 * u.y)),
            255,
            int(1.7 * palm_radius));
   for (int y = 0; y < arm.rows; ++y) {
@@ -436,10 +442,7 @@ TEST_F(ImageEdgesTest, ForearmIsCutOffAtTheWrist) {
   const SyntheticHand h = Hand(0);
   const LabelImage with_arm = WithForearm(h);
   const double palm_radius = PalmRadius(h.image);
-  const auto& wrist = h.keypoints_px[0];
-  const auto& middle = h.keypoints_px[9];
-  const double ux = wrist[0] - middle[0], uy = wrist[1] - middle[1];
-  const double len = std::hypot(ux, uy);
+  const cv::Point2d u = ArmDirection(h);
   auto hand = LoadQueryEdges(WritePhoto(h.image, "hand.png"), ImageEdgeOptions{});
   auto cut = LoadQueryEdges(WritePhoto(with_arm, "arm.png"), ImageEdgeOptions{});
   ImageEdgeOptions keep_arm;
@@ -465,7 +468,7 @@ TEST_F(ImageEdgesTest, ForearmIsCutOffAtTheWrist) {
   EXPECT_FALSE(uncut->arm_found);
   ASSERT_TRUE(cut->arm_found);
   EXPECT_NEAR(std::hypot(cut->arm_dir_x, cut->arm_dir_y), 1.0, 1e-9);
-  EXPECT_GT((cut->arm_dir_x * ux + cut->arm_dir_y * uy) / len, std::cos(0.35));  // within 20 deg
+  EXPECT_GT(cut->arm_dir_x * u.x + cut->arm_dir_y * u.y, std::cos(0.35));  // within 20 deg
 }
 
 TEST_F(ImageEdgesTest, PicturesTheSearchCannotUseAreRefusedInOneLine) {
