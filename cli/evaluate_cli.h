@@ -32,6 +32,9 @@ struct EvaluateFlags {
   std::string distance = "rms";
   std::string roll_compare = "aligned";
   EvaluationOptions options;
+  // --input photo: the installed landmark model (ResolveLandmarker("auto")), as `handdb query`
+  // uses by default; a test set's photos take the photo path's defaults.
+  std::shared_ptr<const HandLandmarker> landmarker;
   void Add(CLI::App& app);
   // Completes `options` after parsing; false (message printed) on bad usage.
   bool Finish(const std::string& cmd, bool quiet);
@@ -45,9 +48,11 @@ struct EvaluateFlags {
 // Test view -> query edge points: the clean label render through the database's own conversion
 // (the edge options its manifest records), or the photo through the real-image path.
 // `db` is DB_DIR opened: its manifest's recorded edge options convert clean (label) queries.
+// A photo's landmarks come from `landmarker` (null: none).
 Result<QueryPointsFn> MakeQueryPointsFn(QueryInput input,
                                         const std::filesystem::path& db_dir,
-                                        const Database& db);
+                                        const Database& db,
+                                        std::shared_ptr<const HandLandmarker> landmarker);
 
 // Warns on stderr when the database's manifest records the test set's seed or another hand model.
 void WarnIfTestSetMatchesDatabase(const std::filesystem::path& db_dir, const TestSet& testset);

@@ -226,6 +226,11 @@ bool EvaluateFlags::Finish(const std::string& cmd, bool quiet) {
     std::fprintf(stderr, "handdb %s: --max-rank must be at least --first-k\n", cmd.c_str());
     return false;
   }
+  if (query_input() == QueryInput::kPhoto) {
+    if (!ResolveLandmarker("auto", cmd, &landmarker)) return false;
+    options.landmark_model = landmarker ? landmarker->path().string() : "";
+    options.landmark_rank.enabled = landmarker != nullptr;
+  }
   return true;
 }
 
@@ -262,7 +267,8 @@ std::vector<std::string> EvaluateFlags::Args() const {
 
 Result<QueryPointsFn> MakeQueryPointsFn(QueryInput input,
                                         const fs::path& db_dir,
-                                        const Database& db) {
+                                        const Database& db,
+                                        std::shared_ptr<const HandLandmarker> landmarker) {
   if (input == QueryInput::kClean) {
     // The label render through the database's own conversion (edges, normalisation): the edge
     // options its manifest records (conversion.edges), else the defaults. From the manifest the
@@ -277,7 +283,7 @@ Result<QueryPointsFn> MakeQueryPointsFn(QueryInput input,
                    fallback.c_str());
     }
     const ViewConversionOptions view_options = *recorded;
-    return QueryPointsFn([view_options](const TestView& view) -> Result<std::vector<Point2f>> {
+    return QueryPointsFn([view_options](const TestView& view) -> Result<TestQuery> {
       auto image = ReadLabelExr(view.label, ExrReadOptions{});
       if (!image.ok()) return image.status();
       auto converted =
@@ -287,11 +293,11 @@ Result<QueryPointsFn> MakeQueryPointsFn(QueryInput input,
       points.reserve(converted->points.size());
       for (const PointQ& p : converted->points)
         points.push_back({PointQToPx(p.x), PointQToPx(p.y)});
-      return points;
+      return TestQuery(std::move(points));
     });
   }
   // The photo through the real-image path: skin segmentation, Canny, the same normalisation.
-  return QueryPointsFn([](const TestView& view) -> Result<std::vector<Point2f>> {
+  return QueryPointsFn([landmarker](const TestView& view) -> Result<TestQuery> {
     if (view.photo.empty()) {
       return Status(StatusCode::kNotFound,
                     "test view " + std::to_string(view.id) +
@@ -299,9 +305,10 @@ Result<QueryPointsFn> MakeQueryPointsFn(QueryInput input,
     }
     ImageEdgeOptions image_options;
     image_options.kind = QueryInputKind::kPhoto;
+    image_options.landmarker = landmarker;
     auto edges = LoadQueryEdges(view.photo, image_options);
     if (!edges.ok()) return edges.status();
-    return edges->points_px();
+    return TestQuery(std::move(edges).value());
   });
 }
 
@@ -410,7 +417,8 @@ int RunEvaluate(int argc, char** argv) {
   WarnIfTestSetMatchesDatabase(db_dir, *testset);
 
   const QueryInput query_input = flags.query_input();
-  auto points_fn = MakeQueryPointsFn(query_input, db_dir, (*searcher)->database());
+  auto points_fn =
+      MakeQueryPointsFn(query_input, db_dir, (*searcher)->database(), flags.landmarker);
   if (!points_fn.ok()) return Fail("evaluate", points_fn.status());
   auto report = Evaluate(**searcher, *testset, query_input, *points_fn, flags.options);
   if (!report.ok()) return Fail("evaluate", report.status());

@@ -102,8 +102,13 @@ void PhotoEvaluateFlags::Add(CLI::App& app, bool with_input) {
   which.input = with_input;
   which.mask = false;
   picture.Add(app, which);
-  for (const char* name :
-       {"--roi", "--skin", "--canny", "--contour-clearance", "--edges-outside"}) {
+  for (const char* name : {"--roi",
+                           "--skin",
+                           "--canny",
+                           "--contour-clearance",
+                           "--edges-outside",
+                           "--landmarks",
+                           "--landmark-weight"}) {
     app.get_option(name)->group(kPhotoGroup);
   }
   if (with_input) app.get_option("--input")->group(kPhotoGroup);
@@ -117,6 +122,7 @@ bool PhotoEvaluateFlags::Finish(const std::string& cmd, int threads, bool quiet)
   if (!picture.Finish(cmd)) return false;
   options.hand = hand.Get();
   options.max_per_shape = rank == "shapes" ? 1 : 0;
+  options.landmark_rank = picture.landmark_rank;
   options.num_threads = threads;
   options.progress = !quiet;
   return options.Check();
@@ -215,7 +221,9 @@ bool CheckTestSetEvaluateUsage(const CLI::App& app) {
                            "--contour-clearance",
                            "--edges-outside",
                            "--work-diameter",
-                           "--no-wrist-cut"}) {
+                           "--no-wrist-cut",
+                           "--landmarks",
+                           "--landmark-weight"}) {
     if (app.get_option(name)->count() > 0) {
       std::fprintf(stderr,
                    "handdb evaluate: %s applies to --photos DIR; a test set uses --plots and its "

@@ -362,7 +362,7 @@ int UnitEvaluateCommands::Run() {
   auto fp = ComputeEvaluationFingerprint(db_, *testset, input, options, tasks_);
   if (!fp.ok()) return Fail(cmd, fp.status());
   const std::vector<uint32_t> selected = SelectTestViews(*testset, options);
-  auto points = MakeQueryPointsFn(input, db_, (*searcher)->database());
+  auto points = MakeQueryPointsFn(input, db_, (*searcher)->database(), flags_.landmarker);
   if (!points.ok()) return Fail(cmd, points.status());
 
   if (merge) {

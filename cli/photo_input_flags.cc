@@ -70,6 +70,17 @@ void PhotoInputFlags::Add(CLI::App& app, Which which) {
       [this] { edges.cut_forearm = false; },
       "photo: keep a forearm that leaves the picture (by default it is cut off at the wrist, "
       "docs/query.md)");
+  app.add_option("--landmarks",
+                 landmarks,
+                 "photo: re-rank the nearest views by the hand landmarks a pretrained network "
+                 "finds (docs/query.md): auto (the model scripts/deps.sh installs; D_c alone "
+                 "with a warning if it is missing), off, or a .tflite model file")
+      ->capture_default_str();
+  app.add_option("--landmark-weight",
+                 landmark_rank.weight,
+                 "photo: weight of the landmark fit against D_c / best D_c in the ranking")
+      ->check(CLI::Range(0.0, 100.0))
+      ->capture_default_str();
 }
 
 bool PhotoInputFlags::Finish(const std::string& cmd) {
@@ -133,6 +144,16 @@ bool PhotoInputFlags::Finish(const std::string& cmd) {
     std::fprintf(stderr, "handdb %s: invalid photo options (see above)\n", c);
     return false;
   }
+  // Edge images and label EXRs have no photo to find landmarks in.
+  if (edges.kind != QueryInputKind::kEdges && edges.kind != QueryInputKind::kLabels &&
+      !ResolveLandmarker(landmarks, cmd, &edges.landmarker)) {
+    return false;
+  }
+  landmark_rank.enabled = edges.landmarker != nullptr;
+  if (!landmark_rank.Check()) {
+    std::fprintf(stderr, "handdb %s: invalid landmark options (see above)\n", c);
+    return false;
+  }
   return true;
 }
 
@@ -155,6 +176,12 @@ std::vector<std::string> PhotoInputFlags::Args() const {
   if (!edges.interior_edges_only) args.push_back("--edges-outside");
   args.insert(args.end(), {"--work-diameter", std::to_string(edges.work_diameter_px)});
   if (!edges.cut_forearm) args.push_back("--no-wrist-cut");
+  // The model this process resolved, so every task uses the same one (or none).
+  args.insert(args.end(),
+              {"--landmarks",
+               edges.landmarker ? edges.landmarker->path().string() : std::string("off"),
+               "--landmark-weight",
+               std::to_string(landmark_rank.weight)});
   return args;
 }
 
@@ -169,7 +196,38 @@ nlohmann::json PhotoInputFlags::ToJson() const {
       {"contour_clearance_px", edges.contour_clearance_px},
       {"interior_edges_only", edges.interior_edges_only},
       {"work_diameter_px", edges.work_diameter_px},
-      {"cut_forearm", edges.cut_forearm}};
+      {"cut_forearm", edges.cut_forearm},
+      {"landmarks",
+       edges.landmarker ? nlohmann::json(edges.landmarker->path().string())
+                        : nlohmann::json(nullptr)},
+      {"landmark_weight", landmark_rank.weight}};
+}
+
+bool ResolveLandmarker(const std::string& spec,
+                       const std::string& cmd,
+                       std::shared_ptr<const HandLandmarker>* out) {
+  out->reset();
+  if (spec == "off") return true;
+  const bool automatic = spec == "auto";
+  const std::filesystem::path model =
+      automatic ? HandLandmarker::DefaultModelPath() : std::filesystem::path(spec);
+  std::error_code ec;
+  if (automatic && !std::filesystem::exists(model, ec)) {
+    std::fprintf(stderr,
+                 "handdb %s: warning: no hand landmark model at %s (scripts/deps.sh --asset "
+                 "installs it): photos are ranked by D_c alone\n",
+                 cmd.c_str(),
+                 model.string().c_str());
+    return true;
+  }
+  auto opened = HandLandmarker::Open(model);
+  if (!opened.ok()) {
+    std::fprintf(
+        stderr, "handdb %s: --landmarks: %s\n", cmd.c_str(), opened.status().message().c_str());
+    return false;
+  }
+  *out = std::move(opened).value();
+  return true;
 }
 
 void HandFlag::Add(CLI::App& app, const std::string& what) {

@@ -12,16 +12,22 @@
 #include "base/status.h"
 #include "query/database.h"
 #include "query/input/image_edges.h"
+#include "query/landmark_rank.h"
 #include "query/searcher.h"
 
 namespace handdb::cli {
 
 // --input, --mask, --roi, --skin, --canny, --contour-clearance, --edges-outside,
-// --work-diameter, --no-wrist-cut, bound to ImageEdgeOptions.
+// --work-diameter, --no-wrist-cut, bound to ImageEdgeOptions; --landmarks,
+// --landmark-weight, bound to the landmark re-ranking (query/landmark_rank.h).
 struct PhotoInputFlags {
   std::string input = std::string(QueryInputKindName(QueryInputKind::kAuto));
   std::string mask, roi, skin, canny;
+  // auto: the installed model (HandLandmarker::DefaultModelPath), or D_c alone with a warning
+  // when it is not installed; off; or a model file.
+  std::string landmarks = "auto";
   ImageEdgeOptions edges;
+  LandmarkRankOptions landmark_rank;
 
   // Which flags a command takes: --input (the kind of picture) only where no other --input
   // exists, --mask only where there is one picture (a mask belongs to one photo).
@@ -30,8 +36,8 @@ struct PhotoInputFlags {
     bool mask = true;
   };
   void Add(CLI::App& app, Which which);
-  // Completes `edges` from the text flags; false (one line "handdb <cmd>: ..." on stderr) on bad
-  // usage.
+  // Completes `edges` from the text flags and opens the landmark model; false (one line
+  // "handdb <cmd>: ..." on stderr) on bad usage or a model that cannot be loaded.
   bool Finish(const std::string& cmd);
   // Label EXRs become queries exactly like the database's views: the edge options its manifest
   // records (from the manifest `db` was opened with; a convert may have replaced the file since).
@@ -41,6 +47,14 @@ struct PhotoInputFlags {
   // The resolved options that change a query (not the mask), for fingerprints and reports.
   nlohmann::json ToJson() const;
 };
+
+// The landmark model `spec` names: "off" -> null; "auto" -> the installed model
+// (HandLandmarker::DefaultModelPath), or null with a one-line warning on stderr when it is not
+// installed; else the model file. False (one line "handdb <cmd>: ..." on stderr) when a model
+// cannot be loaded.
+bool ResolveLandmarker(const std::string& spec,
+                       const std::string& cmd,
+                       std::shared_ptr<const HandLandmarker>* out);
 
 // --hand right|left|either. The default is `handdb query`'s (either: the query and its mirror
 // image are both searched); the library's SearchOptions keeps kRight.

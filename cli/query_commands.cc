@@ -17,6 +17,7 @@
 #include "handdb_version.h"
 #include "query/input/image_edges.h"
 #include "query/input/sheet.h"
+#include "query/landmark_rank.h"
 #include "query/searcher.h"
 
 namespace handdb::cli {
@@ -42,27 +43,32 @@ json MatchJson(const Match& m, int rank, const QueryEdges& query) {
     const Point2f p = query.ImageFromNormalised({k[0], k[1]});
     kps_image.push_back({p.x, p.y});
   }
-  return {{"rank", rank},
-          {"view_id", m.view_id},
-          {"roll", m.roll},
-          {"roll_deg", Deg0To360(m.roll_angle)},
-          {"distance", m.distance},
-          {"a", m.a},
-          {"b", m.b},
-          {"render_id", l.render_id},
-          {"shape_id", l.shape_id},
-          {"shape_name", m.shape_name},
-          {"dir_id", l.dir_id},
-          {"joint_angles", l.joint_angles},
-          {"view_direction", l.view_direction},
-          {"view_theta", l.view_theta},
-          {"view_phi", l.view_phi},
-          {"view_theta_deg", l.view_theta * kDeg},
-          {"view_phi_deg", l.view_phi * kDeg},
-          {"camera_roll", l.camera_roll},
-          {"hand", std::string(HandName(m.hand))},
-          {"keypoints", kps},
-          {"keypoints_image_px", kps_image}};
+  json j = {{"rank", rank},
+            {"view_id", m.view_id},
+            {"roll", m.roll},
+            {"roll_deg", Deg0To360(m.roll_angle)},
+            {"distance", m.distance},
+            {"a", m.a},
+            {"b", m.b},
+            {"render_id", l.render_id},
+            {"shape_id", l.shape_id},
+            {"shape_name", m.shape_name},
+            {"dir_id", l.dir_id},
+            {"joint_angles", l.joint_angles},
+            {"view_direction", l.view_direction},
+            {"view_theta", l.view_theta},
+            {"view_phi", l.view_phi},
+            {"view_theta_deg", l.view_theta * kDeg},
+            {"view_phi_deg", l.view_phi * kDeg},
+            {"camera_roll", l.camera_roll},
+            {"hand", std::string(HandName(m.hand))},
+            {"keypoints", kps},
+            {"keypoints_image_px", kps_image}};
+  if (m.score >= 0) {
+    j["score"] = m.score;
+    j["landmark_error"] = m.landmark_error;
+  }
+  return j;
 }
 
 void PrintTable(const std::vector<Match>& matches,
@@ -78,6 +84,14 @@ void PrintTable(const std::vector<Match>& matches,
       q.diameter_px,
       q.forearm_cut ? ", forearm cut at the wrist" : "",
       q.touches_border && !q.forearm_cut ? "  [warning: the hand touches the image border]" : "");
+  if (q.landmarks) {
+    const bool used = !matches.empty() && matches.front().score >= 0;
+    std::printf("hand landmarks: presence %.3f, %s\n",
+                static_cast<double>(q.landmarks->presence),
+                used ? "the nearest views re-ranked by D_c / best D_c + weight x landmark error "
+                       "(column lm, in hand radii)"
+                     : "below the 0.9 the ranking needs: ranked by D_c alone");
+  }
   std::printf(
       "database: %zu views x %u rolls = %llu virtual views; exact D_c for %llu (%.2f%%), "
       "%.1f ms\n\n",
@@ -98,9 +112,10 @@ void PrintTable(const std::vector<Match>& matches,
         "k");
   }
   // Key joint angles: the flexion of each finger's base joint (thumb CMC, index..pinky MCP).
-  std::printf("%4s  %8s  %-16s  %-5s  %7s %7s  %6s  %29s\n",
+  std::printf("%4s  %8s  %5s  %-16s  %-5s  %7s %7s  %6s  %29s\n",
               "rank",
               "D_c",
+              "lm",
               "shape",
               "hand",
               "theta",
@@ -112,19 +127,23 @@ void PrintTable(const std::vector<Match>& matches,
     const ViewLabel& l = m.label;
     const std::string shape =
         m.shape_name.empty() ? "#" + std::to_string(l.shape_id) : m.shape_name;
-    std::printf("%4d  %8.3f  %-16.16s  %-5s  %7.1f %7.1f  %6.1f  %5.0f %5.0f %5.0f %5.0f %5.0f\n",
-                rank++,
-                m.distance,
-                shape.c_str(),
-                std::string(HandName(m.hand)).c_str(),
-                l.view_theta * kDeg,
-                l.view_phi * kDeg,
-                Deg0To360(m.roll_angle),
-                l.joint_angles[0] * kDeg,
-                l.joint_angles[4] * kDeg,
-                l.joint_angles[8] * kDeg,
-                l.joint_angles[12] * kDeg,
-                l.joint_angles[16] * kDeg);
+    char lm[16] = "-";
+    if (m.landmark_error >= 0) std::snprintf(lm, sizeof(lm), "%.3f", m.landmark_error);
+    std::printf(
+        "%4d  %8.3f  %5s  %-16.16s  %-5s  %7.1f %7.1f  %6.1f  %5.0f %5.0f %5.0f %5.0f %5.0f\n",
+        rank++,
+        m.distance,
+        lm,
+        shape.c_str(),
+        std::string(HandName(m.hand)).c_str(),
+        l.view_theta * kDeg,
+        l.view_phi * kDeg,
+        Deg0To360(m.roll_angle),
+        l.joint_angles[0] * kDeg,
+        l.joint_angles[4] * kDeg,
+        l.joint_angles[8] * kDeg,
+        l.joint_angles[12] * kDeg,
+        l.joint_angles[16] * kDeg);
   }
 }
 
@@ -295,6 +314,20 @@ json ResultJson(const QueryFlags& flags,
                                      {query.wrist_line[2], query.wrist_line[3]}};
     }
     if (query.arm_found) query_json["arm_direction"] = {query.arm_dir_x, query.arm_dir_y};
+    if (query.landmarks) {
+      const HandLandmarks& l = *query.landmarks;
+      json px = json::array();
+      for (const Point2f& p : l.image_px) px.push_back({p.x, p.y});
+      query_json["landmarks"] = {{"model", flags.picture.edges.landmarker->path().string()},
+                                 {"presence", l.presence},
+                                 {"used", UsesLandmarks(query, flags.picture.landmark_rank)},
+                                 {"weight", flags.picture.landmark_rank.weight},
+                                 {"image_px", px},
+                                 {"crop",
+                                  {{"centre_px", {l.crop_centre.x, l.crop_centre.y}},
+                                   {"side_px", l.crop_side_px},
+                                   {"angle_deg", l.crop_angle_deg}}}};
+    }
   }
   return {{"format", "handdb-query-result"},
           {"version", 1},
@@ -377,7 +410,7 @@ int RunQuery(int argc, char** argv) {
   auto query = LoadQueryEdges(flags.image, flags.picture.edges);
   if (!query.ok()) return Fail("query", query.status());
   SearchStats stats;
-  auto matches = searcher.Search(query->points_px(), flags.search, &stats);
+  auto matches = SearchQuery(searcher, *query, flags.search, flags.picture.landmark_rank, &stats);
   if (!matches.ok()) return Fail("query", matches.status());
 
   if (!flags.sheet.empty()) {

@@ -35,7 +35,7 @@ set(HANDDB_DOORS_generator plan/plan.h hand/hand_model.h render/blender.h render
                            convert/converter.h testset/testset.h)
 set(HANDDB_DOORS_query database.h searcher.h kdtree.h coarse_bound.h index/view_index.h
                        index/embedding.h input/image_edges.h
-                       input/sheet.h)
+                       input/hand_landmarks.h input/sheet.h landmark_rank.h)
 set(HANDDB_DOORS_evaluate evaluate.h metrics.h plots.h parts.h photos.h photo_keypoints.h)
 set(HANDDB_MODULES base format cluster edges generator query evaluate)
 

@@ -308,17 +308,21 @@ Result<std::vector<ViewOutcome>> EvaluateViews(const Searcher& searcher,
     out.num_correct = correct_pairs[0];
     out.correct_pairs = correct_pairs;
     const auto t_input = std::chrono::steady_clock::now();
-    auto points = query_points(view);
+    auto query = query_points(view);
     out.input_seconds = SecondsSince(t_input);
-    if (!points.ok()) {
-      out.error = points.status().message();
+    if (!query.ok()) {
+      out.error = query.status().message();
       outcomes.push_back(std::move(out));
       progress.Add();
       continue;
     }
-    out.num_query_points = points->size();
+    auto search = [&](const SearchOptions& o) {
+      return query->picture ? SearchQuery(searcher, *query->picture, o, options.landmark_rank)
+                            : searcher.Search(query->points, o);
+    };
+    out.num_query_points = query->points.size();
     const auto t_search = std::chrono::steady_clock::now();
-    auto matches = searcher.Search(*points, first);
+    auto matches = search(first);
     out.search_seconds = SecondsSince(t_search);
     if (!matches.ok()) {
       out.error = matches.status().message();
@@ -348,7 +352,7 @@ Result<std::vector<ViewOutcome>> EvaluateViews(const Searcher& searcher,
     };
     const bool missing = rank_all(*matches);
     if (missing && deep.top_k > first.top_k) {
-      auto deeper = searcher.Search(*points, deep);
+      auto deeper = search(deep);
       if (deeper.ok()) {
         rank_all(*deeper);
         out.deep_search = true;
@@ -367,7 +371,7 @@ Result<std::vector<ViewOutcome>> EvaluateViews(const Searcher& searcher,
       }
       out.best10_keypoint_error = best10;
     }
-    out.query_points = std::move(*points);
+    out.query_points = std::move(query->points);
     outcomes.push_back(std::move(out));
     progress.Add();
   }
@@ -674,8 +678,8 @@ Status WriteReportPlots(const EvaluationReport& report,
     tile.query_points = v.query_points;
     if (tile.query_points.empty() && v.error.empty() && query_points &&
         v.testset_index < testset.views.size()) {
-      auto points = query_points(testset.views[v.testset_index]);
-      if (points.ok()) tile.query_points = std::move(*points);
+      auto query = query_points(testset.views[v.testset_index]);
+      if (query.ok()) tile.query_points = std::move(query->points);
     }
     if (v.top1) {
       tile.caption2 = "top-1 " + v.top1->shape_name +

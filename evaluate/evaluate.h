@@ -28,6 +28,8 @@
 #include "base/status.h"
 #include "evaluate/metrics.h"
 #include "format/roll.h"
+#include "query/input/image_edges.h"
+#include "query/landmark_rank.h"
 #include "query/searcher.h"
 
 namespace handdb {
@@ -60,9 +62,18 @@ Result<TestSet> ReadTestSet(const std::filesystem::path& dir_or_file);
 enum class QueryInput { kClean, kPhoto };
 const char* QueryInputName(QueryInput input);
 
-// Turns a test view into query edge points in the normalised frame (px). An error (e.g. no hand
-// found in a photo) is recorded for that view, which then counts as having no correct match.
-using QueryPointsFn = std::function<Result<std::vector<Point2f>>(const TestView&)>;
+// A test view's query: edge points in the normalised frame (px) and, for a photo, the photo
+// path's whole result, whose hand landmarks (if any) re-rank the search (query/landmark_rank.h).
+struct TestQuery {
+  std::vector<Point2f> points;
+  std::optional<QueryEdges> picture;
+  explicit TestQuery(std::vector<Point2f> p) : points(std::move(p)) {}
+  explicit TestQuery(QueryEdges q) : points(q.points_px()), picture(std::move(q)) {}
+};
+
+// Turns a test view into its query. An error (e.g. no hand found in a photo) is recorded for
+// that view, which then counts as having no correct match.
+using QueryPointsFn = std::function<Result<TestQuery>(const TestView&)>;
 
 struct EvaluationOptions {
   CorrectnessOptions correctness;                        // the main criterion (Table 1)
@@ -74,6 +85,10 @@ struct EvaluationOptions {
   int max_views = 0;                  // evaluate only the first N test views (0: all)
   int stride = 1;                     // evaluate every stride-th test view (0, s, 2s, ...)
   bool progress = true;
+  // Photo queries with landmarks are re-ranked by them, as `handdb query` does; the model's path
+  // ("" when none) is part of a Slurm run's fingerprint.
+  LandmarkRankOptions landmark_rank;
+  std::string landmark_model;
   bool Check() const;
 };
 

@@ -38,8 +38,8 @@ TEST(Evaluate, DatabaseViewsAreFoundAtRankOne) {
   for (uint32_t i = 0; i < sources.size(); ++i) {
     set.views.push_back(testing::ViewOf(*db, i, sources[i].v, sources[i].r, i == 0));
   }
-  auto points = [&](const TestView& t) -> Result<std::vector<Point2f>> {
-    return testing::RolledView(*db, sources[t.id].v, sources[t.id].r);
+  auto points = [&](const TestView& t) -> Result<TestQuery> {
+    return TestQuery(testing::RolledView(*db, sources[t.id].v, sources[t.id].r));
   };
   auto report = Evaluate(searcher, set, QueryInput::kClean, points, FastOptions());
   ASSERT_TRUE(report.ok()) << report.status().ToString();
@@ -79,7 +79,7 @@ TEST(Evaluate, RanksBeyondTheFirstSearchAreExact) {
   TestSet set;
   set.views.push_back(testing::ViewOf(*db, 0, 5, 2, false));
   const std::vector<Point2f> query = testing::RolledView(*db, 30, 7);
-  auto points = [&](const TestView&) -> Result<std::vector<Point2f>> { return query; };
+  auto points = [&](const TestView&) -> Result<TestQuery> { return TestQuery(query); };
   EvaluationOptions options = FastOptions();
   auto report = Evaluate(searcher, set, QueryInput::kClean, points, options);
   ASSERT_TRUE(report.ok());
@@ -114,9 +114,9 @@ TEST(Evaluate, UnreachableTruthAndFailedInputsLandInTheLastBin) {
   set.views.push_back(testing::ViewOf(*db, 0, 8, 0, false));
   for (auto& j : set.views[0].truth.joint_angles) j += 2.0f;  // no database shape is near
   set.views.push_back(testing::ViewOf(*db, 1, 9, 0, true));
-  auto points = [&](const TestView& t) -> Result<std::vector<Point2f>> {
+  auto points = [&](const TestView& t) -> Result<TestQuery> {
     if (t.id == 1) return Status(StatusCode::kNoHand, "photo: no hand found");
-    return testing::RolledView(*db, 8, 0);
+    return TestQuery(testing::RolledView(*db, 8, 0));
   };
   auto report = Evaluate(searcher, set, QueryInput::kPhoto, points, FastOptions());
   ASSERT_TRUE(report.ok());

@@ -206,7 +206,9 @@ json ScoringOptionsToJson(const EvaluationOptions& options) {
           {"first_k", options.first_k},
           {"max_rank", options.max_rank},
           {"max_views", options.max_views},
-          {"stride", options.stride}};
+          {"stride", options.stride},
+          {"landmark_model", options.landmark_model},
+          {"landmark_weight", options.landmark_rank.weight}};
 }
 
 EvaluationFingerprint MakeEvaluationFingerprint(const std::string& database_manifest_xxh3,

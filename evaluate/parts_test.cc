@@ -42,10 +42,10 @@ struct Case {
     set.dir = "/tests/ts";
     set.file = "/tests/ts/testset.json";
     set.seed = 42;
-    points = [this](const TestView& t) -> Result<std::vector<Point2f>> {
+    points = [this](const TestView& t) -> Result<TestQuery> {
       if (t.id == 105) return Status(StatusCode::kNoHand, "photo: no hand found");
       const auto [v, r] = query_of[t.id - 100];
-      return testing::RolledView(*db, v, r);
+      return TestQuery(testing::RolledView(*db, v, r));
     };
   }
 };

@@ -500,7 +500,7 @@ Result<std::vector<PhotoOutcome>> ScorePhotos(const Searcher& searcher,
     }
     std::vector<Point2f> points = query->points_px();
     t = std::chrono::steady_clock::now();
-    auto matches = searcher.Search(points, search);
+    auto matches = SearchQuery(searcher, *query, search, options.landmark_rank);
     o.search_seconds = SecondsSince(t);
     if (!matches.ok()) {
       // A query that the search rejects (e.g. empty) is a failed input like "no hand".

@@ -42,6 +42,7 @@
 #include "evaluate/photo_keypoints.h"
 #include "format/view.h"
 #include "query/input/image_edges.h"
+#include "query/landmark_rank.h"
 #include "query/searcher.h"
 
 namespace handdb {
@@ -209,6 +210,9 @@ struct PhotoEvaluationOptions {
   int max_per_shape = 1;
   int num_threads = -1;  // photos searched in parallel, one search thread each
   bool progress = true;
+  // A query with hand landmarks (ImageEdgeOptions::landmarker) is re-ranked by them
+  // (query/landmark_rank.h), as `handdb query` does.
+  LandmarkRankOptions landmark_rank;
   bool Check() const;
 };
 

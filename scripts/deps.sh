@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Installs everything handdb needs on a fresh Debian 12 machine (as root), idempotently:
-# Debian packages, and the default hand asset from the npm registry (pinned version + sha256).
-#   scripts/deps.sh            # packages + asset
-#   scripts/deps.sh --asset    # only the hand asset
+# Debian packages, and from the npm registry (pinned versions + sha256) the default hand asset
+# and the hand landmark model.
+#   scripts/deps.sh            # packages + assets
+#   scripts/deps.sh --asset    # only the assets
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 
@@ -72,8 +73,43 @@ install_asset() {
   echo "deps: installed $glb (sha256 $ASSET_GLB_SHA256)"
 }
 
+# The hand landmark network the photo path runs (query/input/hand_landmarks.h): MediaPipe
+# Hands' hand_landmark_full.tflite, Apache-2.0 (see third_party/README.md).
+LANDMARK_PACKAGE="@mediapipe/hands"
+LANDMARK_VERSION="0.4.1675469240"
+LANDMARK_TGZ_SHA256="bdd5be939c60cbd72a49f4b6141407683cf2a67263598e1a44757d70b3dfcb8a"
+LANDMARK_MODEL_SHA256="8c026882c9ec059ce0f8e75266bee5a9a23c341a40e0000df755374d3d1b9b68"
+
+install_landmark_model() {
+  local model="$ASSET_DIR/mediapipe-hands/hand_landmark_full.tflite"
+  if [ -f "$model" ] && echo "$LANDMARK_MODEL_SHA256  $model" | sha256sum -c --status; then
+    echo "deps: hand landmark model present ($model)"
+    return
+  fi
+  command -v npm > /dev/null || { echo "deps: npm is missing (install the nodejs/npm packages)" >&2; exit 1; }
+  local tmp
+  tmp="$(mktemp -d)"
+  trap 'rm -rf "$tmp"' RETURN
+  echo "deps: fetching $LANDMARK_PACKAGE@$LANDMARK_VERSION from the npm registry"
+  (cd "$tmp" && npm pack --silent "$LANDMARK_PACKAGE@$LANDMARK_VERSION" > /dev/null)
+  local tgz="$tmp/mediapipe-hands-$LANDMARK_VERSION.tgz"
+  echo "$LANDMARK_TGZ_SHA256  $tgz" | sha256sum -c --status || {
+    echo "deps: $tgz: sha256 mismatch (expected $LANDMARK_TGZ_SHA256, got $(sha256sum "$tgz" | cut -d' ' -f1))" >&2
+    exit 1
+  }
+  tar -xzf "$tgz" -C "$tmp" package/hand_landmark_full.tflite package/package.json
+  echo "$LANDMARK_MODEL_SHA256  $tmp/package/hand_landmark_full.tflite" | sha256sum -c --status || {
+    echo "deps: hand_landmark_full.tflite: sha256 mismatch" >&2
+    exit 1
+  }
+  mkdir -p "$ASSET_DIR/mediapipe-hands"
+  cp "$tmp/package/package.json" "$ASSET_DIR/mediapipe-hands/package.json"
+  cp "$tmp/package/hand_landmark_full.tflite" "$model.tmp" && sync "$model.tmp" && mv "$model.tmp" "$model"
+  echo "deps: installed $model (sha256 $LANDMARK_MODEL_SHA256)"
+}
+
 case "${1:-}" in
-  --asset) install_asset ;;
-  "") install_packages; install_asset ;;
+  --asset) install_asset; install_landmark_model ;;
+  "") install_packages; install_asset; install_landmark_model ;;
   *) echo "usage: scripts/deps.sh [--asset]" >&2; exit 2 ;;
 esac

@@ -371,6 +371,39 @@ WristCut CutForearm(cv::Mat* region, double radii) {
 
 // `source` is the picture's size in its file: larger than `any` when a huge JPEG was decoded
 // reduced (a mask then has the file's size and is reduced the same way).
+// The landmark network on the hand the photo path found (hand_landmarks.h): a square crop
+// centred on the silhouette, 1.5 of its diameters wide (the whole hand with a margin, as the
+// network's training crops), turned so the hand points up: away from the forearm where one
+// leaves the picture, else from the palm centre towards the silhouette's centre (the fingers
+// reach further from the palm than the wrist does). Measured on the development photos and the
+// photo-like test views (docs/results.md, session 21): the turn matters on the test views, whose
+// hands point every way (without it the network's presence falls below 0.9 on half of them).
+HandLandmarks FindLandmarks(const HandLandmarker& landmarker,
+                            const cv::Mat& bgr,
+                            const QueryEdges& q) {
+  double up_x = 0, up_y = -1;
+  if (q.arm_found) {
+    up_x = -q.arm_dir_x;
+    up_y = -q.arm_dir_y;
+  } else if (q.palm_radius_px > 0) {
+    const double dx = q.centre_x - q.palm_centre_x, dy = q.centre_y - q.palm_centre_y;
+    if (std::hypot(dx, dy) > 1e-6) {
+      up_x = dx;
+      up_y = dy;
+    }
+  }
+  const double angle = std::atan2(up_x, -up_y) * 180.0 / M_PI;
+  cv::Mat rgb;
+  cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
+  return landmarker.Detect(rgb.data,
+                           rgb.cols,
+                           rgb.rows,
+                           rgb.step,
+                           {static_cast<float>(q.centre_x), static_cast<float>(q.centre_y)},
+                           static_cast<float>(1.5 * q.diameter_px),
+                           static_cast<float>(angle));
+}
+
 Result<QueryEdges> FromPhoto(const std::filesystem::path& path,
                              const cv::Mat& any,
                              cv::Size source,
@@ -645,6 +678,7 @@ Result<QueryEdges> FromPhoto(const std::filesystem::path& path,
                       crop.x + wrist.b.x / fx,
                       crop.y + wrist.b.y / fy};
   }
+  if (options.landmarker) out.landmarks = FindLandmarks(*options.landmarker, bgr, out);
   return out;
 }
 
@@ -676,6 +710,13 @@ void ScaleToSource(cv::Size source, cv::Size decoded, QueryEdges* q) {
   q->centre_y *= fy;
   q->diameter_px *= f;
   q->scale /= f;
+  if (q->landmarks) {
+    for (Point2f& p : q->landmarks->image_px)
+      p = {static_cast<float>(p.x * fx), static_cast<float>(p.y * fy)};
+    q->landmarks->crop_centre = {static_cast<float>(q->landmarks->crop_centre.x * fx),
+                                 static_cast<float>(q->landmarks->crop_centre.y * fy)};
+    q->landmarks->crop_side_px *= static_cast<float>(f);
+  }
 }
 
 }  // namespace

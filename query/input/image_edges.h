@@ -22,6 +22,8 @@
 #include <array>
 #include <cstdint>
 #include <filesystem>
+#include <memory>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -30,6 +32,7 @@
 #include "edges/edges.h"
 #include "format/roll.h"
 #include "format/view.h"
+#include "query/input/hand_landmarks.h"
 
 namespace handdb {
 
@@ -105,6 +108,9 @@ struct ImageEdgeOptions {
   // label query is converted exactly like the database's views.
   EdgeOptions label_edges;
   JointPairs label_joint_pairs = DefaultJointPairs();
+  // Photo: the hand landmark network (query/input/hand_landmarks.h) run on the segmented hand;
+  // its joints re-rank the search's nearest views (query/landmark_rank.h). Null: none.
+  std::shared_ptr<const HandLandmarker> landmarker;
   bool Check() const;
 };
 
@@ -138,6 +144,8 @@ struct QueryEdges {
   double palm_centre_y = 0;
   double palm_radius_px = 0;
   std::array<double, 4> wrist_line{};  // the cut: x0, y0, x1, y1 in source px (when forearm_cut)
+  // Photo with ImageEdgeOptions::landmarker: the network's joints, in source px.
+  std::optional<HandLandmarks> landmarks;
   // Normalisation: normalised = (pixel centre - centre) * scale.
   double centre_x = 0, centre_y = 0, diameter_px = 0, scale = 0;
   std::vector<PointQ> points;              // normalised frame, sorted by (y, x), unique

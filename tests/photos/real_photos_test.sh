@@ -47,6 +47,10 @@ sed -n '/shape accuracy/,/^speed/p' "$work/evaluate.txt"
 /usr/bin/python3 - "$work/photos.json" "$TOP1_FLOOR" "$TOP5_FLOOR" <<'PY'
 import json, sys
 doc = json.load(open(sys.argv[1]))
+# The test command installs the landmark model (scripts/deps.sh): the photos must be re-ranked
+# by their hand landmarks, not silently by D_c alone.
+if not doc["search"]["query_options"].get("landmarks"):
+    sys.exit("FAIL: the photos were not re-ranked by hand landmarks (is the model installed?)")
 rate = {a["k"]: a["rate"] for a in doc["accuracy"]}
 top1, top5 = 100 * rate[1], 100 * rate[5]
 print(f"top-1 {top1:.1f}% (floor {sys.argv[2]}%), top-5 {top5:.1f}% (floor {sys.argv[3]}%)")

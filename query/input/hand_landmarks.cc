@@ -1,0 +1,92 @@
+#include "query/input/hand_landmarks.h"
+
+#include <cmath>
+#include <cstdlib>
+#include <map>
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+#include <vector>
+
+#include "handdb_version.h"
+#include "query/input/tflite.h"
+
+namespace handdb {
+
+HandLandmarker::HandLandmarker(std::filesystem::path path, std::unique_ptr<TfliteModel> model)
+    : path_(std::move(path)), model_(std::move(model)) {
+  input_h_ = model_->input_shape()[1];
+  input_w_ = model_->input_shape()[2];
+}
+
+HandLandmarker::~HandLandmarker() = default;
+
+std::filesystem::path HandLandmarker::DefaultModelPath() {
+  if (const char* env = std::getenv("HANDDB_LANDMARK_MODEL"); env != nullptr && *env != '\0') {
+    return env;
+  }
+  std::filesystem::path root = HANDDB_SOURCE_DIR;
+  if (const char* env = std::getenv("HANDDB_SOURCE_DIR"); env != nullptr && *env != '\0')
+    root = env;
+  return root / "third_party" / "assets" / "mediapipe-hands" / "hand_landmark_full.tflite";
+}
+
+Result<std::shared_ptr<const HandLandmarker>> HandLandmarker::Open(
+    const std::filesystem::path& model) {
+  auto m = TfliteModel::Load(model);
+  if (!m.ok()) return m.status();
+  const std::vector<int>& in = m->input_shape();
+  const std::vector<size_t> out = m->output_sizes();
+  if (in.size() != 4 || in[0] != 1 || in[3] != 3 || in[1] < 16 || in[2] < 16 || in[1] > 1024 ||
+      in[2] > 1024 || out.size() < 2 || out[0] != 3 * kNumLandmarks || out[1] != 1) {
+    return Status(StatusCode::kSizeMismatch,
+                  model.string() +
+                      ": not a hand landmark model (expected one 1xHxWx3 input, and 63 joint "
+                      "coordinates and a presence score as its first two outputs)");
+  }
+  return std::shared_ptr<const HandLandmarker>(
+      new HandLandmarker(model, std::make_unique<TfliteModel>(std::move(m).value())));
+}
+
+HandLandmarks HandLandmarker::Detect(const uint8_t* rgb,
+                                     int width,
+                                     int height,
+                                     size_t stride,
+                                     Point2f centre,
+                                     float side,
+                                     float angle_deg) const {
+  const cv::Mat picture(height, width, CV_8UC3, const_cast<uint8_t*>(rgb), stride);
+  // picture -> crop: turn by -angle about `centre`, scale to the network's input, centre it.
+  // OpenCV's pixel centres are at integers; ours at integer + 0.5.
+  const double a = angle_deg * M_PI / 180.0;
+  const double s = static_cast<double>(input_w_) / side;
+  const double sy = static_cast<double>(input_h_) / side;
+  cv::Matx23d m(std::cos(a) * s, std::sin(a) * s, 0, -std::sin(a) * sy, std::cos(a) * sy, 0);
+  const double cx = centre.x - 0.5, cy = centre.y - 0.5;
+  m(0, 2) = input_w_ / 2.0 - (m(0, 0) * cx + m(0, 1) * cy);
+  m(1, 2) = input_h_ / 2.0 - (m(1, 0) * cx + m(1, 1) * cy);
+  cv::Mat crop;
+  cv::warpAffine(
+      picture, crop, m, cv::Size(input_w_, input_h_), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+  std::vector<float> input(static_cast<size_t>(input_w_) * input_h_ * 3);
+  crop.convertTo(cv::Mat(input_h_, input_w_, CV_32FC3, input.data()), CV_32F, 1.0 / 255.0);
+  // One workspace per thread and model: buffers are reused from photo to photo.
+  thread_local std::map<const TfliteModel*, std::unique_ptr<TfliteModel::Workspace>> workspaces;
+  std::unique_ptr<TfliteModel::Workspace>& ws = workspaces[model_.get()];
+  if (!ws) ws = model_->NewWorkspace();
+  const std::vector<std::vector<float>> out = model_->Run(input, ws.get());
+  cv::Matx23d inv;
+  cv::invertAffineTransform(m, inv);
+  HandLandmarks lm;
+  for (int k = 0; k < kNumLandmarks; ++k) {
+    const double x = out[0][3 * k], y = out[0][3 * k + 1];
+    lm.image_px[k] = {static_cast<float>(inv(0, 0) * x + inv(0, 1) * y + inv(0, 2) + 0.5),
+                      static_cast<float>(inv(1, 0) * x + inv(1, 1) * y + inv(1, 2) + 0.5)};
+  }
+  lm.presence = out[1][0];
+  lm.crop_centre = centre;
+  lm.crop_side_px = side;
+  lm.crop_angle_deg = angle_deg;
+  return lm;
+}
+
+}  // namespace handdb

@@ -1,0 +1,68 @@
+// Hand landmarks of a photo: the 21 joints (wrist, then 4 per finger from the thumb, base to
+// tip: the order of docs/conventions.md) found by a pretrained landmark network, MediaPipe
+// Hands' `hand_landmark_full.tflite` (Apache-2.0, installed by scripts/deps.sh), run by
+// query/input/tflite.h. The photo path crops the hand it segmented (its silhouette's centre,
+// 1.5 diameters wide, turned so the hand points up: away from the forearm, or from the palm
+// centre towards the silhouette's centre) and maps the joints back to the picture's pixels.
+// The search uses them to re-rank its nearest views (query/landmark_rank.h, docs/query.md).
+#pragma once
+
+#include <array>
+#include <filesystem>
+#include <memory>
+
+#include "base/status.h"
+#include "format/roll.h"
+
+namespace handdb {
+
+inline constexpr int kNumLandmarks = 21;
+
+struct HandLandmarks {
+  // The joints in the source picture's px (pixel centres at integer + 0.5, like
+  // QueryEdges::ImageFromNormalised), in the order of docs/conventions.md.
+  std::array<Point2f, kNumLandmarks> image_px{};
+  // The network's hand-presence score in [0, 1]: below ~0.9 the joints are unreliable (it sees
+  // no hand, or a view it was not trained on) and the search does not use them.
+  float presence = 0;
+  // The crop the network saw, in source px: centre, side and the turn (degrees, clockwise in
+  // the picture) that brought the hand's up to the crop's up.
+  Point2f crop_centre{};
+  float crop_side_px = 0;
+  float crop_angle_deg = 0;
+};
+
+class TfliteModel;
+
+class HandLandmarker {
+ public:
+  // Loads a landmark model: one 1xHxWx3 float input (RGB in [0, 1]), outputs 21 x 3 joint
+  // coordinates in the input's px and a presence score. Errors name the file.
+  static Result<std::shared_ptr<const HandLandmarker>> Open(const std::filesystem::path& model);
+  // The installed default: $HANDDB_LANDMARK_MODEL if set, else
+  // third_party/assets/mediapipe-hands/hand_landmark_full.tflite under the source tree
+  // ($HANDDB_SOURCE_DIR or the one this binary was built from).
+  static std::filesystem::path DefaultModelPath();
+
+  ~HandLandmarker();
+  const std::filesystem::path& path() const { return path_; }
+
+  // The landmarks of the hand in `rgb` (8-bit RGB rows, `width` x `height`, `stride` bytes per
+  // row) inside the square crop centred at `centre` (px), `side` px wide, turned by
+  // `angle_deg`. Thread-safe.
+  HandLandmarks Detect(const uint8_t* rgb,
+                       int width,
+                       int height,
+                       size_t stride,
+                       Point2f centre,
+                       float side,
+                       float angle_deg) const;
+
+ private:
+  HandLandmarker(std::filesystem::path path, std::unique_ptr<TfliteModel> model);
+  std::filesystem::path path_;
+  std::unique_ptr<TfliteModel> model_;
+  int input_h_ = 0, input_w_ = 0;
+};
+
+}  // namespace handdb

@@ -1,0 +1,174 @@
+// The TFLite interpreter and the hand landmark network, on the installed model
+// (scripts/deps.sh --asset) and the real photos of tests/data/photos: hostile model files are
+// errors, and the joints the network finds are where the hand's joints are.
+#include "query/input/hand_landmarks.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "base/testing.h"
+#include "query/input/image_edges.h"
+#include "query/input/tflite.h"
+
+namespace handdb {
+namespace {
+
+namespace fs = std::filesystem;
+
+fs::path SourceDir() {
+  const char* env = std::getenv("HANDDB_SOURCE_DIR");
+  return env != nullptr ? fs::path(env) : fs::path(".");
+}
+
+fs::path Photo(const std::string& shape, const std::string& file) {
+  return SourceDir() / "tests" / "data" / "photos" / "asl-digits" / shape / file;
+}
+
+// The installed model; the README's test command installs it, so its absence is a failure.
+fs::path Model() {
+  const fs::path model = HandLandmarker::DefaultModelPath();
+  THROW_CHECK_MSG(fs::exists(model), model.string() << " is missing: run scripts/deps.sh --asset");
+  return model;
+}
+
+TEST(TfliteModelTest, LoadsTheLandmarkModel) {
+  auto m = TfliteModel::Load(Model());
+  ASSERT_TRUE(m.ok()) << m.status().ToString();
+  EXPECT_EQ(m->input_shape(), (std::vector<int>{1, 224, 224, 3}));
+  const std::vector<size_t> sizes = m->output_sizes();
+  ASSERT_GE(sizes.size(), 2u);
+  EXPECT_EQ(sizes[0], 63u);
+  EXPECT_EQ(sizes[1], 1u);
+  // A grey picture is no hand: the presence output (a logistic) is low, and finite.
+  std::vector<float> grey(224 * 224 * 3, 0.5f);
+  const auto out = m->Run(grey);
+  ASSERT_EQ(out.size(), sizes.size());
+  EXPECT_LT(out[1][0], 0.5f);
+  for (float v : out[0]) EXPECT_TRUE(std::isfinite(v));
+  // A workspace kept between calls gives the same numbers.
+  auto ws = m->NewWorkspace();
+  const auto again = m->Run(grey, ws.get());
+  const auto third = m->Run(grey, ws.get());
+  EXPECT_EQ(again, out);
+  EXPECT_EQ(third, out);
+}
+
+TEST(TfliteModelTest, BrokenFilesAreErrorsNamingTheFile) {
+  const fs::path dir = testing::TempDir("tflite");
+  EXPECT_EQ(TfliteModel::Load(dir / "missing.tflite").status().code(), StatusCode::kNotFound);
+  testing::WriteBytes(dir / "text.tflite", {'h', 'e', 'l', 'l', 'o', ' ', 'w', 'o', 'r', 'l', 'd'});
+  auto text = TfliteModel::Load(dir / "text.tflite");
+  ASSERT_FALSE(text.ok());
+  EXPECT_EQ(text.status().code(), StatusCode::kBadMagic);
+  EXPECT_NE(text.status().message().find("text.tflite"), std::string::npos);
+
+  // Every truncation of the real model is refused (a flatbuffer's offsets point past the end),
+  // never read out of bounds (the sanitizer build runs this too).
+  const std::vector<uint8_t> bytes = testing::ReadBytes(Model());
+  std::mt19937 rng(7);
+  std::vector<size_t> cuts = {8, 12, 64, 4096, bytes.size() / 2, bytes.size() - 1};
+  for (int k = 0; k < 6; ++k) cuts.push_back(8 + rng() % (bytes.size() - 8));
+  for (size_t cut : cuts) {
+    const fs::path p = dir / "cut.tflite";
+    testing::WriteBytes(p, std::vector<uint8_t>(bytes.begin(), bytes.begin() + cut));
+    auto m = TfliteModel::Load(p);
+    EXPECT_FALSE(m.ok()) << "cut at " << cut;
+    if (!m.ok()) {
+      EXPECT_NE(m.status().message().find("cut.tflite"), std::string::npos)
+          << m.status().ToString();
+    }
+  }
+  // Corrupted bytes in the tables (the model's last 64 KiB: the flatbuffer's vtables, tensors
+  // and operators follow its weights): loading fails cleanly, or the graph still checks out and
+  // runs within its own buffers.
+  std::vector<float> grey(224 * 224 * 3, 0.5f);
+  int ran = 0;
+  for (int k = 0; k < 40; ++k) {
+    std::vector<uint8_t> bad = bytes;
+    const size_t span = std::min<size_t>(65536, bad.size() - 8);
+    for (int j = 0; j < 4; ++j)
+      bad[bad.size() - 1 - rng() % span] ^= static_cast<uint8_t>(1 + rng() % 255);
+    const fs::path p = dir / "flipped.tflite";
+    testing::WriteBytes(p, bad);
+    auto m = TfliteModel::Load(p);
+    if (m.ok() && ran < 3 && m->input_shape() == std::vector<int>{1, 224, 224, 3}) {
+      m->Run(grey);
+      ++ran;
+    }
+  }
+  fs::remove_all(dir);
+}
+
+TEST(HandLandmarkerTest, RefusesAModelThatIsNotALandmarkModel) {
+  const fs::path dir = testing::TempDir("landmarker");
+  auto m = HandLandmarker::Open(dir / "none.tflite");
+  ASSERT_FALSE(m.ok());
+  EXPECT_EQ(m.status().code(), StatusCode::kNotFound);
+  fs::remove_all(dir);
+}
+
+// The joints on real photos: the network sees the hand the photo path segmented, and maps the
+// joints back to the picture's pixels.
+TEST(HandLandmarkerTest, FindsTheJointsOfRealPhotos) {
+  auto landmarker = HandLandmarker::Open(Model());
+  ASSERT_TRUE(landmarker.ok()) << landmarker.status().ToString();
+  ImageEdgeOptions options;
+  options.landmarker = *landmarker;
+  // asl-1: the index finger points up, the others are folded; asl-5: an open hand.
+  for (const auto& [shape, file] : std::vector<std::pair<std::string, std::string>>{
+           {"asl-1", "IMG_1170.JPG"}, {"asl-5", "IMG_1174.JPG"}}) {
+    SCOPED_TRACE(shape);
+    auto q = LoadQueryEdges(Photo(shape, file), options);
+    ASSERT_TRUE(q.ok()) << q.status().ToString();
+    ASSERT_TRUE(q->landmarks.has_value());
+    const HandLandmarks& l = *q->landmarks;
+    EXPECT_GT(l.presence, 0.9f);
+    EXPECT_NEAR(l.crop_side_px, 1.5 * q->diameter_px, 1e-3);
+    // Every joint in the picture (the wrist may lie a little past the border the arm leaves
+    // by), near the hand (within its diameter of its centre).
+    const double margin = 0.1 * q->diameter_px;
+    for (const Point2f& p : l.image_px) {
+      EXPECT_GE(p.x, -margin);
+      EXPECT_LE(p.x, q->width + margin);
+      EXPECT_GE(p.y, -margin);
+      EXPECT_LE(p.y, q->height + margin);
+      EXPECT_LT(std::hypot(p.x - q->centre_x, p.y - q->centre_y), q->diameter_px);
+    }
+    // The arm leaves at the bottom: the wrist is below every fingertip.
+    for (int tip : {4, 8, 12, 16, 20}) EXPECT_GT(l.image_px[0].y, l.image_px[tip].y) << tip;
+    if (shape == "asl-1") {
+      // The raised index tip is the highest joint, well above the folded middle finger's tip.
+      for (int k = 0; k < kNumLandmarks; ++k) {
+        if (k != 8) {
+          EXPECT_LT(l.image_px[8].y, l.image_px[k].y) << k;
+        }
+      }
+      EXPECT_LT(l.image_px[8].y + 0.2 * q->diameter_px, l.image_px[12].y);
+    } else {
+      // Open hand: each fingertip lies further from the wrist than its own base joint.
+      for (int f = 0; f < 5; ++f) {
+        const Point2f& w = l.image_px[0];
+        const Point2f& base = l.image_px[1 + 4 * f];
+        const Point2f& tip = l.image_px[4 + 4 * f];
+        EXPECT_GT(std::hypot(tip.x - w.x, tip.y - w.y), std::hypot(base.x - w.x, base.y - w.y))
+            << "finger " << f;
+      }
+    }
+  }
+}
+
+// No landmarker: no landmarks (edge images and label EXRs never get any).
+TEST(HandLandmarkerTest, OnlyPhotosWithALandmarkerGetLandmarks) {
+  auto q = LoadQueryEdges(Photo("asl-1", "IMG_1170.JPG"), ImageEdgeOptions{});
+  ASSERT_TRUE(q.ok()) << q.status().ToString();
+  EXPECT_FALSE(q->landmarks.has_value());
+}
+
+}  // namespace
+}  // namespace handdb

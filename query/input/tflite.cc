@@ -1,0 +1,870 @@
+#include "query/input/tflite.h"
+
+// One thread per Run: callers run photos in parallel, and Eigen's OpenMP products (this library
+// is built with OpenMP for faiss) spun idle threads against them.
+#define EIGEN_DONT_PARALLELIZE
+#include <Eigen/Core>
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <limits>
+#include <optional>
+#include <system_error>
+
+namespace handdb {
+namespace {
+
+// The flatbuffer layout of the TFLite schema (tensorflow/lite/schema/schema.fbs), by field
+// index. Only what this interpreter reads.
+enum ModelField { kModelOperatorCodes = 1, kModelSubgraphs = 2, kModelBuffers = 4 };
+enum SubgraphField { kSgTensors = 0, kSgInputs = 1, kSgOutputs = 2, kSgOperators = 3 };
+enum TensorField { kTensorShape = 0, kTensorType = 1, kTensorBuffer = 2 };
+enum OperatorField { kOpOpcode = 0, kOpInputs = 1, kOpOutputs = 2, kOpOptions = 4 };
+enum BuiltinOp {
+  kAdd = 0,
+  kConv2d = 3,
+  kDepthwiseConv2d = 4,
+  kDequantize = 6,
+  kFullyConnected = 9,
+  kLogistic = 14,
+  kMaxPool2d = 17,
+  kReshape = 22,
+  kMean = 40,
+};
+enum TensorType { kFloat32 = 0, kFloat16 = 1, kInt32 = 2 };
+
+constexpr size_t kMaxFileBytes = size_t{256} << 20;
+constexpr int64_t kMaxTensorElements = int64_t{1} << 26;
+
+const char* OpName(int code) {
+  switch (code) {
+    case kAdd:
+      return "ADD";
+    case kConv2d:
+      return "CONV_2D";
+    case kDepthwiseConv2d:
+      return "DEPTHWISE_CONV_2D";
+    case kDequantize:
+      return "DEQUANTIZE";
+    case kFullyConnected:
+      return "FULLY_CONNECTED";
+    case kLogistic:
+      return "LOGISTIC";
+    case kMaxPool2d:
+      return "MAX_POOL_2D";
+    case kReshape:
+      return "RESHAPE";
+    case kMean:
+      return "MEAN";
+    default:
+      return "?";
+  }
+}
+
+// Bounds-checked reads of a flatbuffer. Every accessor returns nullopt / an error flag instead
+// of reading outside the file.
+class Flat {
+ public:
+  explicit Flat(std::span<const uint8_t> b) : b_(b) {}
+
+  template <typename T>
+  std::optional<T> Read(size_t pos) const {
+    if (pos > b_.size() || b_.size() - pos < sizeof(T)) return std::nullopt;
+    T v;
+    std::memcpy(&v, b_.data() + pos, sizeof(T));
+    return v;
+  }
+  // A table at `pos`: where field `i` lies (0: absent), or nullopt when the vtable is broken.
+  std::optional<size_t> Field(size_t table, int i) const {
+    const auto soff = Read<int32_t>(table);
+    if (!soff) return std::nullopt;
+    const int64_t vt = static_cast<int64_t>(table) - *soff;
+    if (vt < 0 || static_cast<uint64_t>(vt) >= b_.size()) return std::nullopt;
+    const auto vt_size = Read<uint16_t>(static_cast<size_t>(vt));
+    if (!vt_size || *vt_size < 4 || *vt_size % 2 != 0) return std::nullopt;
+    const size_t slot = 4 + 2 * static_cast<size_t>(i);
+    if (slot + 2 > *vt_size) return size_t{0};
+    const auto off = Read<uint16_t>(static_cast<size_t>(vt) + slot);
+    if (!off) return std::nullopt;
+    return *off == 0 ? size_t{0} : table + *off;
+  }
+  // The target of an offset field (table, vector or string), or nullopt.
+  std::optional<size_t> Deref(size_t at) const {
+    const auto off = Read<uint32_t>(at);
+    if (!off || *off == 0 || at + *off >= b_.size()) return std::nullopt;
+    return at + *off;
+  }
+  size_t size() const { return b_.size(); }
+  const uint8_t* data() const { return b_.data(); }
+
+ private:
+  std::span<const uint8_t> b_;
+};
+
+// Errors carry the file's name; `Fail` builds them in one place.
+struct Parse {
+  const Flat& f;
+  std::string what;
+  Status error;
+
+  bool Fail(StatusCode code, const std::string& msg) {
+    if (error.ok()) error = Status(code, what + ": " + msg);
+    return false;
+  }
+  // Optional table field -> its table position (0: absent).
+  bool Table(size_t table, int field, size_t* out, const char* name) {
+    const auto at = f.Field(table, field);
+    if (!at) return Fail(StatusCode::kBadLayout, std::string("broken vtable reading ") + name);
+    if (*at == 0) {
+      *out = 0;
+      return true;
+    }
+    const auto t = f.Deref(*at);
+    if (!t) return Fail(StatusCode::kTruncated, std::string(name) + " points outside the file");
+    *out = *t;
+    return true;
+  }
+  // A vector field: its first element's position and length (length 0 when absent).
+  bool Vector(
+      size_t table, int field, size_t elem_size, size_t* first, uint32_t* n, const char* name) {
+    size_t v = 0;
+    if (!Table(table, field, &v, name)) return false;
+    if (v == 0) {
+      *first = 0;
+      *n = 0;
+      return true;
+    }
+    const auto len = f.Read<uint32_t>(v);
+    if (!len || (f.size() - v - 4) / elem_size < *len) {
+      return Fail(StatusCode::kTruncated, std::string(name) + " runs past the end of the file");
+    }
+    *first = v + 4;
+    *n = *len;
+    return true;
+  }
+  bool Ints(size_t table, int field, std::vector<int>* out, const char* name) {
+    size_t first = 0;
+    uint32_t n = 0;
+    if (!Vector(table, field, 4, &first, &n, name)) return false;
+    out->resize(n);
+    for (uint32_t k = 0; k < n; ++k) (*out)[k] = *f.Read<int32_t>(first + 4 * k);
+    return true;
+  }
+  bool Tables(size_t table, int field, std::vector<size_t>* out, const char* name) {
+    size_t first = 0;
+    uint32_t n = 0;
+    if (!Vector(table, field, 4, &first, &n, name)) return false;
+    out->resize(n);
+    for (uint32_t k = 0; k < n; ++k) {
+      const auto t = f.Deref(first + 4 * k);
+      if (!t)
+        return Fail(StatusCode::kTruncated, std::string(name) + " entry points outside the file");
+      (*out)[k] = *t;
+    }
+    return true;
+  }
+  template <typename T>
+  bool Scalar(size_t table, int field, T def, T* out, const char* name) {
+    if (table == 0) {
+      *out = def;
+      return true;
+    }
+    const auto at = f.Field(table, field);
+    if (!at) return Fail(StatusCode::kBadLayout, std::string("broken vtable reading ") + name);
+    if (*at == 0) {
+      *out = def;
+      return true;
+    }
+    const auto v = f.Read<T>(*at);
+    if (!v)
+      return Fail(StatusCode::kTruncated, std::string(name) + " lies past the end of the file");
+    *out = *v;
+    return true;
+  }
+};
+
+float HalfToFloat(uint16_t h) {
+  const uint32_t sign = static_cast<uint32_t>(h & 0x8000) << 16;
+  const uint32_t exp = (h >> 10) & 0x1f;
+  uint32_t mant = h & 0x3ff;
+  uint32_t bits = 0;
+  if (exp == 0) {
+    if (mant == 0) {
+      bits = sign;
+    } else {  // subnormal: normalise
+      int e = -1;
+      do {
+        ++e;
+        mant <<= 1;
+      } while ((mant & 0x400) == 0);
+      bits = sign | static_cast<uint32_t>(127 - 15 - e) << 23 | (mant & 0x3ff) << 13;
+    }
+  } else if (exp == 31) {
+    bits = sign | 0x7f800000u | mant << 13;
+  } else {
+    bits = sign | (exp + 127 - 15) << 23 | mant << 13;
+  }
+  float f;
+  std::memcpy(&f, &bits, sizeof(f));
+  return f;
+}
+
+}  // namespace
+
+// Named (not anonymous): TfliteModel::Graph holds a Window.
+namespace tflite_detail {
+
+enum class Padding { kSame, kValid };
+
+struct Window {
+  Padding padding = Padding::kSame;
+  int stride_w = 1, stride_h = 1;
+  int kw = 1, kh = 1;
+  int out(int in, int k, int stride) const {
+    return padding == Padding::kSame ? (in + stride - 1) / stride : (in - k + stride) / stride;
+  }
+  int pad_before(int in, int k, int stride) const {
+    if (padding == Padding::kValid) return 0;
+    const int o = out(in, k, stride);
+    return std::max((o - 1) * stride + k - in, 0) / 2;
+  }
+};
+
+}  // namespace tflite_detail
+
+using tflite_detail::Padding;
+using tflite_detail::Window;
+
+struct TfliteModel::Graph {
+  struct Tensor {
+    std::vector<int> shape;
+    int64_t elements = 1;
+    int type = kFloat32;
+    bool constant = false;
+    std::vector<float> values;  // constants (float16 weights converted at load)
+    std::vector<int> ints;      // int32 constants (MEAN's axes, RESHAPE's shape)
+  };
+  struct Op {
+    int code = 0;
+    std::vector<int> in, out;
+    Window win;
+    int activation = 0;
+    bool keep_dims = false;
+  };
+  std::vector<Tensor> tensors;
+  std::vector<Op> ops;
+  std::vector<int> inputs, outputs;
+  std::vector<int> last_use;  // per tensor: the last op that reads it (-1: none / output)
+  // Per non-constant tensor: the workspace buffer it lives in. Buffers are shared by tensors
+  // whose lives do not overlap (the full landmark model needs 4 instead of 166 tensors' worth).
+  std::vector<int> slot;
+  int num_slots = 0;
+};
+
+TfliteModel::TfliteModel(std::unique_ptr<Graph> graph) : graph_(std::move(graph)) {}
+TfliteModel::TfliteModel(TfliteModel&&) noexcept = default;
+TfliteModel& TfliteModel::operator=(TfliteModel&&) noexcept = default;
+TfliteModel::~TfliteModel() = default;
+
+const std::vector<int>& TfliteModel::input_shape() const {
+  return graph_->tensors[graph_->inputs[0]].shape;
+}
+
+std::vector<size_t> TfliteModel::output_sizes() const {
+  std::vector<size_t> out;
+  for (int t : graph_->outputs) out.push_back(static_cast<size_t>(graph_->tensors[t].elements));
+  return out;
+}
+
+namespace {
+
+// Checks one operator against its tensors' declared shapes, so Run() can index blindly.
+bool CheckOp(const TfliteModel::Graph& g,
+             size_t index,
+             const TfliteModel::Graph::Op& op,
+             Parse* p) {
+  using Tensor = TfliteModel::Graph::Tensor;
+  const std::string where =
+      std::string("operator ") + std::to_string(index) + " (" + OpName(op.code) + ")";
+  auto fail = [&](const std::string& m) {
+    return p->Fail(StatusCode::kSizeMismatch, where + ": " + m);
+  };
+  auto tensor = [&](size_t k, bool input) -> const Tensor* {
+    const std::vector<int>& ids = input ? op.in : op.out;
+    if (k >= ids.size() || ids[k] < 0) return nullptr;
+    return &g.tensors[ids[k]];
+  };
+  const Tensor* x = tensor(0, true);
+  const Tensor* y = tensor(0, false);
+  if (x == nullptr || y == nullptr || op.out.size() != 1)
+    return fail("needs an input and one output");
+  if (y->constant) return fail("writes a constant tensor");
+  if (op.code != kDequantize && x->type != kFloat32) return fail("input is not float32");
+  auto dims4 = [](const Tensor* t) { return t->shape.size() == 4 && t->shape[0] == 1; };
+  switch (op.code) {
+    case kConv2d:
+    case kDepthwiseConv2d: {
+      const Tensor* w = tensor(1, true);
+      const Tensor* b = tensor(2, true);
+      if (!dims4(x) || !dims4(y) || w == nullptr || w->shape.size() != 4 || !w->constant) {
+        return fail("expects 1xHxWxC tensors and constant 4-D weights");
+      }
+      const int c = x->shape[3];
+      const int o = y->shape[3];
+      if (op.code == kConv2d ? (w->shape[0] != o || w->shape[3] != c)
+                             : (w->shape[0] != 1 || w->shape[3] != c || o != c)) {
+        return fail("weights do not match the channels");
+      }
+      if (w->shape[1] != op.win.kh || w->shape[2] != op.win.kw) return fail("kernel size");
+      if (b != nullptr && (!b->constant || b->elements != o)) return fail("bias size");
+      if (y->shape[1] != op.win.out(x->shape[1], op.win.kh, op.win.stride_h) ||
+          y->shape[2] != op.win.out(x->shape[2], op.win.kw, op.win.stride_w)) {
+        return fail("output size");
+      }
+      return true;
+    }
+    case kMaxPool2d:
+      if (!dims4(x) || !dims4(y) || y->shape[3] != x->shape[3] ||
+          y->shape[1] != op.win.out(x->shape[1], op.win.kh, op.win.stride_h) ||
+          y->shape[2] != op.win.out(x->shape[2], op.win.kw, op.win.stride_w)) {
+        return fail("shapes");
+      }
+      return true;
+    case kAdd: {
+      const Tensor* z = tensor(1, true);
+      if (z == nullptr || z->type != kFloat32 || z->shape != x->shape ||
+          y->elements != x->elements) {
+        return fail("ADD needs two float32 inputs of the output's shape (no broadcasting)");
+      }
+      return true;
+    }
+    case kFullyConnected: {
+      const Tensor* w = tensor(1, true);
+      const Tensor* b = tensor(2, true);
+      if (w == nullptr || !w->constant || w->shape.size() != 2 || w->shape[1] <= 0 ||
+          x->elements % w->shape[1] != 0 ||
+          y->elements != x->elements / w->shape[1] * w->shape[0] ||
+          (b != nullptr && (!b->constant || b->elements != w->shape[0]))) {
+        return fail("shapes");
+      }
+      return true;
+    }
+    case kLogistic:
+    case kReshape:
+      if (y->elements != x->elements) return fail("element counts differ");
+      return true;
+    case kDequantize:
+      if (!x->constant || x->type != kFloat16 || y->elements != x->elements) {
+        return fail("only constant float16 -> float32 is supported");
+      }
+      return true;
+    case kMean: {
+      const Tensor* axes = tensor(1, true);
+      if (!dims4(x) || axes == nullptr || !axes->constant || axes->ints != std::vector<int>{1, 2} ||
+          y->elements != x->shape[3]) {
+        return fail("only the mean over H and W of a 1xHxWxC tensor is supported");
+      }
+      return true;
+    }
+    default:
+      return fail("unsupported");
+  }
+}
+
+}  // namespace
+
+Result<TfliteModel> TfliteModel::Load(const std::filesystem::path& path) {
+  const std::string what = path.string();
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) {
+    return Status(StatusCode::kNotFound, what + ": no such model file");
+  }
+  const auto file_size = std::filesystem::file_size(path, ec);
+  if (ec) return Status(StatusCode::kIoError, what + ": " + ec.message());
+  if (file_size > kMaxFileBytes) {
+    return Status(StatusCode::kOutOfRange,
+                  what + ": " + std::to_string(file_size) +
+                      " bytes, more than a landmark model's 256 MiB limit");
+  }
+  std::vector<uint8_t> bytes(file_size);
+  {
+    std::ifstream in(path, std::ios::binary);
+    if (!in.read(reinterpret_cast<char*>(bytes.data()),
+                 static_cast<std::streamsize>(bytes.size()))) {
+      return Status(StatusCode::kIoError, what + ": cannot read the file");
+    }
+  }
+  if (bytes.size() < 8 || std::memcmp(bytes.data() + 4, "TFL3", 4) != 0) {
+    return Status(StatusCode::kBadMagic,
+                  what + ": not a TensorFlow Lite model (no TFL3 identifier)");
+  }
+  const Flat f(bytes);
+  Parse p{f, what, {}};
+  auto bad = [&]() -> Result<TfliteModel> { return p.error; };
+
+  const auto root = f.Deref(0);
+  if (!root) return Status(StatusCode::kTruncated, what + ": the root table lies outside the file");
+  std::vector<size_t> codes_t, subgraphs, buffers_t;
+  if (!p.Tables(*root, kModelOperatorCodes, &codes_t, "operator codes") ||
+      !p.Tables(*root, kModelSubgraphs, &subgraphs, "subgraphs") ||
+      !p.Tables(*root, kModelBuffers, &buffers_t, "buffers")) {
+    return bad();
+  }
+  if (subgraphs.empty())
+    return Status(StatusCode::kBadLayout, what + ": the model has no subgraph");
+  std::vector<int> codes;
+  for (size_t t : codes_t) {
+    int8_t deprecated = 0;
+    int32_t builtin = 0;
+    if (!p.Scalar<int8_t>(t, 0, 0, &deprecated, "operator code") ||
+        !p.Scalar<int32_t>(t, 3, 0, &builtin, "operator code")) {
+      return bad();
+    }
+    codes.push_back(std::max<int>(deprecated, builtin));
+  }
+  struct Buf {
+    size_t first = 0;
+    uint32_t n = 0;
+  };
+  std::vector<Buf> buffers;
+  for (size_t t : buffers_t) {
+    Buf b;
+    uint64_t offset = 0;
+    if (!p.Vector(t, 0, 1, &b.first, &b.n, "buffer data") ||
+        !p.Scalar<uint64_t>(t, 1, 0, &offset, "buffer offset")) {
+      return bad();
+    }
+    if (offset != 0) {
+      return Status(StatusCode::kUnknownRequiredFeature,
+                    what + ": buffers stored outside the flatbuffer are not supported");
+    }
+    buffers.push_back(b);
+  }
+
+  auto g = std::make_unique<Graph>();
+  const size_t sg = subgraphs[0];
+  std::vector<size_t> tensors_t, ops_t;
+  if (!p.Tables(sg, kSgTensors, &tensors_t, "tensors") ||
+      !p.Ints(sg, kSgInputs, &g->inputs, "inputs") ||
+      !p.Ints(sg, kSgOutputs, &g->outputs, "outputs") ||
+      !p.Tables(sg, kSgOperators, &ops_t, "operators")) {
+    return bad();
+  }
+  for (size_t k = 0; k < tensors_t.size(); ++k) {
+    Graph::Tensor t;
+    int8_t type = 0;
+    uint32_t buffer = 0;
+    if (!p.Ints(tensors_t[k], kTensorShape, &t.shape, "tensor shape") ||
+        !p.Scalar<int8_t>(tensors_t[k], kTensorType, 0, &type, "tensor type") ||
+        !p.Scalar<uint32_t>(tensors_t[k], kTensorBuffer, 0, &buffer, "tensor buffer")) {
+      return bad();
+    }
+    t.type = type;
+    for (int d : t.shape) {
+      if (d <= 0 || t.elements * d > kMaxTensorElements) {
+        return Status(
+            StatusCode::kOutOfRange,
+            what + ": tensor " + std::to_string(k) + " has a dimension <= 0 or too many elements");
+      }
+      t.elements *= d;
+    }
+    if (buffer >= buffers.size()) {
+      return Status(StatusCode::kBadLayout,
+                    what + ": tensor " + std::to_string(k) + " names buffer " +
+                        std::to_string(buffer) + " of " + std::to_string(buffers.size()));
+    }
+    const Buf& b = buffers[buffer];
+    if (b.n > 0) {
+      t.constant = true;
+      const size_t elem = type == kFloat16 ? 2 : 4;
+      if (type != kFloat32 && type != kFloat16 && type != kInt32) {
+        return Status(StatusCode::kUnknownRequiredFeature,
+                      what + ": tensor " + std::to_string(k) + " has type " + std::to_string(type) +
+                          " (float32, float16 and int32 constants are supported)");
+      }
+      if (b.n != static_cast<uint64_t>(t.elements) * elem) {
+        return Status(StatusCode::kSizeMismatch,
+                      what + ": tensor " + std::to_string(k) + " holds " + std::to_string(b.n) +
+                          " bytes for " + std::to_string(t.elements) + " elements");
+      }
+      const uint8_t* src = f.data() + b.first;
+      if (type == kInt32) {
+        t.ints.resize(t.elements);
+        std::memcpy(t.ints.data(), src, b.n);
+      } else if (type == kFloat16) {
+        t.values.resize(t.elements);
+        for (int64_t i = 0; i < t.elements; ++i) {
+          uint16_t h;
+          std::memcpy(&h, src + 2 * i, 2);
+          t.values[i] = HalfToFloat(h);
+        }
+      } else {
+        t.values.resize(t.elements);
+        std::memcpy(t.values.data(), src, b.n);
+      }
+    }
+    g->tensors.push_back(std::move(t));
+  }
+  const int num_tensors = static_cast<int>(g->tensors.size());
+  auto valid_ids = [&](const std::vector<int>& ids, bool optional) {
+    return std::all_of(ids.begin(), ids.end(), [&](int i) {
+      return (optional && i == -1) || (i >= 0 && i < num_tensors);
+    });
+  };
+  if (g->inputs.size() != 1 || g->outputs.empty() || !valid_ids(g->inputs, false) ||
+      !valid_ids(g->outputs, false) || g->tensors[g->inputs[0]].constant) {
+    return Status(StatusCode::kBadLayout,
+                  what + ": the graph must have one non-constant input and at least one output");
+  }
+  // Tensors computed so far: an operator may only read these (the file's order is the order of
+  // execution), so Run() never reads a buffer it has not filled.
+  std::vector<bool> ready(num_tensors, false);
+  for (int t = 0; t < num_tensors; ++t) ready[t] = g->tensors[t].constant;
+  ready[g->inputs[0]] = true;
+  for (size_t k = 0; k < ops_t.size(); ++k) {
+    Graph::Op op;
+    uint32_t opcode = 0;
+    if (!p.Scalar<uint32_t>(ops_t[k], kOpOpcode, 0, &opcode, "operator") ||
+        !p.Ints(ops_t[k], kOpInputs, &op.in, "operator inputs") ||
+        !p.Ints(ops_t[k], kOpOutputs, &op.out, "operator outputs")) {
+      return bad();
+    }
+    if (opcode >= codes.size()) {
+      return Status(StatusCode::kBadLayout,
+                    what + ": operator " + std::to_string(k) + " names operator code " +
+                        std::to_string(opcode));
+    }
+    op.code = codes[opcode];
+    if (std::string_view(OpName(op.code)) == "?") {
+      return Status(StatusCode::kUnknownRequiredFeature,
+                    what + ": operator " + std::to_string(k) + " is builtin operator " +
+                        std::to_string(op.code) + ", which this interpreter does not implement");
+    }
+    if (!valid_ids(op.in, true) || !valid_ids(op.out, false)) {
+      return Status(
+          StatusCode::kBadLayout,
+          what + ": operator " + std::to_string(k) + " names a tensor that does not exist");
+    }
+    if (!op.out.empty() && std::find(op.in.begin(), op.in.end(), op.out[0]) != op.in.end()) {
+      return Status(StatusCode::kBadLayout,
+                    what + ": operator " + std::to_string(k) + " writes one of its own inputs");
+    }
+    size_t opt = 0;
+    if (!p.Table(ops_t[k], kOpOptions, &opt, "operator options")) return bad();
+    int8_t padding = 0, act = 0, keep = 0;
+    int32_t dil_w = 1, dil_h = 1, mult = 1;
+    bool ok = true;
+    switch (op.code) {
+      case kConv2d:
+        ok = p.Scalar<int8_t>(opt, 0, 0, &padding, "padding") &&
+             p.Scalar<int32_t>(opt, 1, 1, &op.win.stride_w, "stride") &&
+             p.Scalar<int32_t>(opt, 2, 1, &op.win.stride_h, "stride") &&
+             p.Scalar<int8_t>(opt, 3, 0, &act, "activation") &&
+             p.Scalar<int32_t>(opt, 4, 1, &dil_w, "dilation") &&
+             p.Scalar<int32_t>(opt, 5, 1, &dil_h, "dilation");
+        break;
+      case kDepthwiseConv2d:
+        ok = p.Scalar<int8_t>(opt, 0, 0, &padding, "padding") &&
+             p.Scalar<int32_t>(opt, 1, 1, &op.win.stride_w, "stride") &&
+             p.Scalar<int32_t>(opt, 2, 1, &op.win.stride_h, "stride") &&
+             p.Scalar<int32_t>(opt, 3, 1, &mult, "depth multiplier") &&
+             p.Scalar<int8_t>(opt, 4, 0, &act, "activation") &&
+             p.Scalar<int32_t>(opt, 5, 1, &dil_w, "dilation") &&
+             p.Scalar<int32_t>(opt, 6, 1, &dil_h, "dilation");
+        break;
+      case kMaxPool2d:
+        ok = p.Scalar<int8_t>(opt, 0, 0, &padding, "padding") &&
+             p.Scalar<int32_t>(opt, 1, 1, &op.win.stride_w, "stride") &&
+             p.Scalar<int32_t>(opt, 2, 1, &op.win.stride_h, "stride") &&
+             p.Scalar<int32_t>(opt, 3, 1, &op.win.kw, "filter width") &&
+             p.Scalar<int32_t>(opt, 4, 1, &op.win.kh, "filter height") &&
+             p.Scalar<int8_t>(opt, 5, 0, &act, "activation");
+        break;
+      case kAdd:
+      case kFullyConnected:
+        ok = p.Scalar<int8_t>(opt, 0, 0, &act, "activation");
+        break;
+      case kMean:
+        ok = p.Scalar<int8_t>(opt, 0, 0, &keep, "keep_dims");
+        break;
+      default:
+        break;
+    }
+    if (!ok) return bad();
+    if (op.code == kConv2d || op.code == kDepthwiseConv2d) {
+      const auto& w =
+          op.in.size() > 1 && op.in[1] >= 0 ? g->tensors[op.in[1]].shape : std::vector<int>{};
+      if (w.size() == 4) {
+        op.win.kh = w[1];
+        op.win.kw = w[2];
+      }
+    }
+    op.win.padding = padding == 1 ? Padding::kValid : Padding::kSame;
+    op.activation = act;
+    op.keep_dims = keep != 0;
+    if (padding < 0 || padding > 1 || act < 0 || act > 4 || dil_w != 1 || dil_h != 1 || mult != 1 ||
+        op.win.stride_w < 1 || op.win.stride_h < 1 || op.win.kw < 1 || op.win.kh < 1 ||
+        op.win.stride_w > 64 || op.win.stride_h > 64) {
+      return Status(StatusCode::kUnknownRequiredFeature,
+                    what + ": operator " + std::to_string(k) + " (" + OpName(op.code) +
+                        ") has options this interpreter does not implement (padding " +
+                        std::to_string(padding) + ", activation " + std::to_string(act) +
+                        ", dilation " + std::to_string(dil_w) + "x" + std::to_string(dil_h) +
+                        ", depth multiplier " + std::to_string(mult) + ")");
+    }
+    if (ready[op.out[0]]) {
+      return Status(StatusCode::kBadLayout,
+                    what + ": operator " + std::to_string(k) + " writes tensor " +
+                        std::to_string(op.out[0]) +
+                        ", which is an input, a constant or written before");
+    }
+    for (int i : op.in) {
+      if (i >= 0 && !ready[i]) {
+        return Status(StatusCode::kBadLayout,
+                      what + ": operator " + std::to_string(k) + " reads tensor " +
+                          std::to_string(i) + " before any operator writes it");
+      }
+    }
+    if (!CheckOp(*g, k, op, &p)) return bad();
+    if (op.code == kDequantize) {
+      // Constant folding: the weights are converted once, here.
+      Graph::Tensor& out = g->tensors[op.out[0]];
+      out.values = g->tensors[op.in[0]].values;
+      out.constant = true;
+      ready[op.out[0]] = true;
+      continue;
+    }
+    ready[op.out[0]] = true;
+    g->ops.push_back(std::move(op));
+  }
+  for (int o : g->outputs) {
+    if (!ready[o]) {
+      return Status(StatusCode::kBadLayout,
+                    what + ": graph output tensor " + std::to_string(o) + " is never computed");
+    }
+  }
+  g->last_use.assign(num_tensors, -1);
+  for (size_t k = 0; k < g->ops.size(); ++k) {
+    for (int i : g->ops[k].in) {
+      if (i >= 0) g->last_use[i] = static_cast<int>(k);
+    }
+  }
+  for (int o : g->outputs) g->last_use[o] = std::numeric_limits<int>::max();
+  // Buffers by liveness: an operator's output takes a free buffer before its inputs' buffers
+  // are released, so no operator reads and writes one buffer.
+  g->slot.assign(num_tensors, -1);
+  std::vector<int> free_slots;
+  auto take = [&](int t) {
+    if (g->tensors[t].constant || g->slot[t] >= 0) return;
+    if (free_slots.empty()) {
+      g->slot[t] = g->num_slots++;
+    } else {
+      g->slot[t] = free_slots.back();
+      free_slots.pop_back();
+    }
+  };
+  take(g->inputs[0]);
+  for (size_t k = 0; k < g->ops.size(); ++k) {
+    take(g->ops[k].out[0]);
+    for (int i : g->ops[k].in) {
+      if (i >= 0 && g->slot[i] >= 0 && g->last_use[i] == static_cast<int>(k)) {
+        free_slots.push_back(g->slot[i]);
+        g->last_use[i] = -2;  // released once, even when an operator reads it twice
+      }
+    }
+  }
+  return TfliteModel(std::move(g));
+}
+
+namespace {
+
+using RowMatrix = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+void Activate(int act, float* v, size_t n) {
+  switch (act) {
+    case 1:
+      for (size_t i = 0; i < n; ++i) v[i] = std::max(v[i], 0.0f);
+      break;
+    case 2:
+      for (size_t i = 0; i < n; ++i) v[i] = std::clamp(v[i], -1.0f, 1.0f);
+      break;
+    case 3:
+      for (size_t i = 0; i < n; ++i) v[i] = std::clamp(v[i], 0.0f, 6.0f);
+      break;
+    case 4:
+      for (size_t i = 0; i < n; ++i) v[i] = std::tanh(v[i]);
+      break;
+    default:
+      break;
+  }
+}
+
+}  // namespace
+
+std::vector<std::vector<float>> TfliteModel::Run(std::span<const float> input) const {
+  Workspace ws;
+  return Run(input, &ws);
+}
+
+std::unique_ptr<TfliteModel::Workspace> TfliteModel::NewWorkspace() const {
+  return std::make_unique<Workspace>();
+}
+
+std::vector<std::vector<float>> TfliteModel::Run(std::span<const float> input,
+                                                 Workspace* ws) const {
+  const Graph& g = *graph_;
+  THROW_CHECK_EQ(input.size(), static_cast<size_t>(g.tensors[g.inputs[0]].elements));
+  ws->slots.resize(g.num_slots);
+  auto value = [&](int t) -> const float* {
+    return g.tensors[t].constant ? g.tensors[t].values.data() : ws->slots[g.slot[t]].data();
+  };
+  ws->slots[g.slot[g.inputs[0]]].assign(input.begin(), input.end());
+  std::vector<float>& patches = ws->patches;
+  for (size_t k = 0; k < g.ops.size(); ++k) {
+    const Graph::Op& op = g.ops[k];
+    const Graph::Tensor& xt = g.tensors[op.in[0]];
+    const Graph::Tensor& yt = g.tensors[op.out[0]];
+    // Sized, not cleared: every operator below writes each output element before reading it.
+    std::vector<float>& y = ws->slots[g.slot[op.out[0]]];
+    y.resize(yt.elements);
+    const float* x = value(op.in[0]);
+    const float* bias = op.in.size() > 2 && op.in[2] >= 0 ? value(op.in[2]) : nullptr;
+    switch (op.code) {
+      case kConv2d: {
+        const int h = xt.shape[1], w = xt.shape[2], c = xt.shape[3];
+        const int oh = yt.shape[1], ow = yt.shape[2], o = yt.shape[3];
+        const Window& win = op.win;
+        const float* wt = value(op.in[1]);
+        const int cols = win.kh * win.kw * c;
+        Eigen::Map<const RowMatrix> weights(wt, o, cols);
+        Eigen::Map<RowMatrix> out(y.data(), static_cast<Eigen::Index>(oh) * ow, o);
+        if (win.kh == 1 && win.kw == 1 && win.stride_h == 1 && win.stride_w == 1) {
+          Eigen::Map<const RowMatrix> in(x, static_cast<Eigen::Index>(h) * w, c);
+          out.noalias() = in * weights.transpose();
+        } else {
+          const int pt = win.pad_before(h, win.kh, win.stride_h);
+          const int pl = win.pad_before(w, win.kw, win.stride_w);
+          patches.assign(static_cast<size_t>(oh) * ow * cols, 0.0f);  // padding stays 0
+          for (int r = 0; r < oh; ++r) {
+            for (int s = 0; s < ow; ++s) {
+              float* dst = patches.data() + (static_cast<size_t>(r) * ow + s) * cols;
+              for (int i = 0; i < win.kh; ++i) {
+                const int yy = r * win.stride_h + i - pt;
+                if (yy < 0 || yy >= h) continue;
+                for (int j = 0; j < win.kw; ++j) {
+                  const int xx = s * win.stride_w + j - pl;
+                  if (xx < 0 || xx >= w) continue;
+                  std::memcpy(dst + (i * win.kw + j) * c,
+                              x + (static_cast<size_t>(yy) * w + xx) * c,
+                              sizeof(float) * c);
+                }
+              }
+            }
+          }
+          Eigen::Map<const RowMatrix> in(patches.data(), static_cast<Eigen::Index>(oh) * ow, cols);
+          out.noalias() = in * weights.transpose();
+        }
+        if (bias != nullptr) out.rowwise() += Eigen::Map<const Eigen::RowVectorXf>(bias, o);
+        break;
+      }
+      case kDepthwiseConv2d: {
+        const int h = xt.shape[1], w = xt.shape[2], c = xt.shape[3];
+        const int oh = yt.shape[1], ow = yt.shape[2];
+        const Window& win = op.win;
+        const float* wt = value(op.in[1]);
+        const int pt = win.pad_before(h, win.kh, win.stride_h);
+        const int pl = win.pad_before(w, win.kw, win.stride_w);
+        for (int r = 0; r < oh; ++r) {
+          for (int s = 0; s < ow; ++s) {
+            float* dst = y.data() + (static_cast<size_t>(r) * ow + s) * c;
+            if (bias != nullptr) {
+              std::memcpy(dst, bias, sizeof(float) * c);
+            } else {
+              std::fill(dst, dst + c, 0.0f);
+            }
+            for (int i = 0; i < win.kh; ++i) {
+              const int yy = r * win.stride_h + i - pt;
+              if (yy < 0 || yy >= h) continue;
+              for (int j = 0; j < win.kw; ++j) {
+                const int xx = s * win.stride_w + j - pl;
+                if (xx < 0 || xx >= w) continue;
+                const float* src = x + (static_cast<size_t>(yy) * w + xx) * c;
+                const float* kern = wt + static_cast<size_t>(i * win.kw + j) * c;
+                for (int ch = 0; ch < c; ++ch) dst[ch] += src[ch] * kern[ch];
+              }
+            }
+          }
+        }
+        break;
+      }
+      case kMaxPool2d: {
+        const int h = xt.shape[1], w = xt.shape[2], c = xt.shape[3];
+        const int oh = yt.shape[1], ow = yt.shape[2];
+        const Window& win = op.win;
+        const int pt = win.pad_before(h, win.kh, win.stride_h);
+        const int pl = win.pad_before(w, win.kw, win.stride_w);
+        for (int r = 0; r < oh; ++r) {
+          for (int s = 0; s < ow; ++s) {
+            float* dst = y.data() + (static_cast<size_t>(r) * ow + s) * c;
+            std::fill(dst, dst + c, -std::numeric_limits<float>::infinity());
+            for (int i = 0; i < win.kh; ++i) {
+              const int yy = r * win.stride_h + i - pt;
+              if (yy < 0 || yy >= h) continue;
+              for (int j = 0; j < win.kw; ++j) {
+                const int xx = s * win.stride_w + j - pl;
+                if (xx < 0 || xx >= w) continue;
+                const float* src = x + (static_cast<size_t>(yy) * w + xx) * c;
+                for (int ch = 0; ch < c; ++ch) dst[ch] = std::max(dst[ch], src[ch]);
+              }
+            }
+          }
+        }
+        break;
+      }
+      case kAdd: {
+        const float* z = value(op.in[1]);
+        for (int64_t i = 0; i < yt.elements; ++i) y[i] = x[i] + z[i];
+        break;
+      }
+      case kFullyConnected: {
+        const Graph::Tensor& wt = g.tensors[op.in[1]];
+        const int o = wt.shape[0], in = wt.shape[1];
+        const Eigen::Index batch = xt.elements / in;
+        Eigen::Map<const RowMatrix> weights(value(op.in[1]), o, in);
+        Eigen::Map<const RowMatrix> xs(x, batch, in);
+        Eigen::Map<RowMatrix> out(y.data(), batch, o);
+        out.noalias() = xs * weights.transpose();
+        if (bias != nullptr) out.rowwise() += Eigen::Map<const Eigen::RowVectorXf>(bias, o);
+        break;
+      }
+      case kLogistic:
+        for (int64_t i = 0; i < yt.elements; ++i) y[i] = 1.0f / (1.0f + std::exp(-x[i]));
+        break;
+      case kReshape:
+        std::copy(x, x + yt.elements, y.begin());
+        break;
+      case kMean: {
+        const int64_t hw = static_cast<int64_t>(xt.shape[1]) * xt.shape[2];
+        const int c = xt.shape[3];
+        std::fill(y.begin(), y.end(), 0.0f);
+        for (int64_t i = 0; i < hw; ++i) {
+          for (int ch = 0; ch < c; ++ch) y[ch] += x[i * c + ch];
+        }
+        for (int ch = 0; ch < c; ++ch) y[ch] /= static_cast<float>(hw);
+        break;
+      }
+      default:
+        THROW_CHECK_MSG(false, "operator " << op.code << " passed the load checks");
+    }
+    Activate(op.activation, y.data(), y.size());
+  }
+  std::vector<std::vector<float>> out;
+  for (int o : g.outputs) {
+    const float* v = value(o);
+    out.emplace_back(v, v + g.tensors[o].elements);
+  }
+  return out;
+}
+
+}  // namespace handdb

@@ -1,0 +1,87 @@
+#include "query/landmark_rank.h"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <numeric>
+
+namespace handdb {
+namespace {
+
+// Half the normalised hand diameter (edges/normalise.h scales the silhouette to 192 px).
+constexpr double kHandRadiusPx = 96.0;
+
+}  // namespace
+
+bool LandmarkRankOptions::Check() const {
+  CHECK_OPTION(std::isfinite(weight));
+  CHECK_OPTION_GE(weight, 0.0);
+  CHECK_OPTION(min_presence >= 0.0f && min_presence <= 1.0f);
+  CHECK_OPTION_GE(pool_views, 1);
+  CHECK_OPTION_LE(pool_views, 100000);
+  CHECK_OPTION_GE(pool_per_shape, 1);
+  return true;
+}
+
+double LandmarkError(const QueryEdges& query, const Match& match) {
+  THROW_CHECK(query.landmarks.has_value());
+  THROW_CHECK_GT(query.scale, 0.0);
+  double sum = 0;
+  for (int k = 0; k < kNumLandmarks; ++k) {
+    const Point2f& p = query.landmarks->image_px[k];
+    // Into the normalised frame: the inverse of QueryEdges::ImageFromNormalised.
+    const double x = (p.x - query.centre_x) * query.scale;
+    const double y = (p.y - query.centre_y) * query.scale;
+    sum += std::hypot(x - match.label.keypoints[k][0], y - match.label.keypoints[k][1]);
+  }
+  return sum / kNumLandmarks / kHandRadiusPx;
+}
+
+bool UsesLandmarks(const QueryEdges& query, const LandmarkRankOptions& options) {
+  return options.enabled && query.landmarks.has_value() &&
+         query.landmarks->presence >= options.min_presence && query.scale > 0;
+}
+
+std::vector<Match> RerankByLandmarks(std::vector<Match> pool,
+                                     const QueryEdges& query,
+                                     const SearchOptions& search,
+                                     const LandmarkRankOptions& options) {
+  if (pool.empty()) return pool;
+  double best = pool.front().distance;
+  for (const Match& m : pool) best = std::min(best, m.distance);
+  for (Match& m : pool) {
+    m.landmark_error = LandmarkError(query, m);
+    // A zero best D_c (the query is a view) ranks by the distance's excess instead of a ratio.
+    m.score = (best > 0 ? m.distance / best : 1.0 + m.distance) + options.weight * m.landmark_error;
+  }
+  // Ties keep the D_c order (stable), so equal scores rank as the search did.
+  std::stable_sort(
+      pool.begin(), pool.end(), [](const Match& a, const Match& b) { return a.score < b.score; });
+  std::vector<Match> out;
+  std::map<uint32_t, int> per_shape;
+  for (Match& m : pool) {
+    if (static_cast<int>(out.size()) >= search.top_k) break;
+    if (search.max_per_shape > 0 && ++per_shape[m.label.shape_id] > search.max_per_shape) continue;
+    out.push_back(std::move(m));
+  }
+  return out;
+}
+
+Result<std::vector<Match>> SearchQuery(const Searcher& searcher,
+                                       const QueryEdges& query,
+                                       const SearchOptions& search,
+                                       const LandmarkRankOptions& options,
+                                       SearchStats* stats) {
+  const std::vector<Point2f> points = query.points_px();
+  if (!UsesLandmarks(query, options)) return searcher.Search(points, search, stats);
+  SearchOptions pool = search;
+  pool.top_k = std::max(search.top_k, options.pool_views);
+  if (search.max_per_shape > 0) {
+    pool.max_per_shape = std::max(search.max_per_shape, options.pool_per_shape);
+  }
+  auto matches = searcher.Search(points, pool, stats);
+  if (!matches.ok()) return matches;
+  return RerankByLandmarks(std::move(matches).value(), query, search, options);
+}
+
+}  // namespace handdb
