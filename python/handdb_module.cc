@@ -20,6 +20,7 @@
 #include <filesystem>
 #include <map>
 #include <memory>
+#include <mutex>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
@@ -36,6 +37,7 @@
 #include "handdb_version.h"
 #include "query/database.h"
 #include "query/input/image_edges.h"
+#include "query/landmark_rank.h"
 #include "query/searcher.h"
 
 namespace handdb::python {
@@ -190,9 +192,36 @@ std::vector<int> IntList(const py::handle& value, size_t n, const char* name) {
   return out;
 }
 
+// The landmark model `spec` names ("auto", "off" or a file), loaded once per path and kept: a
+// Python loop over photos would otherwise read and check the 5 MB model per photo. "auto"
+// without the installed model: None and a Python warning (the CLI's warning), D_c alone.
+std::shared_ptr<const HandLandmarker> Landmarker(const std::string& spec) {
+  if (spec == "off") return nullptr;
+  const fs::path path = spec == "auto" ? HandLandmarker::DefaultModelPath() : fs::path(spec);
+  static std::mutex mu;
+  static std::map<fs::path, std::shared_ptr<const HandLandmarker>> cache;
+  {
+    std::lock_guard<std::mutex> lock(mu);
+    if (auto it = cache.find(path); it != cache.end()) return it->second;
+  }
+  std::error_code ec;
+  if (spec == "auto" && !fs::exists(path, ec)) {
+    const std::string msg = "no hand landmark model at " + path.string() +
+                            " (scripts/deps.sh --asset installs it): photos are ranked by D_c "
+                            "alone";
+    if (PyErr_WarnEx(PyExc_RuntimeWarning, msg.c_str(), 1) != 0) throw py::error_already_set();
+    return nullptr;
+  }
+  auto opened = HandLandmarker::Open(path);
+  if (!opened.ok()) throw StatusError(opened.status());
+  std::lock_guard<std::mutex> lock(mu);
+  return cache.emplace(path, std::move(opened).value()).first->second;
+}
+
 // The keyword options of query_edges() and search(), named like `handdb query`'s flags.
 ImageEdgeOptions EdgeOptionsFromKwargs(const py::kwargs& kw) {
   ImageEdgeOptions o;
+  std::string landmarks = "auto";
   for (const auto& [key_handle, value] : kw) {
     const std::string key = py::cast<std::string>(key_handle);
     if (key == "input") {
@@ -226,6 +255,8 @@ ImageEdgeOptions EdgeOptionsFromKwargs(const py::kwargs& kw) {
       o.work_diameter_px = py::cast<double>(value);
     } else if (key == "wrist_cut") {
       o.cut_forearm = py::cast<bool>(value);
+    } else if (key == "landmarks") {
+      landmarks = value.is_none() ? "off" : py::cast<std::string>(py::str(value));
     } else {
       throw py::type_error("unexpected keyword argument '" + key + "'");
     }
@@ -235,6 +266,10 @@ ImageEdgeOptions EdgeOptionsFromKwargs(const py::kwargs& kw) {
         "invalid photo options (skin box within 0..255 and min <= max, 0 <= canny low <= high, "
         "contour_clearance 0..20, "
         "work_diameter 0 or 16..4096)");
+  }
+  // Edge images and label EXRs have no photo to find landmarks in.
+  if (o.kind != QueryInputKind::kEdges && o.kind != QueryInputKind::kLabels) {
+    o.landmarker = Landmarker(landmarks);
   }
   return o;
 }
@@ -497,6 +532,10 @@ py::dict MatchDict(const PyMatch& pm) {
   d["view_phi_deg"] = l.view_phi * kDeg;
   d["camera_roll"] = l.camera_roll;
   d["hand"] = std::string(HandName(m.hand));
+  if (m.score >= 0) {
+    d["score"] = m.score;
+    d["landmark_error"] = m.landmark_error;
+  }
   d["keypoints"] = kps_lists;
   if (pm.keypoints_image) d["keypoints_image_px"] = kps_image_lists;
   return d;
@@ -555,6 +594,7 @@ py::object Search(const PyDatabase& self,
                   bool coarse_bound,
                   bool return_stats,
                   int per_shape,
+                  double landmark_weight,
                   const py::kwargs& edge_kwargs) {
   SearchOptions options;
   options.top_k = top_k;
@@ -572,6 +612,9 @@ py::object Search(const PyDatabase& self,
   if (top_k < 1) throw py::value_error("top_k must be >= 1");
   if (per_shape < 0) throw py::value_error("per_shape must be >= 0");
   if (threads == 0 || threads < -1) throw py::value_error("threads must be -1 or >= 1");
+  LandmarkRankOptions landmark_rank;
+  landmark_rank.weight = landmark_weight;
+  if (!landmark_rank.Check()) throw py::value_error("landmark_weight must be >= 0");
 
   std::optional<QueryEdges> edges;
   std::vector<Point2f> points;
@@ -592,7 +635,8 @@ py::object Search(const PyDatabase& self,
   std::optional<Result<std::vector<Match>>> matches;
   {
     py::gil_scoped_release release;
-    matches.emplace(searcher.Search(points, options, &stats));
+    matches.emplace(edges ? SearchQuery(searcher, *edges, options, landmark_rank, &stats)
+                          : searcher.Search(points, options, &stats));
   }
   if (!matches->ok()) throw StatusError(matches->status());
   py::list out;
@@ -742,6 +786,22 @@ PYBIND11_MODULE(_handdb, m) {
             return py::make_tuple(w[0], w[1], w[2], w[3]);
           },
           "photo: the wrist cut (x0, y0, x1, y1) in image px, or None when no forearm was cut")
+      .def_property_readonly(
+          "landmarks",
+          [](const PyQueryEdges& q) -> py::object {
+            if (!q.edges.landmarks) return py::none();
+            const HandLandmarks& l = *q.edges.landmarks;
+            py::dict d;
+            d["presence"] = l.presence;
+            d["image_px"] =
+                Point2fArray(std::vector<Point2f>(l.image_px.begin(), l.image_px.end()));
+            d["crop_centre_px"] = py::make_tuple(l.crop_centre.x, l.crop_centre.y);
+            d["crop_side_px"] = l.crop_side_px;
+            d["crop_angle_deg"] = l.crop_angle_deg;
+            return d;
+          },
+          "photo: the hand landmark network's joints, {presence, image_px (21, 2), crop_*}, or "
+          "None (no model, or not a photo)")
       .def(
           "image_from_normalised",
           [](const PyQueryEdges& q,
@@ -862,6 +922,21 @@ PYBIND11_MODULE(_handdb, m) {
           "b", [](const PyMatch& p) { return p.match.b; }, "view -> query term, px")
       .def_property_readonly("hand",
                              [](const PyMatch& p) { return std::string(HandName(p.match.hand)); })
+      .def_property_readonly(
+          "score",
+          [](const PyMatch& p) -> py::object {
+            if (p.match.score < 0) return py::none();
+            return py::cast(p.match.score);
+          },
+          "when a photo's hand landmarks re-ranked the matches: distance / best distance + "
+          "weight x landmark_error (the order of the list); None: ranked by distance")
+      .def_property_readonly(
+          "landmark_error",
+          [](const PyMatch& p) -> py::object {
+            if (p.match.landmark_error < 0) return py::none();
+            return py::cast(p.match.landmark_error);
+          },
+          "with score: mean distance of the keypoints to the photo's landmarks, in hand radii")
       .def_property_readonly("shape_name", [](const PyMatch& p) { return p.match.shape_name; })
       .def_property_readonly("render_id", [](const PyMatch& p) { return p.match.label.render_id; })
       .def_property_readonly("shape_id", [](const PyMatch& p) { return p.match.label.shape_id; })
@@ -1029,6 +1104,7 @@ PYBIND11_MODULE(_handdb, m) {
           py::arg("coarse_bound") = true,
           py::arg("return_stats") = false,
           py::arg("per_shape") = 0,
+          py::arg("landmark_weight") = LandmarkRankOptions{}.weight,
           "Exact top-k (view, roll) by the chamfer distance (docs/query.md), best first, as a list "
           "of Match; the GIL is released while searching.\n\n"
           "query: an image path (photo, edge image or label EXR: converted like `handdb query "
@@ -1038,7 +1114,10 @@ PYBIND11_MODULE(_handdb, m) {
           "hand: 'either' (default, as `handdb query`), 'right' or 'left'. threads: -1 = all "
           "cores. return_stats=True returns (matches, stats) with the stats of `handdb query "
           "--json`. per_shape: at most this many matches per basic shape (0: no limit; 1: the "
-          "top_k nearest shapes, each by its best view, as `handdb query --per-shape 1`).")
+          "top_k nearest shapes, each by its best view, as `handdb query --per-shape 1`). A photo "
+          "whose QueryEdges carry hand landmarks (query_edges(landmarks='auto'), the default) is "
+          "re-ranked by them as `handdb query` does (Match.score; landmark_weight as "
+          "--landmark-weight).")
       .def("__repr__",
            [](const PyDatabase& d) {
              return "<handdb.Database '" + d.path().string() +
@@ -1072,7 +1151,8 @@ PYBIND11_MODULE(_handdb, m) {
       "Options, named like the command's flags: input='auto'|'photo'|'edges'|'labels', "
       "mask=path, roi=(x, y, w, h), skin=(Ymin, Ymax, Crmin, Crmax, Cbmin, Cbmax), "
       "canny=(low, high), contour_clearance=2, edges_outside=False, work_diameter=128, "
-      "wrist_cut=True. database (a Database or "
+      "wrist_cut=True, landmarks='auto' (the installed hand landmark model; 'off' or None: "
+      "none; or a .tflite file). database (a Database or "
       "its path): label EXRs use the edge options it was converted with.");
 
   m.def("validate",

@@ -296,6 +296,7 @@ def test_search_releases_the_gil(db):
     ([], {}),
     (["--contour-clearance", "4", "--canny", "30,100", "--edges-outside"],
      {"contour_clearance": 4, "canny": (30, 100), "edges_outside": True}),
+    (["--landmarks", "off"], {"landmarks": "off"}),
 ])
 def test_photo_search_equals_query_json(handdb, db, db_dir, flags, options):
     """A real photo (tests/data/photos) through the skin-colour path, with the command's photo
@@ -311,6 +312,27 @@ def test_photo_search_equals_query_json(handdb, db, db_dir, flags, options):
     assert (len(edges), edges.kind, edges.hand_pixels) == (
         cli["query"]["edge_points"], "photo", cli["query"]["hand_pixels"])
     assert edges.centre_px == tuple(cli["query"]["centre_px"]) and edges.scale == cli["query"]["scale"]
+
+
+def test_photo_landmarks_rerank_like_the_cli(handdb, db, db_dir):
+    """The installed landmark model (the test command installs it): a real photo's QueryEdges
+    carry the network's 21 joints, and the search ranks by the documented score; landmarks='off'
+    ranks by D_c alone."""
+    from handdb_testing import REPO
+    photo = os.path.join(REPO, "tests/data/photos/asl-digits/asl-1/IMG_1170.JPG")
+    edges = handdb.query_edges(photo)
+    assert edges.landmarks is not None and edges.landmarks["presence"] > 0.9
+    assert edges.landmarks["image_px"].shape == (21, 2)
+    matches = db.search(edges, top_k=5, per_shape=1)
+    scores = [m.score for m in matches]
+    assert all(s is not None for s in scores) and scores == sorted(scores)
+    cli = handdb_json("query", db_dir, photo, "--json", "--top", 5, "--per-shape", 1)
+    assert cli["query"]["landmarks"]["used"] is True
+    assert [m.to_dict() for m in matches] == cli["matches"]
+    assert cli["query"]["landmarks"]["image_px"] == edges.landmarks["image_px"].tolist()
+    plain = db.search(handdb.query_edges(photo, landmarks="off"), top_k=5, per_shape=1)
+    assert all(m.score is None for m in plain)
+    assert [m.distance for m in plain] == sorted(m.distance for m in plain)
 
 
 def test_coded_database_reads_and_searches_like_the_plain_one(handdb, db, tmp_path, view_image):
