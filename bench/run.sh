@@ -23,7 +23,8 @@
 #             success@(d,n) with the chance baseline, keypoint error, queries/s)
 #   photos    handdb evaluate --photos: the real-photo development set (../shared/photos/asl-digits)
 #             against the paper database: top-1/5/10 shape accuracy, chance, confusion matrix;
-#             the defaults (either hand, shapes ranked), then --hand right and --rank views
+#             the defaults (either hand, shapes ranked, hand landmarks), then --hand right,
+#             --rank views and --landmarks off (the in-run baseline of the landmark re-ranking)
 #   index     handdb index on the paper database, then bench/index_bench: indexed search against
 #             exact search on the same query sets (latency, recall@1/10, candidates refined)
 #   codec     bench/point_codec_bench on the paper database: the point and coarse-field codes'
@@ -148,6 +149,10 @@ if want photos; then
     --threads "$jobs" --json "$out/eval_photos_right.json"
   run eval_photos_views "$handdb" evaluate "$work/db-paper" --photos "$photos" --rank views \
     --threads "$jobs" --json "$out/eval_photos_views.json"
+  # The in-run baseline of the landmark re-ranking (docs/query.md, "Hand landmarks"): D_c alone.
+  # Its timing against eval_photos' is the cost of the landmarks (network + pool search).
+  run eval_photos_no_landmarks "$handdb" evaluate "$work/db-paper" --photos "$photos" \
+    --landmarks off --threads "$jobs" --json "$out/eval_photos_no_landmarks.json"
 fi
 
 if want pca_large_generate; then
