@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <random>
 #include <string>
@@ -45,6 +46,10 @@ TEST(TfliteModelTest, LoadsTheLandmarkModel) {
   ASSERT_GE(sizes.size(), 2u);
   EXPECT_EQ(sizes[0], 63u);
   EXPECT_EQ(sizes[1], 1u);
+  std::printf("landmark model: %.3g multiply-adds per run\n",
+              static_cast<double>(m->multiply_adds()));
+  EXPECT_GT(m->multiply_adds(), 1e8);
+  EXPECT_LT(m->multiply_adds(), 1e10);
   // A grey picture is no hand: the presence output (a logistic) is low, and finite.
   std::vector<float> grey(224 * 224 * 3, 0.5f);
   const auto out = m->Run(grey);

@@ -260,6 +260,7 @@ struct TfliteModel::Graph {
   // whose lives do not overlap (the full landmark model needs 4 instead of 166 tensors' worth).
   std::vector<int> slot;
   int num_slots = 0;
+  int64_t multiply_adds = 0;
 };
 
 TfliteModel::TfliteModel(std::unique_ptr<Graph> graph) : graph_(std::move(graph)) {}
@@ -270,6 +271,8 @@ TfliteModel::~TfliteModel() = default;
 const std::vector<int>& TfliteModel::input_shape() const {
   return graph_->tensors[graph_->inputs[0]].shape;
 }
+
+int64_t TfliteModel::multiply_adds() const { return graph_->multiply_adds; }
 
 std::vector<size_t> TfliteModel::output_sizes() const {
   std::vector<size_t> out;
@@ -302,12 +305,16 @@ bool CheckOp(const TfliteModel::Graph& g,
   if (y->constant) return fail("writes a constant tensor");
   if (op.code != kDequantize && x->type != kFloat32) return fail("input is not float32");
   auto dims4 = [](const Tensor* t) { return t->shape.size() == 4 && t->shape[0] == 1; };
+  // Weights and biases: constants with float values (float32, or float16 converted at load).
+  auto float_constant = [](const Tensor* t) {
+    return t != nullptr && t->constant && static_cast<int64_t>(t->values.size()) == t->elements;
+  };
   switch (op.code) {
     case kConv2d:
     case kDepthwiseConv2d: {
       const Tensor* w = tensor(1, true);
       const Tensor* b = tensor(2, true);
-      if (!dims4(x) || !dims4(y) || w == nullptr || w->shape.size() != 4 || !w->constant) {
+      if (!dims4(x) || !dims4(y) || !float_constant(w) || w->shape.size() != 4) {
         return fail("expects 1xHxWxC tensors and constant 4-D weights");
       }
       const int c = x->shape[3];
@@ -317,7 +324,7 @@ bool CheckOp(const TfliteModel::Graph& g,
         return fail("weights do not match the channels");
       }
       if (w->shape[1] != op.win.kh || w->shape[2] != op.win.kw) return fail("kernel size");
-      if (b != nullptr && (!b->constant || b->elements != o)) return fail("bias size");
+      if (b != nullptr && (!float_constant(b) || b->elements != o)) return fail("bias size");
       if (y->shape[1] != op.win.out(x->shape[1], op.win.kh, op.win.stride_h) ||
           y->shape[2] != op.win.out(x->shape[2], op.win.kw, op.win.stride_w)) {
         return fail("output size");
@@ -342,10 +349,10 @@ bool CheckOp(const TfliteModel::Graph& g,
     case kFullyConnected: {
       const Tensor* w = tensor(1, true);
       const Tensor* b = tensor(2, true);
-      if (w == nullptr || !w->constant || w->shape.size() != 2 || w->shape[1] <= 0 ||
+      if (!float_constant(w) || w->shape.size() != 2 || w->shape[1] <= 0 ||
           x->elements % w->shape[1] != 0 ||
           y->elements != x->elements / w->shape[1] * w->shape[0] ||
-          (b != nullptr && (!b->constant || b->elements != w->shape[0]))) {
+          (b != nullptr && (!float_constant(b) || b->elements != w->shape[0]))) {
         return fail("shapes");
       }
       return true;
@@ -546,7 +553,14 @@ Result<TfliteModel> TfliteModel::Load(const std::filesystem::path& path) {
           StatusCode::kBadLayout,
           what + ": operator " + std::to_string(k) + " names a tensor that does not exist");
     }
-    if (!op.out.empty() && std::find(op.in.begin(), op.in.end(), op.out[0]) != op.in.end()) {
+    if (op.out.size() != 1 || op.in.empty() || op.in[0] < 0) {
+      return Status(StatusCode::kBadLayout,
+                    what + ": operator " + std::to_string(k) + " has " +
+                        std::to_string(op.in.size()) + " inputs and " +
+                        std::to_string(op.out.size()) +
+                        " outputs (every operator here reads a first input and writes one output)");
+    }
+    if (std::find(op.in.begin(), op.in.end(), op.out[0]) != op.in.end()) {
       return Status(StatusCode::kBadLayout,
                     what + ": operator " + std::to_string(k) + " writes one of its own inputs");
     }
@@ -651,6 +665,19 @@ Result<TfliteModel> TfliteModel::Load(const std::filesystem::path& path) {
     }
   }
   for (int o : g->outputs) g->last_use[o] = std::numeric_limits<int>::max();
+  double work = 0;  // double: a hostile graph's counts could overflow int64
+  for (const Graph::Op& op : g->ops) {
+    const Graph::Tensor& x = g->tensors[op.in[0]];
+    const Graph::Tensor& y = g->tensors[op.out[0]];
+    int64_t per_output = 1;
+    if (op.code == kConv2d) per_output = int64_t{op.win.kh} * op.win.kw * x.shape[3];
+    if (op.code == kDepthwiseConv2d || op.code == kMaxPool2d)
+      per_output = int64_t{op.win.kh} * op.win.kw;
+    if (op.code == kFullyConnected) per_output = g->tensors[op.in[1]].shape[1];
+    if (op.code == kMean) per_output = x.elements / std::max<int64_t>(1, y.elements);
+    work += static_cast<double>(y.elements) * static_cast<double>(per_output);
+  }
+  g->multiply_adds = work < 9e18 ? static_cast<int64_t>(work) : std::numeric_limits<int64_t>::max();
   // Buffers by liveness: an operator's output takes a free buffer before its inputs' buffers
   // are released, so no operator reads and writes one buffer.
   g->slot.assign(num_tensors, -1);

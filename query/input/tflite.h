@@ -33,6 +33,9 @@ class TfliteModel {
   // The first input's shape (NHWC for images) and the outputs' element counts.
   const std::vector<int>& input_shape() const;
   std::vector<size_t> output_sizes() const;
+  // Multiply-adds of one Run (convolutions and products; other operators count one per output
+  // element): 3.3e8 for the full landmark model.
+  int64_t multiply_adds() const;
 
   // Runs the graph on `input` (the first input tensor, row-major, input_shape()'s element
   // count); returns one vector per graph output. Thread-safe: each call has its own buffers.
