@@ -254,10 +254,14 @@ Status WriteSheet(const QueryFlags& flags,
   for (const Match& m : matches) {
     SheetTile t;
     char caption[128];
+    // Re-ranked by landmarks: the score the order follows, then D_c.
+    char score[32] = "";
+    if (m.score >= 0) std::snprintf(score, sizeof(score), "s=%.2f ", m.score);
     std::snprintf(caption,
                   sizeof(caption),
-                  "#%d  D=%.2f  %s  r=%.0f%s",
+                  "#%d  %sD=%.2f  %s  r=%.0f%s",
                   rank++,
+                  score,
                   m.distance,
                   m.shape_name.empty() ? ("shape " + std::to_string(m.label.shape_id)).c_str()
                                        : m.shape_name.c_str(),

@@ -121,6 +121,13 @@ Status WriteContactSheet(const std::filesystem::path& out_png,
         cv::circle(tile, to_tile(k.x, k.y), 2, kBlack, cv::FILLED, cv::LINE_AA);
       }
     }
+    // The landmark network's joints (docs/query.md, "Hand landmarks") as small magenta rings,
+    // so the top match's skeleton can be read against what the network saw.
+    if (query.landmarks) {
+      for (const Point2f& k : query.landmarks->image_px) {
+        cv::circle(tile, to_tile(k.x, k.y), 3, cv::Scalar(200, 0, 200), 1, cv::LINE_AA);
+      }
+    }
     if (query.forearm_cut) {
       cv::line(tile,
                to_tile(query.wrist_line[0], query.wrist_line[1]),
