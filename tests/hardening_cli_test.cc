@@ -293,6 +293,22 @@ TEST_F(HardeningCli, BadPhotoAndSearchFlagsAreOneLineNamingTheFlag) {
     EXPECT_EQ(r.err, message) << flags;
   }
   EXPECT_EQ(Handdb(query + "--dt-cell 0.5 --canny 10,20 --skin 0,255,0,255,0,255").code, 0);
+  // A landmark model that is missing, not a model, or not a landmark model: one line naming it.
+  const fs::path text = *dir_ / "text.tflite";
+  std::ofstream(text) << "not a model\n";
+  const fs::path small = fs::path(HANDDB_SOURCE_DIR) / "tests" / "data" / "tflite" / "head.tflite";
+  const std::vector<std::pair<fs::path, std::string>> models = {
+      {*dir_ / "missing.tflite", "no such model file"},
+      {text, "not a TensorFlow Lite model (no TFL3 identifier)"},
+      {small,
+       "not a hand landmark model (expected one 1xHxWx3 input, and 63 joint coordinates and a "
+       "presence score as its first two outputs)"},
+  };
+  for (const auto& [model, problem] : models) {
+    const CliRun r = Handdb(query + "--landmarks " + model.string());
+    EXPECT_EQ(r.code, 2) << model;
+    EXPECT_EQ(r.err, "handdb query: --landmarks: " + model.string() + ": " + problem + "\n");
+  }
 }
 
 // A database of one shard whose metadata is `metadata_json`, after `patch` edited the shard's
