@@ -44,33 +44,50 @@ ASSET_TGZ_SHA256="30df2a2268220fc0d0e034bed1550aabdd7a2500573c5216f64fc70d59c3d9
 ASSET_GLB_SHA256="291790c14f7f88a7f9bd35330c47392ed8e8d395ae6728f4bb7089f1bc1f2b96"
 ASSET_DIR="${HANDDB_ASSET_DIR:-$here/third_party/assets}"
 
-install_asset() {
-  local glb="$ASSET_DIR/generic-hand/right.glb"
-  if [ -f "$glb" ] && echo "$ASSET_GLB_SHA256  $glb" | sha256sum -c --status; then
-    echo "deps: hand asset present ($glb)"
+# npm_file PACKAGE VERSION TGZ_SHA256 FILE FILE_SHA256 DEST_DIR [EXTRA...]: the package's FILE
+# (a path inside the tarball's package/) installed as DEST_DIR/<its name>, after both checksums;
+# EXTRA files of the package (licence, package.json) copied beside it. Nothing is fetched when
+# the installed file already has its checksum.
+npm_file() {
+  local package="$1" version="$2" tgz_sha="$3" file="$4" file_sha="$5" dest_dir="$6"
+  shift 6
+  local dest
+  dest="$dest_dir/$(basename "$file")"
+  if [ -f "$dest" ] && echo "$file_sha  $dest" | sha256sum -c --status; then
+    echo "deps: $package $(basename "$file") present ($dest)"
     return
   fi
   command -v npm > /dev/null || { echo "deps: npm is missing (install the nodejs/npm packages)" >&2; exit 1; }
   local tmp
   tmp="$(mktemp -d)"
-  trap 'rm -rf "$tmp"' RETURN
-  echo "deps: fetching $ASSET_PACKAGE@$ASSET_VERSION from the npm registry"
-  (cd "$tmp" && npm pack --silent "$ASSET_PACKAGE@$ASSET_VERSION" > /dev/null)
-  local tgz="$tmp/webxr-input-profiles-assets-$ASSET_VERSION.tgz"
-  echo "$ASSET_TGZ_SHA256  $tgz" | sha256sum -c --status || {
-    echo "deps: $tgz: sha256 mismatch (expected $ASSET_TGZ_SHA256, got $(sha256sum "$tgz" | cut -d' ' -f1))" >&2
+  trap 'rm -rf "$tmp"; trap - RETURN' RETURN
+  echo "deps: fetching $package@$version from the npm registry"
+  (cd "$tmp" && npm pack --silent "$package@$version" > /dev/null)
+  # npm pack names the tarball after the package: @scope/name -> scope-name-VERSION.tgz.
+  local tgz
+  tgz="$tmp/$(echo "${package#@}" | tr / -)-$version.tgz"
+  echo "$tgz_sha  $tgz" | sha256sum -c --status || {
+    echo "deps: $tgz: sha256 mismatch (expected $tgz_sha, got $(sha256sum "$tgz" | cut -d' ' -f1))" >&2
     exit 1
   }
-  tar -xzf "$tgz" -C "$tmp" package/dist/profiles/generic-hand/right.glb package/LICENSE.md package/package.json
-  echo "$ASSET_GLB_SHA256  $tmp/package/dist/profiles/generic-hand/right.glb" | sha256sum -c --status || {
-    echo "deps: right.glb: sha256 mismatch" >&2
+  local extra=()
+  for e in "$@"; do extra+=("package/$e"); done
+  tar -xzf "$tgz" -C "$tmp" "package/$file" "${extra[@]}"
+  echo "$file_sha  $tmp/package/$file" | sha256sum -c --status || {
+    echo "deps: $(basename "$file"): sha256 mismatch" >&2
     exit 1
   }
-  mkdir -p "$ASSET_DIR/generic-hand"
-  cp "$tmp/package/LICENSE.md" "$ASSET_DIR/generic-hand/LICENSE.md"
-  cp "$tmp/package/package.json" "$ASSET_DIR/generic-hand/package.json"
-  cp "$tmp/package/dist/profiles/generic-hand/right.glb" "$glb.tmp" && sync "$glb.tmp" && mv "$glb.tmp" "$glb"
-  echo "deps: installed $glb (sha256 $ASSET_GLB_SHA256)"
+  mkdir -p "$dest_dir"
+  # Readable by every user (the npm tarballs carry modes like 0750 and 0440).
+  for e in "$@"; do install -m 0644 "$tmp/package/$e" "$dest_dir/$(basename "$e")"; done
+  install -m 0644 "$tmp/package/$file" "$dest.tmp" && sync "$dest.tmp" && mv "$dest.tmp" "$dest"
+  echo "deps: installed $dest (sha256 $file_sha)"
+}
+
+install_asset() {
+  npm_file "$ASSET_PACKAGE" "$ASSET_VERSION" "$ASSET_TGZ_SHA256" \
+    dist/profiles/generic-hand/right.glb "$ASSET_GLB_SHA256" "$ASSET_DIR/generic-hand" \
+    LICENSE.md package.json
 }
 
 # The hand landmark network the photo path runs (query/input/hand_landmarks.h): MediaPipe
@@ -81,31 +98,8 @@ LANDMARK_TGZ_SHA256="bdd5be939c60cbd72a49f4b6141407683cf2a67263598e1a44757d70b3d
 LANDMARK_MODEL_SHA256="8c026882c9ec059ce0f8e75266bee5a9a23c341a40e0000df755374d3d1b9b68"
 
 install_landmark_model() {
-  local model="$ASSET_DIR/mediapipe-hands/hand_landmark_full.tflite"
-  if [ -f "$model" ] && echo "$LANDMARK_MODEL_SHA256  $model" | sha256sum -c --status; then
-    echo "deps: hand landmark model present ($model)"
-    return
-  fi
-  command -v npm > /dev/null || { echo "deps: npm is missing (install the nodejs/npm packages)" >&2; exit 1; }
-  local tmp
-  tmp="$(mktemp -d)"
-  trap 'rm -rf "$tmp"' RETURN
-  echo "deps: fetching $LANDMARK_PACKAGE@$LANDMARK_VERSION from the npm registry"
-  (cd "$tmp" && npm pack --silent "$LANDMARK_PACKAGE@$LANDMARK_VERSION" > /dev/null)
-  local tgz="$tmp/mediapipe-hands-$LANDMARK_VERSION.tgz"
-  echo "$LANDMARK_TGZ_SHA256  $tgz" | sha256sum -c --status || {
-    echo "deps: $tgz: sha256 mismatch (expected $LANDMARK_TGZ_SHA256, got $(sha256sum "$tgz" | cut -d' ' -f1))" >&2
-    exit 1
-  }
-  tar -xzf "$tgz" -C "$tmp" package/hand_landmark_full.tflite package/package.json
-  echo "$LANDMARK_MODEL_SHA256  $tmp/package/hand_landmark_full.tflite" | sha256sum -c --status || {
-    echo "deps: hand_landmark_full.tflite: sha256 mismatch" >&2
-    exit 1
-  }
-  mkdir -p "$ASSET_DIR/mediapipe-hands"
-  cp "$tmp/package/package.json" "$ASSET_DIR/mediapipe-hands/package.json"
-  cp "$tmp/package/hand_landmark_full.tflite" "$model.tmp" && sync "$model.tmp" && mv "$model.tmp" "$model"
-  echo "deps: installed $model (sha256 $LANDMARK_MODEL_SHA256)"
+  npm_file "$LANDMARK_PACKAGE" "$LANDMARK_VERSION" "$LANDMARK_TGZ_SHA256" \
+    hand_landmark_full.tflite "$LANDMARK_MODEL_SHA256" "$ASSET_DIR/mediapipe-hands" package.json
 }
 
 case "${1:-}" in

@@ -569,29 +569,27 @@ Result<TfliteModel> TfliteModel::Load(const std::filesystem::path& path) {
     int8_t padding = 0, act = 0, keep = 0;
     int32_t dil_w = 1, dil_h = 1, mult = 1;
     bool ok = true;
+    // Conv2DOptions, DepthwiseConv2DOptions and Pool2DOptions all start with padding, stride_w,
+    // stride_h (fields 0-2).
+    auto window = [&] {
+      return p.Scalar<int8_t>(opt, 0, 0, &padding, "padding") &&
+             p.Scalar<int32_t>(opt, 1, 1, &op.win.stride_w, "stride") &&
+             p.Scalar<int32_t>(opt, 2, 1, &op.win.stride_h, "stride");
+    };
     switch (op.code) {
       case kConv2d:
-        ok = p.Scalar<int8_t>(opt, 0, 0, &padding, "padding") &&
-             p.Scalar<int32_t>(opt, 1, 1, &op.win.stride_w, "stride") &&
-             p.Scalar<int32_t>(opt, 2, 1, &op.win.stride_h, "stride") &&
-             p.Scalar<int8_t>(opt, 3, 0, &act, "activation") &&
+        ok = window() && p.Scalar<int8_t>(opt, 3, 0, &act, "activation") &&
              p.Scalar<int32_t>(opt, 4, 1, &dil_w, "dilation") &&
              p.Scalar<int32_t>(opt, 5, 1, &dil_h, "dilation");
         break;
       case kDepthwiseConv2d:
-        ok = p.Scalar<int8_t>(opt, 0, 0, &padding, "padding") &&
-             p.Scalar<int32_t>(opt, 1, 1, &op.win.stride_w, "stride") &&
-             p.Scalar<int32_t>(opt, 2, 1, &op.win.stride_h, "stride") &&
-             p.Scalar<int32_t>(opt, 3, 1, &mult, "depth multiplier") &&
+        ok = window() && p.Scalar<int32_t>(opt, 3, 1, &mult, "depth multiplier") &&
              p.Scalar<int8_t>(opt, 4, 0, &act, "activation") &&
              p.Scalar<int32_t>(opt, 5, 1, &dil_w, "dilation") &&
              p.Scalar<int32_t>(opt, 6, 1, &dil_h, "dilation");
         break;
       case kMaxPool2d:
-        ok = p.Scalar<int8_t>(opt, 0, 0, &padding, "padding") &&
-             p.Scalar<int32_t>(opt, 1, 1, &op.win.stride_w, "stride") &&
-             p.Scalar<int32_t>(opt, 2, 1, &op.win.stride_h, "stride") &&
-             p.Scalar<int32_t>(opt, 3, 1, &op.win.kw, "filter width") &&
+        ok = window() && p.Scalar<int32_t>(opt, 3, 1, &op.win.kw, "filter width") &&
              p.Scalar<int32_t>(opt, 4, 1, &op.win.kh, "filter height") &&
              p.Scalar<int8_t>(opt, 5, 0, &act, "activation");
         break;
