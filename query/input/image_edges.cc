@@ -369,15 +369,13 @@ WristCut CutForearm(cv::Mat* region, double radii) {
   return out;
 }
 
-// `source` is the picture's size in its file: larger than `any` when a huge JPEG was decoded
-// reduced (a mask then has the file's size and is reduced the same way).
 // The landmark network on the hand the photo path found (hand_landmarks.h): a square crop
 // centred on the silhouette, 1.5 of its diameters wide (the whole hand with a margin, as the
 // network's training crops), turned so the hand points up: away from the forearm where one
 // leaves the picture, else from the palm centre towards the silhouette's centre (the fingers
-// reach further from the palm than the wrist does). Measured on the development photos and the
-// photo-like test views (docs/results.md, session 21): the turn matters on the test views, whose
-// hands point every way (without it the network's presence falls below 0.9 on half of them).
+// reach further from the palm than the wrist does). On the photo-like test views, whose hands
+// point every way, the network's presence is below 0.9 for 63% with the turn and 73% without
+// (docs/query.md, "Hand landmarks"); the development photos' arms all point down.
 HandLandmarks FindLandmarks(const HandLandmarker& landmarker,
                             const cv::Mat& bgr,
                             const QueryEdges& q) {
@@ -404,6 +402,8 @@ HandLandmarks FindLandmarks(const HandLandmarker& landmarker,
                            static_cast<float>(angle));
 }
 
+// `source` is the picture's size in its file: larger than `any` when a huge JPEG was decoded
+// reduced (a mask then has the file's size and is reduced the same way).
 Result<QueryEdges> FromPhoto(const std::filesystem::path& path,
                              const cv::Mat& any,
                              cv::Size source,
