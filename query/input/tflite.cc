@@ -112,15 +112,22 @@ struct Parse {
     if (error.ok()) error = Status(code, what + ": " + msg);
     return false;
   }
+  // Where field `field` of `table` lies (0: absent, or no table); false on a broken vtable.
+  bool At(size_t table, int field, size_t* at, const char* name) {
+    const auto pos = table == 0 ? std::optional<size_t>(0) : f.Field(table, field);
+    if (!pos) return Fail(StatusCode::kBadLayout, std::string("broken vtable reading ") + name);
+    *at = *pos;
+    return true;
+  }
   // Optional table field -> its table position (0: absent).
   bool Table(size_t table, int field, size_t* out, const char* name) {
-    const auto at = f.Field(table, field);
-    if (!at) return Fail(StatusCode::kBadLayout, std::string("broken vtable reading ") + name);
-    if (*at == 0) {
+    size_t at = 0;
+    if (!At(table, field, &at, name)) return false;
+    if (at == 0) {
       *out = 0;
       return true;
     }
-    const auto t = f.Deref(*at);
+    const auto t = f.Deref(at);
     if (!t) return Fail(StatusCode::kTruncated, std::string(name) + " points outside the file");
     *out = *t;
     return true;
@@ -166,17 +173,13 @@ struct Parse {
   }
   template <typename T>
   bool Scalar(size_t table, int field, T def, T* out, const char* name) {
-    if (table == 0) {
+    size_t at = 0;
+    if (!At(table, field, &at, name)) return false;
+    if (at == 0) {
       *out = def;
       return true;
     }
-    const auto at = f.Field(table, field);
-    if (!at) return Fail(StatusCode::kBadLayout, std::string("broken vtable reading ") + name);
-    if (*at == 0) {
-      *out = def;
-      return true;
-    }
-    const auto v = f.Read<T>(*at);
+    const auto v = f.Read<T>(at);
     if (!v)
       return Fail(StatusCode::kTruncated, std::string(name) + " lies past the end of the file");
     *out = *v;
