@@ -57,7 +57,10 @@ S["E"] = shape((50, 20, 60, 40), (60, 0, 100, 80), (60, 0, 100, 80), (60, 0, 100
 S["X"] = shape(TH_FIST, (20, 0, 90, 60), CURL, CURL, CURL)
 S["horns"] = shape(TH_FIST, ab(STRAIGHT, 10), CURL, CURL, ab(STRAIGHT, 20))
 S["gun"] = shape((-15, 10, 0, 0), STRAIGHT, STRAIGHT, CURL, CURL)
-S["half-open"] = shape((15, 20, 20, 20), HALF, HALF, HALF, HALF)
+# Fingers halfway to a fist, thumb open. (Its thumb was first bent towards the fingertips,
+# (15, 20, 20, 20): that made it a second O, its thumb tip nearer the index tip than asl-0's,
+# and the nearest wrong shape of most O photos; docs/hand_model.md, session 22.)
+S["half-open"] = shape(STRAIGHT, HALF, HALF, HALF, HALF)
 
 # Shapes in which the thumb tip touches a finger tip: search the thumb's 4 DOFs (and the
 # touched finger's flexion) so the two tip keypoints are TOUCH_DIST apart.
