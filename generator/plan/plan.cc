@@ -218,12 +218,6 @@ Result<std::vector<Eigen::Vector3d>> SampleViews(const json& spec,
 
 }  // namespace
 
-fs::path RepoRoot() {
-  if (const char* env = std::getenv("HANDDB_SOURCE_DIR"); env != nullptr && *env != '\0')
-    return env;
-  return HANDDB_SOURCE_DIR;
-}
-
 fs::path ResolvePlanPath(const std::string& path_in_plan) {
   const fs::path p(path_in_plan);
   if (p.is_absolute()) return p;

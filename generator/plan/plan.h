@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "base/repo_root.h"
 #include "base/status.h"
 #include "format/view.h"
 
@@ -29,8 +30,6 @@ constexpr int kPlanFormatVersion = 1;
 // 250,000 renders (~225 MB) still fit under the 256 MiB ReadJsonFile allows a plan; checked from
 // the config's counts before any shape is sampled. pca-large has 22,016.
 constexpr uint64_t kMaxPlanRenders = 250'000;
-// The repository root: $HANDDB_SOURCE_DIR if set, else the source dir this binary was built from.
-std::filesystem::path RepoRoot();
 // A path as written in a plan / hand-model / shapes file -> a path to open.
 std::filesystem::path ResolvePlanPath(const std::string& path_in_plan);
 // A path as written in a config (generation or test-set) -> an existing file: absolute as is,

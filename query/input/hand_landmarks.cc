@@ -7,7 +7,7 @@
 #include <opencv2/imgproc.hpp>
 #include <vector>
 
-#include "handdb_version.h"
+#include "base/repo_root.h"
 #include "query/input/tflite.h"
 
 namespace handdb {
@@ -24,10 +24,7 @@ std::filesystem::path HandLandmarker::DefaultModelPath() {
   if (const char* env = std::getenv("HANDDB_LANDMARK_MODEL"); env != nullptr && *env != '\0') {
     return env;
   }
-  std::filesystem::path root = HANDDB_SOURCE_DIR;
-  if (const char* env = std::getenv("HANDDB_SOURCE_DIR"); env != nullptr && *env != '\0')
-    root = env;
-  return root / "third_party" / "assets" / "mediapipe-hands" / "hand_landmark_full.tflite";
+  return RepoRoot() / "third_party" / "assets" / "mediapipe-hands" / "hand_landmark_full.tflite";
 }
 
 Result<std::shared_ptr<const HandLandmarker>> HandLandmarker::Open(

@@ -41,7 +41,7 @@ class HandLandmarker {
   static Result<std::shared_ptr<const HandLandmarker>> Open(const std::filesystem::path& model);
   // The installed default: $HANDDB_LANDMARK_MODEL if set, else
   // third_party/assets/mediapipe-hands/hand_landmark_full.tflite under the source tree
-  // ($HANDDB_SOURCE_DIR or the one this binary was built from).
+  // (RepoRoot(): $HANDDB_SOURCE_DIR or the one this binary was built from).
   static std::filesystem::path DefaultModelPath();
 
   ~HandLandmarker();
