@@ -25,7 +25,7 @@
 #include "format/roll.h"
 #include "format/shard_reader.h"
 #include "query/database.h"
-#include "query/input/image_edges.h"
+#include "photo/image_edges.h"
 #include "query/searcher.h"
 
 namespace handdb {

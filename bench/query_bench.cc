@@ -55,7 +55,7 @@
 #include "evaluate/photos.h"
 #include "format/manifest.h"
 #include "format/shard_writer.h"
-#include "query/input/image_edges.h"
+#include "photo/image_edges.h"
 #include "query/search_testing.h"
 #include "query/searcher.h"
 

@@ -16,7 +16,7 @@
 #include "edges/view_conversion.h"
 #include "evaluate/evaluate.h"
 #include "evaluate/photos.h"
-#include "query/input/image_edges.h"
+#include "photo/image_edges.h"
 #include "query/search_testing.h"
 #include "query/searcher.h"
 

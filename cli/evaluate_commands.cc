@@ -22,7 +22,7 @@
 #include "evaluate/evaluate.h"
 #include "format/manifest.h"
 #include "generator/testset/testset.h"
-#include "query/input/image_edges.h"
+#include "photo/image_edges.h"
 #include "query/searcher.h"
 
 namespace handdb::cli {

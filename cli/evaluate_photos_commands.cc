@@ -19,7 +19,7 @@
 #include "evaluate/parts.h"
 #include "evaluate/photo_keypoints.h"
 #include "evaluate/photos.h"
-#include "query/input/image_edges.h"
+#include "photo/image_edges.h"
 #include "query/searcher.h"
 
 namespace handdb::cli {

@@ -11,15 +11,15 @@
 
 #include "base/status.h"
 #include "query/database.h"
-#include "query/input/image_edges.h"
-#include "query/landmark_rank.h"
+#include "photo/image_edges.h"
+#include "pose/landmark_rank.h"
 #include "query/searcher.h"
 
 namespace handdb::cli {
 
 // --input, --mask, --roi, --skin, --canny, --contour-clearance, --edges-outside,
 // --work-diameter, --no-wrist-cut, bound to ImageEdgeOptions; --landmarks,
-// --landmark-weight, bound to the landmark re-ranking (query/landmark_rank.h).
+// --landmark-weight, bound to the landmark re-ranking (pose/landmark_rank.h).
 struct PhotoInputFlags {
   std::string input = std::string(QueryInputKindName(QueryInputKind::kAuto));
   std::string mask, roi, skin, canny;

@@ -15,9 +15,9 @@
 #include "cli/photo_input_flags.h"
 #include "format/roll.h"
 #include "handdb_version.h"
-#include "query/input/image_edges.h"
-#include "query/input/sheet.h"
-#include "query/landmark_rank.h"
+#include "photo/image_edges.h"
+#include "pose/sheet.h"
+#include "pose/landmark_rank.h"
 #include "query/searcher.h"
 
 namespace handdb::cli {

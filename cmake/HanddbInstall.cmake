@@ -35,10 +35,12 @@ set(HANDDB_DOORS_edges edges.h normalise.h exr_io.h view_conversion.h)
 set(HANDDB_DOORS_generator plan/plan.h hand/hand_model.h render/blender.h render/render_driver.h
                            convert/converter.h testset/testset.h)
 set(HANDDB_DOORS_query database.h searcher.h kdtree.h coarse_bound.h index/view_index.h
-                       index/embedding.h input/image_edges.h
-                       input/hand_landmarks.h input/sheet.h landmark_rank.h)
+                       index/embedding.h)
+set(HANDDB_DOORS_nn tflite.h)
+set(HANDDB_DOORS_photo image_edges.h hand_landmarks.h)
+set(HANDDB_DOORS_pose landmark_rank.h sheet.h)
 set(HANDDB_DOORS_evaluate evaluate.h metrics.h plots.h parts.h photos.h photo_keypoints.h)
-set(HANDDB_MODULES base format cluster edges generator query evaluate)
+set(HANDDB_MODULES base nn format cluster edges generator query photo pose evaluate)
 
 # Every door's `#include "x/y.h"` must be a door too (or the generated version header).
 set(_handdb_all_doors handdb_version.h)

@@ -28,8 +28,8 @@
 #include "base/status.h"
 #include "evaluate/metrics.h"
 #include "format/roll.h"
-#include "query/input/image_edges.h"
-#include "query/landmark_rank.h"
+#include "photo/image_edges.h"
+#include "pose/landmark_rank.h"
 #include "query/searcher.h"
 
 namespace handdb {
@@ -63,7 +63,7 @@ enum class QueryInput { kClean, kPhoto };
 const char* QueryInputName(QueryInput input);
 
 // A test view's query: edge points in the normalised frame (px) and, for a photo, the photo
-// path's whole result, whose hand landmarks (if any) re-rank the search (query/landmark_rank.h).
+// path's whole result, whose hand landmarks (if any) re-rank the search (pose/landmark_rank.h).
 struct TestQuery {
   std::vector<Point2f> points;
   std::optional<QueryEdges> picture;

@@ -12,7 +12,7 @@
 #include "evaluate/metrics.h"
 #include "format/roll.h"
 #include "query/database.h"
-#include "query/input/image_edges.h"
+#include "photo/image_edges.h"
 #include "query/search_testing.h"
 
 namespace handdb::testing {

@@ -41,8 +41,8 @@
 #include "evaluate/metrics.h"
 #include "evaluate/photo_keypoints.h"
 #include "format/view.h"
-#include "query/input/image_edges.h"
-#include "query/landmark_rank.h"
+#include "photo/image_edges.h"
+#include "pose/landmark_rank.h"
 #include "query/searcher.h"
 
 namespace handdb {
@@ -211,7 +211,7 @@ struct PhotoEvaluationOptions {
   int num_threads = -1;  // photos searched in parallel, one search thread each
   bool progress = true;
   // A query with hand landmarks (ImageEdgeOptions::landmarker) is re-ranked by them
-  // (query/landmark_rank.h), as `handdb query` does.
+  // (pose/landmark_rank.h), as `handdb query` does.
   LandmarkRankOptions landmark_rank;
   bool Check() const;
 };

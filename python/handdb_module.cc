@@ -1,5 +1,5 @@
 // handdb._handdb: the Python module (issue 13), a thin layer over the libraries' public API
-// (query/database.h, query/searcher.h, query/input/image_edges.h, format/manifest.h,
+// (query/database.h, query/searcher.h, photo/image_edges.h, format/manifest.h,
 // format/validator.h), so Python reads and searches exactly what the `handdb` binary does.
 // docs/python.md describes the API; python/handdb/__init__.py re-exports it.
 //
@@ -36,8 +36,8 @@
 #include "format/view.h"
 #include "handdb_version.h"
 #include "query/database.h"
-#include "query/input/image_edges.h"
-#include "query/landmark_rank.h"
+#include "photo/image_edges.h"
+#include "pose/landmark_rank.h"
 #include "query/searcher.h"
 
 namespace handdb::python {

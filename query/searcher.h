@@ -95,7 +95,7 @@ struct Match {
   // kRight, or kLeft when the mirrored query matched: then `label` is mirrored back into the
   // query's frame (MirrorLabel), so keypoints are where the left hand's joints are.
   Hand hand = Hand::kRight;
-  // Re-ranked by a photo's hand landmarks (query/landmark_rank.h): the mean distance of the
+  // Re-ranked by a photo's hand landmarks (pose/landmark_rank.h): the mean distance of the
   // keypoints to the landmarks (in hand radii: normalised px / 96) and the score the matches
   // are ranked by, distance / (the pool's best distance) + weight * landmark_error.
   // -1: ranked by D_c alone.

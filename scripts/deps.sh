@@ -90,7 +90,7 @@ install_asset() {
     LICENSE.md package.json
 }
 
-# The hand landmark network the photo path runs (query/input/hand_landmarks.h): MediaPipe
+# The hand landmark network the photo path runs (photo/hand_landmarks.h): MediaPipe
 # Hands' hand_landmark_full.tflite, Apache-2.0 (see third_party/README.md).
 LANDMARK_PACKAGE="@mediapipe/hands"
 LANDMARK_VERSION="0.4.1675469240"

@@ -1,4 +1,4 @@
-// libFuzzer target for the TFLite model reader (query/input/tflite.h): the bytes as a model file
+// libFuzzer target for the TFLite model reader (nn/tflite.h): the bytes as a model file
 // through TfliteModel::Load (flatbuffer offsets, vector lengths, tensor shapes and buffers, each
 // operator against its tensors), and a model that loads is run once on zeros when it is small
 // enough to run within the fuzzer's time limit: Run() must stay inside the shapes Load checked
@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "fuzz_file.h"
-#include "query/input/tflite.h"
+#include "nn/tflite.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const auto path = handdb::fuzz::WriteInput(data, size, "model.tflite");

@@ -1,4 +1,4 @@
-#include "query/landmark_rank.h"
+#include "pose/landmark_rank.h"
 
 #include <gtest/gtest.h>
 

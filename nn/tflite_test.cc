@@ -2,7 +2,7 @@
 // (tests/data/tflite, written by make_models.py there with weights from a fixed formula) run on
 // a fixed input, and the same arithmetic done here with plain loops and TFLite's SAME/VALID
 // padding rule.
-#include "query/input/tflite.h"
+#include "nn/tflite.h"
 
 #include <gtest/gtest.h>
 

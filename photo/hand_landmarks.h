@@ -1,10 +1,10 @@
 // Hand landmarks of a photo: the 21 joints (wrist, then 4 per finger from the thumb, base to
 // tip: the order of docs/conventions.md) found by a pretrained landmark network, MediaPipe
 // Hands' `hand_landmark_full.tflite` (Apache-2.0, installed by scripts/deps.sh), run by
-// query/input/tflite.h. The photo path crops the hand it segmented (its silhouette's centre,
+// nn/tflite.h. The photo path crops the hand it segmented (its silhouette's centre,
 // 1.5 diameters wide, turned so the hand points up: away from the forearm, or from the palm
 // centre towards the silhouette's centre) and maps the joints back to the picture's pixels.
-// The search uses them to re-rank its nearest views (query/landmark_rank.h, docs/query.md).
+// The search uses them to re-rank its nearest views (pose/landmark_rank.h, docs/query.md).
 #pragma once
 
 #include <array>

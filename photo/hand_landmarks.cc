@@ -1,4 +1,4 @@
-#include "query/input/hand_landmarks.h"
+#include "photo/hand_landmarks.h"
 
 #include <cmath>
 #include <cstdlib>
@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "base/repo_root.h"
-#include "query/input/tflite.h"
+#include "nn/tflite.h"
 
 namespace handdb {
 

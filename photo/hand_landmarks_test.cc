@@ -1,7 +1,7 @@
 // The TFLite interpreter and the hand landmark network, on the installed model
 // (scripts/deps.sh --asset) and the real photos of tests/data/photos: hostile model files are
 // errors, and the joints the network finds are where the hand's joints are.
-#include "query/input/hand_landmarks.h"
+#include "photo/hand_landmarks.h"
 
 #include <gtest/gtest.h>
 
@@ -14,8 +14,8 @@
 #include <vector>
 
 #include "base/testing.h"
-#include "query/input/image_edges.h"
-#include "query/input/tflite.h"
+#include "photo/image_edges.h"
+#include "nn/tflite.h"
 
 namespace handdb {
 namespace {

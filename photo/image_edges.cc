@@ -1,4 +1,4 @@
-#include "query/input/image_edges.h"
+#include "photo/image_edges.h"
 
 #include <algorithm>
 #include <charconv>

@@ -1,6 +1,6 @@
 // The second stage of a photo query (issue 16): the exact chamfer search's nearest views,
 // re-ranked by how well each view's 21 keypoints fit the hand landmarks a pretrained network
-// found in the photo (query/input/hand_landmarks.h). D_c alone confuses basic shapes whose
+// found in the photo (photo/hand_landmarks.h). D_c alone confuses basic shapes whose
 // outlines and inner edges agree (asl-0 with pinch and half-open, asl-5 with flat, asl-9 with B:
 // docs/results.md); the landmarks say where the fingertips and knuckles are. Measured on the
 // development photos and the rendered test sets in docs/results.md (session 21).
@@ -16,7 +16,7 @@
 #include <vector>
 
 #include "base/status.h"
-#include "query/input/image_edges.h"
+#include "photo/image_edges.h"
 #include "query/searcher.h"
 
 namespace handdb {

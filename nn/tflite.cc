@@ -1,8 +1,7 @@
-#include "query/input/tflite.h"
+#include "nn/tflite.h"
 
-// One thread per Run: callers run photos in parallel, and Eigen's OpenMP products (this library
-// is built with OpenMP for faiss) spun idle threads against them.
-#define EIGEN_DONT_PARALLELIZE
+// One thread per Run (EIGEN_DONT_PARALLELIZE, set for this whole library in nn/CMakeLists.txt):
+// callers run photos in parallel, and Eigen's own threads would spin against them.
 #include <Eigen/Core>
 #include <algorithm>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include "query/input/sheet.h"
+#include "pose/sheet.h"
 
 #include <algorithm>
 #include <cmath>

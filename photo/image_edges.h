@@ -32,7 +32,7 @@
 #include "edges/edges.h"
 #include "format/roll.h"
 #include "format/view.h"
-#include "query/input/hand_landmarks.h"
+#include "photo/hand_landmarks.h"
 
 namespace handdb {
 
@@ -108,8 +108,8 @@ struct ImageEdgeOptions {
   // label query is converted exactly like the database's views.
   EdgeOptions label_edges;
   JointPairs label_joint_pairs = DefaultJointPairs();
-  // Photo: the hand landmark network (query/input/hand_landmarks.h) run on the segmented hand;
-  // its joints re-rank the search's nearest views (query/landmark_rank.h). Null: none.
+  // Photo: the hand landmark network (photo/hand_landmarks.h) run on the segmented hand;
+  // its joints re-rank the search's nearest views (pose/landmark_rank.h). Null: none.
   std::shared_ptr<const HandLandmarker> landmarker;
   bool Check() const;
 };

@@ -11,7 +11,7 @@
 
 #include "base/status.h"
 #include "format/view.h"
-#include "query/input/image_edges.h"
+#include "photo/image_edges.h"
 
 namespace handdb {
 
