@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Latency against database size, from index_bench outputs (issue 12's scaling plot).
+"""Latency against database size, from index_bench outputs (the scaling plot of bench/run.sh).
 
 Usage: bench/plot_scaling.py [--candidates N] OUT.png INDEX_BENCH_OUTPUT.txt [...]
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Python module benchmark (issue 13): Python against C++ on the same database, in one run.
+"""Python module benchmark: Python against C++ on the same database, in one run.
 
     PYTHONPATH=build/python /usr/bin/python3 bench/python_bench.py --db DB [--build build]
         [--rounds 5] [--scan-reps 20] [--query-reps 3] [--threads 2] [--image PHOTO]...

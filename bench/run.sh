@@ -1,8 +1,12 @@
 #!/usr/bin/env bash
-# Runs every benchmark of handdb on this machine and writes the report:
-#   bench/results.json   every number (and each benchmark's own output)
-#   docs/results.md      the machine, the numbers, the ratios against the in-run baselines, and
-#                        pictures of successes and failures (docs/images/results/)
+# Runs every benchmark of handdb on this machine and writes a generated, dated report:
+#   bench/results.json                  every number (and each benchmark's own output)
+#   docs/results/DATE-NAME.md           the machine, the numbers, the ratios against the in-run
+#                                       baselines; DATE is today's (UTC), NAME is
+#                                       $HANDDB_BENCH_NAME (default "<cores>-core")
+#   docs/results/DATE-NAME/             pictures of successes and failures, the scaling plot
+# A run never writes into a hand-written page: docs/results.md explains the benchmarks and links
+# the reports.
 #
 #   bench/run.sh                          # format, render, convert, query, evaluate (paper database)
 #   HANDDB_BENCH_PCA_LARGE=1 bench/run.sh # also the pca-large database (1,056,768 virtual views)
@@ -16,7 +20,7 @@
 #   convert   bench/convert_bench on the paper renders: views/s with 1 and 2 threads
 #   testset   handdb testset configs/testset-paper.json (plain photos) and --clutter
 #   query     bench/query_bench on the paper database: pruned vs brute force vs naive PCL, then
-#             the query sets users send (issue 15): real photos, the test set's photo-like and
+#             the query sets users send: real photos, the test set's photo-like and
 #             clean label renders, the perturbed views; latency median/p90/max with --hand either
 #             and right, share refined, brute force on 3 of each (after testset: it reads ts-paper)
 #   evaluate  handdb evaluate: clean labels, plain photos, cluttered photos (Table 1,
@@ -28,13 +32,13 @@
 #   index     handdb index on the paper database, then bench/index_bench: indexed search against
 #             exact search on the same query sets (latency, recall@1/10, candidates refined)
 #   codec     bench/point_codec_bench on the paper database: the point and coarse-field codes'
-#             bytes per view, decode time, and the storage per virtual view they give (issue 12)
-#   scale     (HANDDB_BENCH_SCALE=1) issue 12's scaling runs: bench/synth_db makes 10M and 50M
+#             bytes per view, decode time, and the storage per virtual view they give
+#   scale     (HANDDB_BENCH_SCALE=1) the scaling runs: bench/synth_db makes 10M and 50M
 #             virtual views from pca-large (or the paper database when pca-large is not built),
 #             handdb index, index_bench on each (fewer queries at 50M: exact search takes
 #             seconds there), the 10M one again with coded shards (synth_db --coded, format
 #             v1.2), and bench/plot_scaling.py draws latency against size
-#   report    bench/report.py -> bench/results.json, docs/results.md
+#   report    bench/report.py -> bench/results.json, docs/results/DATE-NAME.md
 # Databases and test sets are kept in $HANDDB_BENCH_DIR (default /tmp/handdb-bench) and reused by
 # a rerun (generate and testset resume); the benchmarks themselves always run again.
 # HANDDB_BENCH_FRESH=1 removes the databases and test sets first (renders included).
@@ -54,6 +58,7 @@ if [ "${HANDDB_BENCH_SCALE:-0}" = 1 ] && [ -z "${HANDDB_BENCH_STEPS:-}" ]; then
   steps="${steps/ report/} scale report"
 fi
 out="$work/out"
+report="docs/results/$(date -u +%F)-${HANDDB_BENCH_NAME:-$(nproc)-core}"
 if [ "${HANDDB_BENCH_FRESH:-0}" = 1 ]; then
   rm -rf "$work/db-paper" "$work/db-pca-large" "$work/ts-paper" "$work/ts-paper-clutter" "$out" \
     "$work/plots"
@@ -140,16 +145,16 @@ fi
 
 if want photos; then
   # The defaults users get (--hand either: each photo and its mirror image; --rank shapes: top-k
-  # over the k nearest shapes), which issue 16's targets are stated for; then --hand right (the
-  # development photos are right hands) and --rank views (top-k over the k nearest views, the
-  # count of the reports before session 19), each against the same database.
+  # over the k nearest shapes), which the photo accuracy targets are stated for; then --hand right
+  # (the development photos are right hands) and --rank views (top-k over the k nearest views,
+  # the count before shapes were ranked), each against the same database.
   run eval_photos "$handdb" evaluate "$work/db-paper" --photos "$photos" \
     --threads "$jobs" --json "$out/eval_photos.json" --out "$work/plots/photos"
   run eval_photos_right "$handdb" evaluate "$work/db-paper" --photos "$photos" --hand right \
     --threads "$jobs" --json "$out/eval_photos_right.json"
   run eval_photos_views "$handdb" evaluate "$work/db-paper" --photos "$photos" --rank views \
     --threads "$jobs" --json "$out/eval_photos_views.json"
-  # The in-run baseline of the landmark re-ranking (docs/query.md, "Hand landmarks"): D_c alone.
+  # The in-run baseline of the landmark re-ranking (docs/photo.md, "Hand landmarks"): D_c alone.
   # Its timing against eval_photos' is the cost of the landmarks (network + pool search).
   run eval_photos_no_landmarks "$handdb" evaluate "$work/db-paper" --photos "$photos" \
     --landmarks off --threads "$jobs" --json "$out/eval_photos_no_landmarks.json"
@@ -161,7 +166,7 @@ if want pca_large_generate; then
 fi
 if want pca_large_query; then
   # Latency and memory at 1M virtual views; no brute force (~5 min per query here). The query
-  # sets with 8 queries each: a real photo takes seconds here today (issue 15).
+  # sets with 8 queries each: a real photo's exact search takes much longer than at 100k views.
   run query_pca_large "$build/bench/query_bench" --db "$work/db-pca-large" --threads "$jobs" \
     --queries 5 --brute-queries 0 --baseline-fraction 0.001 "${sets[@]}" --set-queries 8
 fi
@@ -213,16 +218,17 @@ if want scale; then
   fi
   run index_bench_synth_10m_coded "$build/bench/index_bench" --db "$db" --threads "$jobs" \
     "${sets[@]}" --set-queries 20 --perturbed 10 --candidates 1000 --cache "$db/exact-cache.txt"
-  mkdir -p docs/images
+  mkdir -p "$report"
   inputs=("$out/index_bench_paper.txt")
   for size in 10 50; do inputs+=("$out/index_bench_synth_${size}m.txt"); done
-  run plot_scaling /usr/bin/python3 bench/plot_scaling.py --candidates 1000 docs/images/latency_vs_size.png \
+  run plot_scaling /usr/bin/python3 bench/plot_scaling.py --candidates 1000 "$report/latency_vs_size.png" \
     "${inputs[@]}"
 fi
 
 if want report; then
   log "report"
   /usr/bin/python3 bench/report.py --work "$work" --handdb "$handdb" \
-    --results bench/results.json --markdown docs/results.md --images docs/images/results
+    --results bench/results.json --markdown "$report.md" --images "$report" \
+    --name "${HANDDB_BENCH_NAME:-$(nproc)-core}"
 fi
 log "done"
