@@ -82,6 +82,19 @@ TEST_F(DatabaseRigTest, WithoutACopyFallsBackToTheConfigsHandModel) {
   EXPECT_EQ(fs::weakly_canonical(rig->hand_model_file), fs::weakly_canonical(HandPath()));
 }
 
+TEST_F(DatabaseRigTest, WithoutACopyFallsBackToThePlanThatGenerateLeaves) {
+  WriteTheManifest(sha_, json::object());  // a config that names no hand model
+  EXPECT_EQ(LoadDatabaseRig(db_).status().code(), StatusCode::kNotFound);
+  fs::create_directories(db_ / "render");
+  ASSERT_TRUE(WriteFileAtomic(db_ / "render" / "plan.json",
+                              json{{"hand_model", {{"path", HandPath().string()}}}}.dump())
+                  .ok());
+  auto rig = LoadDatabaseRig(db_);
+  ASSERT_TRUE(rig.ok()) << rig.status().message();
+  EXPECT_FALSE(rig->from_database_copy);
+  EXPECT_EQ(rig->hand_model_file, HandPath());
+}
+
 TEST_F(DatabaseRigTest, WithoutACopyOrAMatchingFileIsAClearError) {
   const std::string other(64, 'a');
   WriteTheManifest(other, json{{"hand_model", "configs/hands/webxr_generic_right.json"}});
