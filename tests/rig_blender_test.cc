@@ -158,7 +158,7 @@ TEST_F(RigBlender, TestSetGroundTruthWithRolledCameras) {
   auto truth = ReadJsonFile(ts_dir() / "testset.json", "testset.schema.json");
   ASSERT_TRUE(truth.ok()) << truth.status().message();
   const RenderSettings params{(*truth)["resolution"].get<int>(),
-                            (*truth)["ortho_scale"].get<double>()};
+                              (*truth)["ortho_scale"].get<double>()};
   double max_err = 0;
   size_t rolled = 0;
   for (const json& item : (*truth)["items"]) {

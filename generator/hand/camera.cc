@@ -32,7 +32,7 @@ bool RenderSettings::Check() const {
 }
 
 Result<RenderSettings> RenderSettings::FromMetadata(const nlohmann::json& metadata,
-                                                const std::string& what) {
+                                                    const std::string& what) {
   const auto bad = [&](const std::string& problem) {
     return Status(StatusCode::kSchemaViolation, what + ": generation: " + problem);
   };

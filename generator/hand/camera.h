@@ -27,7 +27,8 @@ struct RenderSettings {
   bool Check() const;
   // From `generation.resolution` / `generation.ortho_scale` of a manifest's or shard's metadata;
   // kSchemaViolation (starting with `what`) when either is missing or out of range.
-  static Result<RenderSettings> FromMetadata(const nlohmann::json& metadata, const std::string& what);
+  static Result<RenderSettings> FromMetadata(const nlohmann::json& metadata,
+                                             const std::string& what);
 };
 
 // Rows: the camera's x (right), y (down), z (away from the camera) axes in the hand frame, so
