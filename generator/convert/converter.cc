@@ -26,6 +26,7 @@
 #include "format/manifest.h"
 #include "format/shard_reader.h"
 #include "format/shard_writer.h"
+#include "generator/hand/database_rig.h"
 #include "generator/hand/hand_model.h"
 #include "generator/plan/plan.h"
 #include "handdb_version.h"
@@ -284,7 +285,10 @@ void RemoveStaleTempFiles(const fs::path& db_dir,
     prefixes.insert(st.shard_path.filename().string() + ".tmp-");
     prefixes.insert(st.staging_path.filename().string() + ".tmp-");
   }
-  if (writes_manifest) prefixes.insert(std::string(kManifestFileName) + ".tmp-");
+  if (writes_manifest) {
+    prefixes.insert(std::string(kManifestFileName) + ".tmp-");
+    prefixes.insert(std::string(kDatabaseHandModelFileName) + ".tmp-");
+  }
   std::error_code ec;
   for (fs::directory_iterator it(db_dir, ec), end; !ec && it != end; it.increment(ec)) {
     const std::string name = it->path().filename().string();
@@ -614,6 +618,21 @@ Status SwapInManifest(const fs::path& db_dir, std::vector<UnitState>& units, Man
   return Status::Ok();
 }
 
+// DB_DIR/hand_model.json: the bytes of the hand model the views were made with, so the database
+// carries its rig (generator/hand/database_rig.h). The bytes written are the ones hashed here,
+// and must hash to what the shards record.
+Status WriteHandModelCopy(const RunContext& ctx, const fs::path& db_dir) {
+  Result<std::string> bytes = ReadFileToString(ctx.hand.path);
+  if (!bytes.ok()) return bytes.status();
+  const std::string sha = Sha256Hex(*bytes);
+  if (sha != ctx.hand.sha256) {
+    return Status(StatusCode::kChecksumMismatch,
+                  ctx.hand.path.string() + ": hand model changed during the convert (sha256 " +
+                      sha + ", was " + ctx.hand.sha256 + ")");
+  }
+  return WriteFileAtomic(db_dir / kDatabaseHandModelFileName, *bytes);
+}
+
 // Step 7: the summary of the selected units and, for a run over all units, the manifest.
 Result<ConvertSummary> FinishRun(const RunContext& ctx,
                                  const fs::path& db_dir,
@@ -654,8 +673,12 @@ Result<ConvertSummary> FinishRun(const RunContext& ctx,
     }
   }
   manifest.UpdateTotals();
-  // The manifest lists every shard: only a run over all units writes it.
-  if (options.units.empty()) HANDDB_RETURN_IF_ERROR(SwapInManifest(db_dir, units, &manifest));
+  // The manifest lists every shard: only a run over all units writes it, after the hand model
+  // copy it vouches for (its sha256 is the manifest's hand_model.sha256).
+  if (options.units.empty()) {
+    HANDDB_RETURN_IF_ERROR(WriteHandModelCopy(ctx, db_dir));
+    HANDDB_RETURN_IF_ERROR(SwapInManifest(db_dir, units, &manifest));
+  }
   return summary;
 }
 

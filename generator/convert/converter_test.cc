@@ -12,6 +12,7 @@
 
 #include "base/atomic_file.h"
 #include "base/json_schema.h"
+#include "base/sha256.h"
 #include "base/testing.h"
 #include "edges/exr_io.h"
 #include "edges/synthetic_hand.h"
@@ -239,6 +240,11 @@ TEST_F(ConvertDir, WritesOneShardPerUnitAndTheManifest) {
   EXPECT_EQ(manifest->num_virtual_views, 80u);
   ASSERT_EQ(manifest->shards.size(), 3u);
   EXPECT_EQ(manifest->metadata["shapes"].size(), 2u);
+  // The hand model the views were made with, byte for byte: its sha256 is the recorded one.
+  auto copy_sha = Sha256File(db / "hand_model.json");
+  ASSERT_TRUE(copy_sha.ok()) << copy_sha.status().ToString();
+  EXPECT_EQ(*copy_sha, plan_.hand_model_sha256);
+  EXPECT_EQ(manifest->metadata["hand_model"]["sha256"], plan_.hand_model_sha256);
   // What the converter writes passes validate, including the manifest-vs-shard cross-checks.
   const ValidationReport report = ValidatePath(db);
   EXPECT_TRUE(report.ok()) << (report.problems.empty() ? "" : report.problems[0].message);
@@ -283,7 +289,7 @@ TEST_F(ConvertDir, RerunKeepsShardsAndOutputIsByteIdentical) {
   const fs::path db = root_ / "db";
   ASSERT_TRUE(ConvertRenderDir(run_, db, Options(2)).ok());
   const auto first = ReadDir(db);
-  ASSERT_EQ(first.size(), 4u);  // 3 shards + manifest
+  ASSERT_EQ(first.size(), 5u);  // 3 shards + hand model copy + manifest
   auto again = ConvertRenderDir(run_, db, Options(2));
   ASSERT_TRUE(again.ok());
   EXPECT_EQ(again->shards_kept, 3u);

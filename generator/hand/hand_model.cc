@@ -98,6 +98,30 @@ Result<HandModel> LoadHandModel(const std::filesystem::path& path) {
       if (model.ortho_scale <= 0) throw FieldError{file + ": ortho_scale must be > 0"};
     }
 
+    if (d.contains("forward_axis"))
+      model.forward_axis = Vec3(d["forward_axis"], file + ": forward_axis");
+    if (d.contains("palm_normal"))
+      model.palm_normal = Vec3(d["palm_normal"], file + ": palm_normal");
+    if (d.contains("look_at")) model.look_at = Vec3(d["look_at"], file + ": look_at");
+    if (d.contains("bones")) {
+      const json& bones = Array(d["bones"], file + ": bones");
+      for (size_t i = 0; i < bones.size(); ++i) {
+        const std::string where = file + ": bones/" + std::to_string(i);
+        HandBone bone;
+        bone.name = String(Field(bones[i], "name", where), where + "/name");
+        const json& parent = Field(bones[i], "parent", where);
+        if (!parent.is_null()) bone.parent = String(parent, where + "/parent");
+        bone.link = Integer(Field(bones[i], "link", where), where + "/link");
+        bone.head = Vec3(Field(bones[i], "head", where), where + "/head");
+        const json& rest = Array(Field(bones[i], "rest_matrix", where), where + "/rest_matrix");
+        if (rest.size() != 3) throw FieldError{where + "/rest_matrix: expected 3 rows"};
+        for (size_t r = 0; r < 3; ++r) {
+          bone.rest_matrix[r] = Vec3(rest[r], where + "/rest_matrix/" + std::to_string(r));
+        }
+        model.bones.push_back(std::move(bone));
+      }
+    }
+
     const json& links = Array(Field(d, "links", file), file + ": links");
     for (size_t i = 0; i < links.size(); ++i) {
       const std::string where = file + ": links/" + std::to_string(i);
@@ -161,7 +185,15 @@ Result<HandModel> LoadHandModel(const std::filesystem::path& path) {
       const json& kps = Array(d["keypoints"], file + ": keypoints");
       for (size_t i = 0; i < kps.size(); ++i) {
         const std::string where = file + ": keypoints/" + std::to_string(i);
-        model.keypoint_names.push_back(String(Field(kps[i], "name", where), where + "/name"));
+        HandKeypoint kp;
+        kp.name = String(Field(kps[i], "name", where), where + "/name");
+        if (kps[i].contains("index")) kp.index = Integer(kps[i]["index"], where + "/index");
+        if (kps[i].contains("bone")) kp.bone = String(kps[i]["bone"], where + "/bone");
+        if (kps[i].contains("at")) kp.at_tail = String(kps[i]["at"], where + "/at") == "tail";
+        if (kps[i].contains("length")) kp.length = Number(kps[i]["length"], where + "/length");
+        if (kps[i].contains("link")) kp.link = Integer(kps[i]["link"], where + "/link");
+        model.keypoint_names.push_back(kp.name);
+        model.keypoints.push_back(std::move(kp));
       }
       if (model.keypoint_names.size() != kNumKeypoints) {
         throw FieldError{file + ": keypoints: " + std::to_string(kps.size()) + ", expected 21"};

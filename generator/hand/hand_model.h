@@ -27,6 +27,26 @@ struct HandDof {
   double max = 0;
 };
 
+// A bone of the rigged asset at rest, in the hand frame (armature space).
+struct HandBone {
+  std::string name;
+  std::string parent;  // empty: a root
+  int link = 0;
+  std::array<double, 3> head{};
+  // Row-major; its columns are the bone's x, y (along the bone), z axes in the hand frame.
+  std::array<std::array<double, 3>, 3> rest_matrix{};
+};
+
+// Where keypoint `index` sits: a bone's head, or `length` along its posed y axis ("tail").
+struct HandKeypoint {
+  int index = 0;
+  std::string name;
+  std::string bone;
+  bool at_tail = false;
+  double length = 0;
+  int link = 0;
+};
+
 struct HandLink {
   int id = 0;
   std::string name;
@@ -39,11 +59,17 @@ struct HandModel {
   std::string name;
   std::string asset_path;  // as written (repository-relative or absolute)
   std::string asset_sha256;
-  double ortho_scale = 0;       // the model's recommended orthographic scale (0: none given)
-  std::vector<HandLink> links;  // ids 1..16 in order
-  std::vector<HandDof> dofs;    // 20, in DOF order
+  double ortho_scale = 0;  // the model's recommended orthographic scale (0: none given)
+  // The camera references of docs/conventions.md, in the hand frame.
+  std::array<double, 3> forward_axis{};
+  std::array<double, 3> palm_normal{};
+  std::array<double, 3> look_at{};
+  std::vector<HandBone> bones;                   // as listed in the file
+  std::vector<HandLink> links;                   // ids 1..16 in order
+  std::vector<HandDof> dofs;                     // 20, in DOF order
   std::vector<std::pair<int, int>> joint_pairs;  // (parent link, child link)
   std::vector<std::string> keypoint_names;       // 21
+  std::vector<HandKeypoint> keypoints;           // 21, as listed (index says which keypoint)
 
   JointLimits limits() const;
   bool IsJointPair(int link_a, int link_b) const;  // either order
