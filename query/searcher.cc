@@ -654,15 +654,41 @@ class QueryContext {
 bool SearchOptions::Check() const {
   CHECK_OPTION_GT(top_k, 0);
   CHECK_OPTION_GE(max_per_shape, 0);
-  CHECK_OPTION(num_threads == -1 || num_threads >= 1);
+  CHECK_OPTION(num_threads == -1 || (num_threads >= 1 && num_threads <= MaxNumThreads()));
   CHECK_OPTION((DistanceGridOptions{dt_cell_px, 170.0f}.Check()));
   CHECK_OPTION_GT(index.candidates, 0);
   CHECK_OPTION(index.nprobe >= 0);
   return true;
 }
 
-Searcher::Searcher(std::shared_ptr<const Database> db) : db_(std::move(db)) {
+bool SearcherOptions::Check() const {
+  CHECK_OPTION(num_threads == -1 || (num_threads >= 1 && num_threads <= MaxNumThreads()));
+  return true;
+}
+
+namespace {
+
+// The pool of a Searcher with `num_threads` threads: the calling thread is worker 0, so one
+// fewer in the pool, and none for one thread (a search then starts no thread at all).
+std::unique_ptr<ThreadPool> StartPool(int num_threads) {
+  const int threads = ResolveNumThreads(num_threads);
+  return threads > 1 ? std::make_unique<ThreadPool>(threads - 1) : nullptr;
+}
+
+}  // namespace
+
+Searcher::Searcher(std::shared_ptr<const Database> db, const SearcherOptions& options)
+    : Searcher(std::move(db), options, StartPool(options.num_threads)) {}
+
+Searcher::Searcher(std::shared_ptr<const Database> db,
+                   const SearcherOptions& options,
+                   std::unique_ptr<ThreadPool> pool)
+    : db_(std::move(db)),
+      num_threads_(pool != nullptr ? pool->NumThreads() + 1 : 1),
+      pool_(std::move(pool)) {
   THROW_CHECK(db_ != nullptr);
+  THROW_CHECK(options.Check());
+  if (options.few_queries && db_->has_coarse_fields()) exact_field_kind_ = FieldKind::kBox;
   max_abs_.resize(db_->num_views());
   y_sorted_.resize(db_->num_views());
   // Every view's extent and order: read from its points once here, in parallel (on a
@@ -670,7 +696,7 @@ Searcher::Searcher(std::shared_ptr<const Database> db) : db_(std::move(db)) {
   // coded shards made at open.
   constexpr size_t kChunk = 4096;
   const auto& summaries = db_->point_summaries();
-  ParallelFor((db_->num_views() + kChunk - 1) / kChunk, ResolveNumThreads(-1), [&](size_t k, int) {
+  auto summarise = [&](size_t k, int) {
     const size_t end = std::min<size_t>(db_->num_views(), (k + 1) * kChunk);
     for (size_t v = k * kChunk; v < end; ++v) {
       const Database::PointSummary sum =
@@ -679,7 +705,8 @@ Searcher::Searcher(std::shared_ptr<const Database> db) : db_(std::move(db)) {
       y_sorted_[v] = sum.max_abs < CoarseGrid::kHalfUnits && sum.sorted_by_y;
     }
     return true;
-  });
+  };
+  ParallelFor((db_->num_views() + kChunk - 1) / kChunk, num_threads_, summarise, pool_.get());
   // The grid holds distances to the rolled query, looked up only at view points; its bounds
   // are the same at every node whatever the extent (it grows to contain the query), so the
   // smallest extent that keeps every view on the grid gives identical bounds at the least cost.
@@ -693,8 +720,9 @@ Searcher::Searcher(std::shared_ptr<const Database> db) : db_(std::move(db)) {
 }
 
 const CoarseFields& Searcher::cell_major_fields() const {
-  std::call_once(cell_major_once_,
-                 [this] { cell_major_ = CoarseFields(*db_, -1, exact_field_kind_); });
+  std::call_once(cell_major_once_, [this] {
+    cell_major_ = CoarseFields(*db_, num_threads_, exact_field_kind_, pool_.get());
+  });
   return cell_major_;
 }
 
@@ -704,7 +732,8 @@ void Searcher::PrepareExactSearch() const {
 }
 
 const ViewHistograms& Searcher::view_histograms() const {
-  std::call_once(view_histograms_once_, [this] { view_histograms_ = ViewHistograms(*db_, -1); });
+  std::call_once(view_histograms_once_,
+                 [this] { view_histograms_ = ViewHistograms(*db_, num_threads_, pool_.get()); });
   return view_histograms_;
 }
 
@@ -713,12 +742,13 @@ const Searcher::ShapeIndex& Searcher::shape_index() const {
     const size_t n = db_->num_views();
     std::vector<shape_id_t> ids(n);
     constexpr size_t kChunk = 4096;
-    ParallelFor((n + kChunk - 1) / kChunk, ResolveNumThreads(-1), [&](size_t c, int) {
+    auto read_shape_ids = [&](size_t c, int) {
       for (size_t v = c * kChunk; v < std::min(n, (c + 1) * kChunk); ++v) {
         ids[v] = db_->label(static_cast<view_id_t>(v)).shape_id;
       }
       return true;
-    });
+    };
+    ParallelFor((n + kChunk - 1) / kChunk, num_threads_, read_shape_ids, pool_.get());
     std::vector<shape_id_t> distinct = ids;
     std::sort(distinct.begin(), distinct.end());
     distinct.erase(std::unique(distinct.begin(), distinct.end()), distinct.end());
@@ -734,10 +764,75 @@ const Searcher::ShapeIndex& Searcher::shape_index() const {
 
 Searcher::~Searcher() = default;
 
-Result<std::unique_ptr<Searcher>> Searcher::Open(const std::filesystem::path& dir) {
-  Result<Database> db = Database::Open(dir);
+namespace {
+
+Status CheckSearcherOptions(const SearcherOptions& options) {
+  if (!options.Check()) {
+    return Status(StatusCode::kInvalidArgument,
+                  "threads " + std::to_string(options.num_threads) + ": must be -1 or 1.." +
+                      std::to_string(MaxNumThreads()) + " (4x the cores, at most 256)");
+  }
+  return Status::Ok();
+}
+
+// The index the options ask for, or null: kAuto attaches the manifest's, kIndexed needs one.
+Result<std::shared_ptr<const ViewIndex>> OpenIndex(const Database& db,
+                                                   const SearcherOptions& options) {
+  if (options.use_index == IndexUse::kExact) return std::shared_ptr<const ViewIndex>();
+  if (options.use_index == IndexUse::kAuto && !db.manifest().index) {
+    return std::shared_ptr<const ViewIndex>();
+  }
+  Result<ViewIndex> index = ViewIndex::Open(db.path(), db.manifest());
+  if (!index.ok()) return index.status();
+  return std::make_shared<const ViewIndex>(std::move(index).value());
+}
+
+// The Searcher's pool (none for one thread), or the error of a thread the system refused.
+Result<std::unique_ptr<ThreadPool>> CreatePool(int num_threads) {
+  const int threads = ResolveNumThreads(num_threads);
+  if (threads <= 1) return std::unique_ptr<ThreadPool>();
+  return ThreadPool::Create(threads - 1);
+}
+
+}  // namespace
+
+Result<std::unique_ptr<Searcher>> Searcher::Open(const std::filesystem::path& dir,
+                                                 const SearcherOptions& options) {
+  HANDDB_RETURN_IF_ERROR(CheckSearcherOptions(options));
+  Result<std::unique_ptr<ThreadPool>> pool = CreatePool(options.num_threads);
+  if (!pool.ok()) return pool.status();
+  Result<Database> db = Database::Open(
+      dir, options.verify, ResolveNumThreads(options.num_threads), pool.value().get());
   if (!db.ok()) return db.status();
-  return std::make_unique<Searcher>(std::make_shared<const Database>(std::move(db).value()));
+  return Make(
+      std::make_shared<const Database>(std::move(db).value()), options, std::move(pool).value());
+}
+
+Result<std::unique_ptr<Searcher>> Searcher::Create(std::shared_ptr<const Database> db,
+                                                   const SearcherOptions& options) {
+  THROW_CHECK(db != nullptr);
+  HANDDB_RETURN_IF_ERROR(CheckSearcherOptions(options));
+  Result<std::unique_ptr<ThreadPool>> pool = CreatePool(options.num_threads);
+  if (!pool.ok()) return pool.status();
+  return Make(std::move(db), options, std::move(pool).value());
+}
+
+Result<std::unique_ptr<Searcher>> Searcher::Make(std::shared_ptr<const Database> db,
+                                                 const SearcherOptions& options,
+                                                 std::unique_ptr<ThreadPool> pool) {
+  Result<std::shared_ptr<const ViewIndex>> index = OpenIndex(*db, options);
+  if (!index.ok()) return index.status();
+  std::unique_ptr<Searcher> searcher(new Searcher(std::move(db), options, std::move(pool)));
+  searcher->SetIndex(std::move(index).value());
+  return searcher;
+}
+
+SearchMode Searcher::ModeFor(const SearchOptions& options) const {
+  if (options.brute_force) return SearchMode::kExact;
+  if (options.mode == SearchMode::kAuto) {
+    return index_ != nullptr ? SearchMode::kIndexed : SearchMode::kExact;
+  }
+  return options.mode;
 }
 
 namespace {
@@ -1433,7 +1528,35 @@ class QueryRun {
 }  // namespace
 
 std::string_view SearchModeName(SearchMode mode) {
-  return mode == SearchMode::kIndexed ? "indexed" : "exact";
+  switch (mode) {
+    case SearchMode::kAuto:
+      return "auto";
+    case SearchMode::kExact:
+      return "exact";
+    case SearchMode::kIndexed:
+      return "indexed";
+  }
+  return "?";
+}
+
+std::string_view IndexUseName(IndexUse use) {
+  switch (use) {
+    case IndexUse::kAuto:
+      return "auto";
+    case IndexUse::kExact:
+      return "exact";
+    case IndexUse::kIndexed:
+      return "indexed";
+  }
+  return "?";
+}
+
+Result<IndexUse> ParseIndexUse(std::string_view name) {
+  for (IndexUse u : {IndexUse::kAuto, IndexUse::kExact, IndexUse::kIndexed}) {
+    if (name == IndexUseName(u)) return u;
+  }
+  return Status(StatusCode::kInvalidArgument,
+                "unknown search '" + std::string(name) + "' (auto, exact or indexed)");
 }
 
 std::string_view HandName(Hand hand) {
@@ -1483,7 +1606,7 @@ Result<std::vector<Match>> Searcher::SearchImpl(std::span<const Point2f> query_p
                                                 SearchStats* stats) const {
   const auto start = std::chrono::steady_clock::now();
   if (Status s = CheckQuery(query_px, options); !s.ok()) return s;
-  const bool indexed = options.mode == SearchMode::kIndexed && !options.brute_force;
+  const bool indexed = ModeFor(options) == SearchMode::kIndexed;
   if (indexed) {
     if (index_ == nullptr) {
       return Status(StatusCode::kInvalidArgument,
@@ -1504,10 +1627,9 @@ Result<std::vector<Match>> Searcher::SearchImpl(std::span<const Point2f> query_p
     ~TrimAfter() { db.TrimSearchCache(); }
   } trim_after{*db_};
   const Database::SearchPin pin(*db_);
-  const int threads = ResolveNumThreads(options.num_threads);
-  // One pool for the query's parallel loops; the calling thread is worker 0.
-  std::optional<ThreadPool> pool_storage;
-  ThreadPool* pool = threads > 1 ? &pool_storage.emplace(threads - 1) : nullptr;
+  // The Searcher's pool, capped by the options; the calling thread is worker 0.
+  const int threads = std::min(ResolveNumThreads(options.num_threads), num_threads_);
+  ThreadPool* pool = threads > 1 ? pool_.get() : nullptr;
   const auto progress_since = options.progress_since == std::chrono::steady_clock::time_point{}
                                   ? start
                                   : options.progress_since;
@@ -1515,6 +1637,7 @@ Result<std::vector<Match>> Searcher::SearchImpl(std::span<const Point2f> query_p
   local.virtual_views = db_->num_virtual_views();
   local.query_points = query_px.size();
   local.searches = options.hand == Hand::kEither ? 2 : 1;
+  local.mode = indexed ? SearchMode::kIndexed : SearchMode::kExact;
 
   // The coarse fields the bounds read: none for brute force (it scores every pair with the
   // kd-trees), the shards' own for indexed search when they have them, else the cell-major copy.
@@ -1556,7 +1679,7 @@ Result<std::vector<Match>> Searcher::SearchImpl(std::span<const Point2f> query_p
         for (Point2f& p : mirrored) p.x = -p.x;
       }
       const std::vector<Candidate> candidates = index_->Candidates(
-          h == Hand::kLeft ? std::span<const Point2f>(mirrored) : query_px, index_options);
+          h == Hand::kLeft ? std::span<const Point2f>(mirrored) : query_px, index_options, pool);
       local.candidates += candidates.size();
       for (const Candidate& c : candidates) {
         if (c.view >= db_->num_views() || c.roll >= db_->num_rolls()) continue;
