@@ -20,6 +20,7 @@
 #include "query/coarse_bound.h"
 #include "query/distance_transform.h"
 #include "query/point_buckets.h"
+#include "query/view_lru.h"
 
 namespace handdb {
 namespace {
@@ -322,36 +323,17 @@ class QueryContext {
     return query_buckets_[s];
   }
 
+  // View v's row index from worker `worker`'s cache (RowIndex; a ViewLru, as the buckets and
+  // trees).
   const RowIndex& ViewRows(view_id_t v, int worker) {
-    auto& cache = row_caches_[worker];
-    for (size_t i = 0; i < cache.size(); ++i) {
-      if (cache[i].first == v) {
-        std::rotate(cache.begin(), cache.begin() + i, cache.begin() + i + 1);
-        return cache.front().second;
-      }
-    }
-    if (cache.size() < kBucketCacheSize) cache.emplace_back();
-    std::rotate(cache.begin(), cache.end() - 1, cache.end());
-    cache.front().first = v;
-    cache.front().second.Build(db_.SearchPoints(v));
-    return cache.front().second;
+    return row_caches_[worker].Get(v, [&](RowIndex& rows) { rows.Build(db_.SearchPoints(v)); });
   }
 
   // View v's buckets from worker `worker`'s cache: like the view kd-trees, a small LRU catches
   // the few rolls of one view that are refined close together.
   const PointBuckets& ViewBuckets(view_id_t v, int worker) {
-    auto& cache = bucket_caches_[worker];
-    for (size_t i = 0; i < cache.size(); ++i) {
-      if (cache[i].first == v) {
-        std::rotate(cache.begin(), cache.begin() + i, cache.begin() + i + 1);
-        return cache.front().second;
-      }
-    }
-    if (cache.size() < kBucketCacheSize) cache.emplace_back();
-    std::rotate(cache.begin(), cache.end() - 1, cache.end());  // the oldest entry, reused
-    cache.front().first = v;
-    cache.front().second.Build(db_.SearchPoints(v));
-    return cache.front().second;
+    return bucket_caches_[worker].Get(
+        v, [&](PointBuckets& buckets) { buckets.Build(db_.SearchPoints(v)); });
   }
 
   // max_i |rolled(member)[i] - flip(rolled(base)[i])| (px), rounded up: how far the member's
@@ -393,17 +375,10 @@ class QueryContext {
   // visited in increasing bound and the rolls of one view have similar bounds). Only brute force
   // and views beyond the linear scans' coordinate range build them.
   const KdTree& ViewTree(view_id_t v, int worker) {
-    auto& cache = caches_[worker];
-    for (size_t i = 0; i < cache.size(); ++i) {
-      if (cache[i].first == v) {
-        std::rotate(cache.begin(), cache.begin() + i, cache.begin() + i + 1);
-        return *cache.front().second;
-      }
-    }
-    if (cache.size() == kTreeCacheSize) cache.pop_back();
-    cache.emplace(cache.begin(), v, std::make_unique<KdTree>(db_.SearchPoints(v), options_.kdtree));
-    num_view_trees_.fetch_add(1, std::memory_order_relaxed);
-    return *cache.front().second;
+    return *caches_[worker].Get(v, [&](std::unique_ptr<KdTree>& tree) {
+      tree = std::make_unique<KdTree>(db_.SearchPoints(v), options_.kdtree);
+      num_view_trees_.fetch_add(1, std::memory_order_relaxed);
+    });
   }
 
   // Exact D_c of (v, slot s); returns false (abandoned) once it provably exceeds `threshold`.
@@ -641,11 +616,10 @@ class QueryContext {
   std::vector<std::once_flag> query_tree_once_;
   std::vector<PointBuckets> query_buckets_;
   std::vector<std::once_flag> query_buckets_once_;
-  static constexpr size_t kTreeCacheSize = 2;
-  std::vector<std::vector<std::pair<view_id_t, std::unique_ptr<KdTree>>>> caches_;
-  static constexpr size_t kBucketCacheSize = 4;
-  std::vector<std::vector<std::pair<view_id_t, PointBuckets>>> bucket_caches_;
-  std::vector<std::vector<std::pair<view_id_t, RowIndex>>> row_caches_;
+  // Per worker: the last 2 views' kd-trees, the last 4 views' buckets and row indexes.
+  std::vector<ViewLru<std::unique_ptr<KdTree>, 2>> caches_;
+  std::vector<ViewLru<PointBuckets, 4>> bucket_caches_;
+  std::vector<ViewLru<RowIndex, 4>> row_caches_;
   std::atomic<uint64_t> num_view_trees_{0};
 };
 
