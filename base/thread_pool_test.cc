@@ -3,9 +3,11 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <mutex>
 #include <numeric>
 #include <set>
 #include <stdexcept>
+#include <system_error>
 #include <vector>
 
 namespace handdb {
@@ -86,6 +88,46 @@ TEST(ParallelForStatus, FirstErrorAndCancel) {
   });
   EXPECT_EQ(c.code(), StatusCode::kCancelled);
   EXPECT_EQ(ran.load(), 0);
+}
+
+// A pool caps a loop's workers: a loop asking for more runs on the pool's threads and the
+// caller, never on threads of its own.
+TEST(ParallelFor, APoolCapsTheWorkers) {
+  ThreadPool pool(1);
+  std::set<int> workers;
+  std::mutex mu;
+  ParallelFor(
+      1000,
+      8,
+      [&](size_t, int worker) {
+        std::lock_guard<std::mutex> lock(mu);
+        workers.insert(worker);
+        return true;
+      },
+      &pool);
+  EXPECT_LE(workers.size(), 2u);
+  for (int w : workers) EXPECT_LT(w, 2);
+}
+
+TEST(ThreadPool, MaxNumThreadsIsBounded) {
+  EXPECT_GE(MaxNumThreads(), 4);
+  EXPECT_LE(MaxNumThreads(), 256);
+}
+
+// When the system refuses a thread, construction joins what it started and fails: Create
+// returns the error, and nothing is left running or waiting.
+TEST(ThreadPool, AThreadThatCannotStartIsAnError) {
+  SetThreadStartLimitForTesting(2);
+  EXPECT_THROW(ThreadPool pool(4), std::system_error);
+  auto pool = ThreadPool::Create(4);
+  SetThreadStartLimitForTesting(-1);
+  ASSERT_FALSE(pool.ok());
+  EXPECT_EQ(pool.status().code(), StatusCode::kIoError);
+  EXPECT_NE(pool.status().message().find("cannot start 4 worker threads"), std::string::npos)
+      << pool.status().message();
+  auto fine = ThreadPool::Create(2);
+  ASSERT_TRUE(fine.ok());
+  EXPECT_EQ((*fine)->NumThreads(), 2);
 }
 
 }  // namespace

@@ -31,6 +31,7 @@ struct EvaluateFlags {
   std::string input = "clean";
   std::string distance = "rms";
   std::string roll_compare = "aligned";
+  std::string search = "auto";  // IndexUse, as `handdb query --search`
   EvaluationOptions options;
   // --input photo: the installed landmark model (ResolveLandmarker("auto")), as `handdb query`
   // uses by default; a test set's photos take the photo path's defaults.
@@ -43,6 +44,8 @@ struct EvaluateFlags {
   }
   // The flags that reproduce input and every scoring option exactly (not --threads, --quiet).
   std::vector<std::string> Args() const;
+  // How the searcher opens DB: the search threads, and the index as --search says.
+  SearcherOptions searcher_options() const;
 };
 
 // Test view -> query edge points: the clean label render through the database's own conversion

@@ -176,6 +176,13 @@ void EvaluateFlags::Add(CLI::App& app) {
       ->capture_default_str();
   app.add_option("--threads", options.num_threads, "search threads (-1: all cores)")
       ->capture_default_str();
+  app.add_option("--search",
+                 search,
+                 "exact: every (view, roll) pair; indexed: candidates from the database's index, "
+                 "then exact D_c of those only; auto: indexed when the database has an index "
+                 "(as handdb query)")
+      ->check(CLI::IsMember({"auto", "exact", "indexed"}))
+      ->capture_default_str();
   app.add_option(
          "--d", options.correctness.max_joint_distance_deg, "joint distance threshold d (deg)")
       ->check(CLI::NonNegativeNumber)
@@ -262,7 +269,15 @@ std::vector<std::string> EvaluateFlags::Args() const {
                                    "--limit",
                                    std::to_string(options.max_views)};
   if (c.same_shape) args.push_back("--same-shape");
+  args.insert(args.end(), {"--search", search});
   return args;
+}
+
+SearcherOptions EvaluateFlags::searcher_options() const {
+  SearcherOptions open;
+  open.num_threads = options.num_threads;
+  open.use_index = ParseIndexUse(search).value();
+  return open;
 }
 
 Result<QueryPointsFn> MakeQueryPointsFn(QueryInput input,
@@ -412,7 +427,7 @@ int RunEvaluate(int argc, char** argv) {
 
   auto testset = ReadTestSet(testset_path);
   if (!testset.ok()) return Fail("evaluate", testset.status());
-  auto searcher = Searcher::Open(db_dir);
+  auto searcher = Searcher::Open(db_dir, flags.searcher_options());
   if (!searcher.ok()) return Fail("evaluate", searcher.status());
   WarnIfTestSetMatchesDatabase(db_dir, *testset);
 

@@ -357,7 +357,7 @@ int UnitEvaluateCommands::Run() {
   const QueryInput input = flags_.query_input();
   auto testset = ReadTestSet(testset_);
   if (!testset.ok()) return Fail(cmd, testset.status());
-  auto searcher = Searcher::Open(db_);
+  auto searcher = Searcher::Open(db_, flags_.searcher_options());
   if (!searcher.ok()) return Fail(cmd, searcher.status());
   auto fp = ComputeEvaluationFingerprint(db_, *testset, input, options, tasks_);
   if (!fp.ok()) return Fail(cmd, fp.status());

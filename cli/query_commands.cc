@@ -16,8 +16,8 @@
 #include "format/roll.h"
 #include "handdb_version.h"
 #include "photo/image_edges.h"
-#include "pose/sheet.h"
 #include "pose/landmark_rank.h"
+#include "pose/sheet.h"
 #include "query/searcher.h"
 
 namespace handdb::cli {
@@ -151,7 +151,7 @@ void PrintTable(const std::vector<Match>& matches,
 struct QueryFlags {
   std::string db_dir, image, sheet;
   HandFlag hand;
-  std::string search_mode = "auto";  // auto: indexed when the manifest lists an index
+  std::string search_mode = "auto";  // IndexUse: auto attaches the index the manifest lists
   std::string kdtree = std::string(KdTreeBackendName(SearchOptions{}.kdtree));
   bool as_json = false, verify = false, quiet = false;
   SearchOptions search;
@@ -220,8 +220,11 @@ void QueryFlags::Add(CLI::App& app) {
 
 bool QueryFlags::Finish() {
   search.progress = !quiet;
-  if (search.num_threads == 0 || search.num_threads < -1) {
-    std::fprintf(stderr, "handdb query: --threads must be -1 or >= 1\n");
+  if (search.num_threads == 0 || search.num_threads < -1 || search.num_threads > MaxNumThreads()) {
+    std::fprintf(stderr,
+                 "handdb query: --threads %d: must be -1 or 1..%d (4x the cores, at most 256)\n",
+                 search.num_threads,
+                 MaxNumThreads());
     return false;
   }
   if (!picture.Finish("query")) return false;
@@ -349,7 +352,7 @@ json ResultJson(const QueryFlags& flags,
             {"kdtree", flags.kdtree},
             {"dt_cell_px", search.dt_cell_px},
             {"coarse_bound", search.coarse_bound},
-            {"search", std::string(SearchModeName(search.mode))},
+            {"search", std::string(SearchModeName(stats.mode))},
             {"candidates", search.index.candidates},
             {"nprobe", search.index.nprobe}}},
           {"stats",
@@ -389,47 +392,42 @@ int RunQuery(int argc, char** argv) {
   if (!flags.Finish()) return kExitUsage;
   const std::string& db_dir = flags.db_dir;
 
-  // Open the database first: a broken database is reported before any image work.
-  auto db = Database::Open(db_dir, flags.verify);
-  if (!db.ok()) return Fail("query", db.status());
-  if (db->num_views() == 0)
+  // Open the database first: a broken database is reported before any image work. Its index is
+  // attached when the manifest lists one (--search auto), and searched (SearchMode::kAuto).
+  SearcherOptions open;
+  open.num_threads = flags.search.num_threads;
+  open.verify = flags.verify;
+  open.use_index =
+      flags.search.brute_force ? IndexUse::kExact : ParseIndexUse(flags.search_mode).value();
+  open.few_queries = true;
+  auto searcher = Searcher::Open(db_dir, open);
+  if (!searcher.ok()) return Fail("query", searcher.status());
+  const Database& db = (*searcher)->database();
+  if (db.num_views() == 0)
     return Fail("query", Status(StatusCode::kNotFound, db_dir + ": the database has no views"));
-  auto shared_db = std::make_shared<const Database>(std::move(db).value());
-  Searcher searcher(shared_db);
-  // One query: the shards' box fields are copied in a fraction of the time the centre fields
-  // take to compute (pca-large: ~0.1 s against ~0.7 s), which is more than one query gains.
-  if (shared_db->has_coarse_fields()) searcher.SetExactFieldKind(FieldKind::kBox);
-  // Indexed search when asked, or by default when the manifest lists an index.
-  if (flags.search_mode != "exact" && !flags.search.brute_force &&
-      (flags.search_mode == "indexed" || shared_db->manifest().index)) {
-    auto index = ViewIndex::Open(db_dir, shared_db->manifest());
-    if (!index.ok()) return Fail("query", index.status());
-    searcher.SetIndex(std::make_shared<const ViewIndex>(std::move(index).value()));
-    flags.search.mode = SearchMode::kIndexed;
-  }
 
   // A label EXR is converted with the edge options the database was made with.
-  const Status recorded = flags.picture.UseDatabaseConversion(*shared_db, db_dir);
+  const Status recorded = flags.picture.UseDatabaseConversion(db, db_dir);
   if (!recorded.ok()) return Fail("query", recorded);
   auto query = LoadQueryEdges(flags.image, flags.picture.edges);
   if (!query.ok()) return Fail("query", query.status());
   SearchStats stats;
-  auto matches = SearchQuery(searcher, *query, flags.search, flags.picture.landmark_rank, &stats);
+  auto matches = SearchQuery(**searcher, *query, flags.search, flags.picture.landmark_rank, &stats);
   if (!matches.ok()) return Fail("query", matches.status());
 
   if (!flags.sheet.empty()) {
-    const Status st = WriteSheet(flags, *query, *matches, *shared_db);
+    const Status st = WriteSheet(flags, *query, *matches, db);
     if (!st.ok()) return Fail("query", st);
   }
 
   if (flags.as_json) {
-    const json doc = ResultJson(flags, *query, *matches, stats, *shared_db);
+    const json doc = ResultJson(flags, *query, *matches, stats, db);
     const Status valid = ValidateJson(doc, "query_result.schema.json", "query result");
     // A bug, but never print JSON that breaks the schema.
     if (!valid.ok()) return Fail("query", valid);
     std::printf("%s\n", doc.dump(2).c_str());
   } else {
-    PrintTable(*matches, *query, stats, *shared_db);
+    PrintTable(*matches, *query, stats, db);
     if (!flags.sheet.empty()) std::printf("\ncontact sheet: %s\n", flags.sheet.c_str());
   }
   return kExitOk;

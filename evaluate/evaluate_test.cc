@@ -13,6 +13,7 @@
 #include "base/atomic_file.h"
 #include "base/json_schema.h"
 #include "evaluate/evaluate_testing.h"
+#include "query/index/view_index.h"
 
 namespace handdb {
 namespace {
@@ -234,6 +235,42 @@ TEST(Criteria, MainSameShapeAndTheDGrid) {
   EXPECT_TRUE(c[1].basic_only);
   EXPECT_EQ(c[2].name, "d=10");
   EXPECT_EQ(c[3].options.max_joint_distance_deg, 20);
+}
+
+// Evaluate searches as its Searcher does: with an index attached (SearcherOptions::use_index at
+// open), every search is indexed (SearchMode::kAuto), and one built for another database is
+// every view's error.
+TEST(Evaluate, SearchesWithTheSearchersIndex) {
+  auto db = testing::EvalDatabase();
+  IndexBuildOptions build;
+  build.grid.cell_units = 256;
+  build.grid.side = 15;
+  build.dims = 16;
+  build.nlist = 4;
+  build.num_threads = 1;
+  TestSet set;
+  set.views.push_back(testing::ViewOf(*db, 0, 17, 5, true));
+  auto points = [&](const TestView&) -> Result<TestQuery> {
+    return TestQuery(testing::RolledView(*db, 17, 5));
+  };
+
+  auto index = ViewIndex::Build(*db, build);
+  ASSERT_TRUE(index.ok()) << index.status().ToString();
+  auto searcher = Searcher::Create(db);
+  ASSERT_TRUE(searcher.ok());
+  (*searcher)->SetIndex(std::make_shared<const ViewIndex>(std::move(index).value()));
+  auto report = Evaluate(**searcher, set, QueryInput::kClean, points, FastOptions());
+  ASSERT_TRUE(report.ok()) << report.status().ToString();
+  EXPECT_EQ(report->views[0].ranks[0], 1) << report->views[0].error;
+
+  auto other_db = std::make_shared<const Database>(testing::SyntheticDatabase(30, 200, 12, 10));
+  auto other = ViewIndex::Build(*other_db, build);
+  ASSERT_TRUE(other.ok());
+  (*searcher)->SetIndex(std::make_shared<const ViewIndex>(std::move(other).value()));
+  report = Evaluate(**searcher, set, QueryInput::kClean, points, FastOptions());
+  ASSERT_TRUE(report.ok()) << report.status().ToString();
+  EXPECT_NE(report->views[0].error.find("the index is of another database"), std::string::npos)
+      << report->views[0].error;
 }
 
 }  // namespace

@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
-#include <map>
+#include <utility>
+
+#include "query/top_k.h"
 
 namespace handdb {
 namespace {
@@ -56,14 +58,7 @@ std::vector<Match> RerankByLandmarks(std::vector<Match> pool,
   // Ties keep the D_c order (stable), so equal scores rank as the search did.
   std::stable_sort(
       pool.begin(), pool.end(), [](const Match& a, const Match& b) { return a.score < b.score; });
-  std::vector<Match> out;
-  std::map<uint32_t, int> per_shape;
-  for (Match& m : pool) {
-    if (static_cast<int>(out.size()) >= search.top_k) break;
-    if (search.max_per_shape > 0 && ++per_shape[m.label.shape_id] > search.max_per_shape) continue;
-    out.push_back(std::move(m));
-  }
-  return out;
+  return LimitPerShape(std::move(pool), search.top_k, search.max_per_shape);
 }
 
 Result<std::vector<Match>> SearchQuery(const Searcher& searcher,

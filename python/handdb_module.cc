@@ -35,9 +35,9 @@
 #include "format/validator.h"
 #include "format/view.h"
 #include "handdb_version.h"
-#include "query/database.h"
 #include "photo/image_edges.h"
 #include "pose/landmark_rank.h"
+#include "query/database.h"
 #include "query/searcher.h"
 
 namespace handdb::python {
@@ -305,7 +305,12 @@ struct PyView {
 
 class PyDatabase {
  public:
-  PyDatabase(fs::path path, bool verify) : path_(std::move(path)), verify_(verify) {
+  PyDatabase(fs::path path, bool verify, const std::string& search)
+      : path_(std::move(path)), verify_(verify), search_(search) {
+    auto use = ParseIndexUse(search);
+    if (!use.ok()) throw py::value_error("search must be auto, exact or indexed");
+    searcher_options_.verify = verify;
+    searcher_options_.use_index = *use;
     {
       py::gil_scoped_release release;
       // The errors are the ones `handdb query` prints.
@@ -316,6 +321,7 @@ class PyDatabase {
   const Database& db() const { return *db_; }
   const fs::path& path() const { return path_; }
   bool verify() const { return verify_; }
+  const std::string& search() const { return search_; }
   // The manifest the shards were opened with (Database keeps it): re-reading manifest.json could
   // see a newer one while `handdb convert` rewrites the database (docs/format.md section 8).
   const Manifest& manifest() const { return db_->manifest(); }
@@ -462,15 +468,18 @@ class PyDatabase {
     return out;
   }
 
-  // Built on the first search (it scans every view's points once), under the GIL.
+  // Built on the first search (it scans every view's points once), under the GIL, as
+  // `handdb query` opens one: with the index the manifest lists unless search='exact'.
   const Searcher& searcher() const {
-    if (!searcher_) searcher_ = std::make_unique<Searcher>(db_);
+    if (!searcher_) searcher_ = Unwrap(Searcher::Create(db_, searcher_options_));
     return *searcher_;
   }
 
  private:
   fs::path path_;
   bool verify_ = false;
+  std::string search_ = "auto";
+  SearcherOptions searcher_options_;
   std::shared_ptr<const Database> db_;
   mutable std::unique_ptr<Searcher> searcher_;
 };
@@ -553,6 +562,7 @@ py::dict StatsDict(const SearchStats& st, const Database& db) {
   d["grids"] = st.grids;
   d["grid_bounded"] = st.grid_bounded;
   d["searches"] = st.searches;
+  d["candidates"] = st.candidates;
   d["seconds"] = st.seconds_total;
   d["seconds_bounds"] = st.seconds_bounds;
   d["seconds_refine"] = st.seconds_refine;
@@ -611,7 +621,9 @@ py::object Search(const PyDatabase& self,
   options.kdtree = *k;
   if (top_k < 1) throw py::value_error("top_k must be >= 1");
   if (per_shape < 0) throw py::value_error("per_shape must be >= 0");
-  if (threads == 0 || threads < -1) throw py::value_error("threads must be -1 or >= 1");
+  if (threads == 0 || threads < -1 || threads > MaxNumThreads()) {
+    throw py::value_error("threads must be -1 or 1.." + std::to_string(MaxNumThreads()));
+  }
   LandmarkRankOptions landmark_rank;
   landmark_rank.weight = landmark_weight;
   if (!landmark_rank.Check()) throw py::value_error("landmark_weight must be >= 0");
@@ -986,11 +998,20 @@ PYBIND11_MODULE(_handdb, m) {
       "Database(path, verify=False) runs the open checks of `handdb query` (manifest schema, "
       "every shard's header, section table, footer and labels, counts against the manifest); "
       "verify=True also hashes every section. Errors raise handdb.Error with the tool's "
-      "one-line message.\n\n"
+      "one-line message. search='auto' (default) searches with the index the manifest lists, "
+      "as `handdb query` does; 'exact' opts out, 'indexed' requires one.\n\n"
       "A sequence of canonical views: len(db), db[i] / db.view(i) -> View, db[a:b] -> list of "
       "View, iteration; db.read(start, stop) -> every field as numpy columns. Pickling "
       "reopens the path, so each worker process of a data loader maps the shards itself.")
-      .def(py::init<fs::path, bool>(), py::arg("path"), py::arg("verify") = false)
+      .def(py::init<fs::path, bool, const std::string&>(),
+           py::arg("path"),
+           py::arg("verify") = false,
+           py::arg("search") = "auto")
+      .def_property_readonly(
+          "search_mode",
+          [](const PyDatabase& d) { return d.search(); },
+          "how searches use the database's index: 'auto' (the index the manifest lists, as "
+          "`handdb query`), 'exact' or 'indexed'")
       .def_property_readonly(
           "path", [](const PyDatabase& d) { return d.path().string(); }, "the directory")
       .def_property_readonly(
@@ -1127,11 +1148,13 @@ PYBIND11_MODULE(_handdb, m) {
       .def(py::pickle(
           // Absolute: a spawned worker may start in another directory.
           [](const PyDatabase& d) {
-            return py::make_tuple(fs::absolute(d.path()).string(), d.verify());
+            return py::make_tuple(fs::absolute(d.path()).string(), d.verify(), d.search());
           },
           [](const py::tuple& t) {
-            if (t.size() != 2) throw py::value_error("bad handdb.Database pickle");
-            return PyDatabase(py::cast<fs::path>(t[0]), py::cast<bool>(t[1]));
+            if (t.size() != 2 && t.size() != 3) throw py::value_error("bad handdb.Database pickle");
+            return PyDatabase(py::cast<fs::path>(t[0]),
+                              py::cast<bool>(t[1]),
+                              t.size() == 3 ? py::cast<std::string>(t[2]) : "auto");
           }));
 
   m.def(

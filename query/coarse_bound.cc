@@ -56,11 +56,11 @@ void CellHistogram::Build(std::span<const PointQ> points, FieldKind kind) {
   }
 }
 
-CoarseFields::CoarseFields(const Database& db, int num_threads, FieldKind kind)
+CoarseFields::CoarseFields(const Database& db, int num_threads, FieldKind kind, ThreadPool* pool)
     : kind_(kind), num_views_(db.num_views()) {
   planes_.assign(num_blocks() * CoarseGrid::kCells * kBlock, 0);
   std::vector<size_t> computed(num_blocks(), 0);
-  ParallelFor(num_blocks(), ResolveNumThreads(num_threads), [&](size_t b, int) {
+  auto fill_block = [&](size_t b, int) {
     std::vector<uint8_t> scratch(CoarseGrid::kCells);
     std::vector<uint8_t> decoded(CoarseGrid::kCells);
     std::vector<PointQ> points;  // a coded view's, decoded (not kept: every view passes here)
@@ -83,7 +83,8 @@ CoarseFields::CoarseFields(const Database& db, int num_threads, FieldKind kind)
       }
     }
     return true;
-  });
+  };
+  ParallelFor(num_blocks(), ResolveNumThreads(num_threads), fill_block, pool);
   for (size_t n : computed) computed_views_ += n;
   db.ReleaseCoarseFieldPages();
 }
@@ -431,7 +432,7 @@ void SlotFields::CopyQuarterTurned(size_t base, size_t s, double gap_px) {
   CopyMapped(base, s, gap_px, [](int ix, int iy) { return ix * kSide + (kSide - 1 - iy); });
 }
 
-ViewHistograms::ViewHistograms(const Database& db, int num_threads) {
+ViewHistograms::ViewHistograms(const Database& db, int num_threads, ThreadPool* pool) {
   const size_t num_views = db.num_views();
   // Per view its entries, built in parallel into per-chunk lists, then concatenated.
   constexpr size_t kChunk = 1024;
@@ -439,7 +440,7 @@ ViewHistograms::ViewHistograms(const Database& db, int num_threads) {
   std::vector<std::vector<uint16_t>> chunk_cells(num_chunks);
   std::vector<std::vector<uint8_t>> chunk_counts(num_chunks);
   std::vector<std::vector<uint32_t>> chunk_sizes(num_chunks);
-  ParallelFor(num_chunks, ResolveNumThreads(num_threads), [&](size_t k, int) {
+  auto histograms = [&](size_t k, int) {
     // Plain arrays and local pointers: the byte stores below may alias anything, so members of
     // vectors would be reloaded after each one.
     std::array<uint32_t, CoarseGrid::kCells + 1> count{};
@@ -490,7 +491,8 @@ ViewHistograms::ViewHistograms(const Database& db, int num_threads) {
     chunk_counts[k] = std::move(counts);
     chunk_sizes[k] = std::move(sizes);
     return true;
-  });
+  };
+  ParallelFor(num_chunks, ResolveNumThreads(num_threads), histograms, pool);
   begin_.assign(num_views + 1, 0);
   size_t v = 0;
   for (size_t k = 0; k < num_chunks; ++k) {

@@ -102,8 +102,11 @@ class CoarseFields {
 
   CoarseFields() = default;
   // kBox: the shards' F_v (computed where a shard lacks the section); kCentre: C_v, computed
-  // from every view's points (~60 us per view, in parallel).
-  CoarseFields(const Database& db, int num_threads, FieldKind kind = FieldKind::kBox);
+  // from every view's points (~60 us per view, in parallel: num_threads, on `pool` when given).
+  CoarseFields(const Database& db,
+               int num_threads,
+               FieldKind kind = FieldKind::kBox,
+               ThreadPool* pool = nullptr);
   // The shards' own row-major fields, read in place (nothing copied, nothing computed): for
   // searches that read the fields of a few views only (indexed search), where the cell-major
   // copy of every view would cost more than the search (~4 s and 1.2 GB at 10M virtual views).
@@ -248,8 +251,9 @@ class ViewHistograms {
  public:
   static constexpr uint32_t kMaxCount = 255;  // a fuller cell is listed more than once
   ViewHistograms() = default;
-  // Every view's histogram, computed from its points in parallel (~2 us per view).
-  ViewHistograms(const Database& db, int num_threads);
+  // Every view's histogram, computed from its points in parallel (~2 us per view; num_threads,
+  // on `pool` when given).
+  ViewHistograms(const Database& db, int num_threads, ThreadPool* pool = nullptr);
   bool empty() const { return begin_.empty(); }
   size_t num_views() const { return begin_.empty() ? 0 : begin_.size() - 1; }
   // Bytes held: 3 per entry and 8 per view.

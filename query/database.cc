@@ -81,15 +81,22 @@ Database Database::FromMemory(std::vector<ViewLabel> labels,
   return db;
 }
 
-Result<Database> Database::Open(const std::filesystem::path& dir, bool verify_checksums) {
+Result<Database> Database::Open(const std::filesystem::path& dir,
+                                bool verify_checksums,
+                                int num_threads,
+                                ThreadPool* pool) {
   std::error_code ec;
   if (!std::filesystem::is_directory(dir, ec)) {
     return Status(StatusCode::kNotFound, dir.string() + ": not a database directory");
   }
-  return ReadWithStableManifest(dir, [&] { return OpenOnce(dir, verify_checksums); });
+  return ReadWithStableManifest(dir,
+                                [&] { return OpenOnce(dir, verify_checksums, num_threads, pool); });
 }
 
-Result<Database> Database::OpenOnce(const std::filesystem::path& dir, bool verify_checksums) {
+Result<Database> Database::OpenOnce(const std::filesystem::path& dir,
+                                    bool verify_checksums,
+                                    int num_threads,
+                                    ThreadPool* pool) {
   Result<Manifest> manifest = ReadManifest(dir);
   if (!manifest.ok()) return manifest.status();
   Database db;
@@ -165,7 +172,7 @@ Result<Database> Database::OpenOnce(const std::filesystem::path& dir, bool verif
       db.search_points_[v].store(nullptr, std::memory_order_relaxed);
       db.search_fields_[v].store(nullptr, std::memory_order_relaxed);
     }
-    HANDDB_RETURN_IF_ERROR(db.SummariseViews(ResolveNumThreads(-1)));
+    HANDDB_RETURN_IF_ERROR(db.SummariseViews(ResolveNumThreads(num_threads), pool));
     // That pass read every record and every point code: a search reads only its candidates'.
     for (const auto& shard : db.shards_) {
       shard->ReleaseViewTablePages();
@@ -181,11 +188,11 @@ Result<Database> Database::OpenOnce(const std::filesystem::path& dir, bool verif
 // one scratch buffer each). A header that cannot be read, or a count that disagrees with the
 // record, is an error of Open naming the shard, the view and the byte offset; a code damaged
 // past its header is found by the search that decodes it (CodedViewError) or by validate.
-Status Database::SummariseViews(int num_threads) {
+Status Database::SummariseViews(int num_threads, ThreadPool* pool) {
   constexpr size_t kChunk = 1024;
   const size_t n = views_.size();
   summaries_.assign(n, PointSummary{});
-  return ParallelForStatus((n + kChunk - 1) / kChunk, num_threads, nullptr, [&](size_t k) {
+  auto summarise = [&](size_t k) {
     std::vector<PointQ> scratch;
     const size_t end = std::min(n, (k + 1) * kChunk);
     for (size_t v = k * kChunk; v < end; ++v) {
@@ -205,7 +212,8 @@ Status Database::SummariseViews(int num_threads) {
       summaries_[v] = Summarise(pts);
     }
     return Status::Ok();
-  });
+  };
+  return ParallelForStatus((n + kChunk - 1) / kChunk, num_threads, nullptr, summarise, pool);
 }
 
 Database::PointSummary Database::Summarise(std::span<const PointQ> points) {

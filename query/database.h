@@ -21,6 +21,8 @@
 
 namespace handdb {
 
+class ThreadPool;
+
 class ShardReader;
 
 // A coded view whose code does not decode (damaged past the header Open reads; `handdb validate`
@@ -49,7 +51,12 @@ class Database {
   // shards' view counts match the manifest. With verify_checksums, also hashes every section.
   // A convert rewriting DB_DIR meanwhile is invisible: the manifest and the shards opened are one
   // consistent database, the old one or the new one (ReadWithStableManifest, format/manifest.h).
-  static Result<Database> Open(const std::filesystem::path& dir, bool verify_checksums = false);
+  // A coded database's views are summarised on num_threads threads, on `pool` when given
+  // (base/thread_pool.h, ParallelFor).
+  static Result<Database> Open(const std::filesystem::path& dir,
+                               bool verify_checksums = false,
+                               int num_threads = -1,
+                               ThreadPool* pool = nullptr);
 
   // A database held in memory. labels.size() == points.size(); shape_names indexed by shape id
   // (may be empty).
@@ -156,7 +163,10 @@ class Database {
   const std::string& manifest_metadata_json() const { return manifest_metadata_json_; }
 
  private:
-  static Result<Database> OpenOnce(const std::filesystem::path& dir, bool verify_checksums);
+  static Result<Database> OpenOnce(const std::filesystem::path& dir,
+                                   bool verify_checksums,
+                                   int num_threads,
+                                   ThreadPool* pool);
   struct ViewRef {
     const PointQ* points = nullptr;  // plain: in the shard's mapping or memory_points_
     uint32_t num_points = 0;
@@ -175,7 +185,7 @@ class Database {
   const uint8_t* DecodeFieldOnce(view_id_t v,
                                  std::atomic<uint8_t*>* fields,
                                  std::atomic<uint64_t>& bytes) const;
-  Status SummariseViews(int num_threads);
+  Status SummariseViews(int num_threads, ThreadPool* pool);
   size_t shards_without_coarse_fields_ = 0;
   std::vector<ViewRef> views_;
   uint32_t num_rolls_ = 1;

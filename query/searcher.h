@@ -42,9 +42,29 @@ Result<Hand> ParseHand(std::string_view name);
 // kExact: every (view, slot) pair is bounded, the exact top-k. kIndexed: the database's index
 // (query/index/view_index.h, docs/index.md) gives candidate (view, roll) pairs per hand searched
 // (the left hand's from the mirrored query), and only those pairs of the hand's slots are bounded
-// and refined, by the same steps: the exact top-k among the candidates.
-enum class SearchMode { kExact, kIndexed };
-std::string_view SearchModeName(SearchMode mode);  // "exact", "indexed"
+// and refined, by the same steps: the exact top-k among the candidates. kAuto: kIndexed when the
+// Searcher has an index attached (SearcherOptions::use_index), else kExact.
+enum class SearchMode { kAuto, kExact, kIndexed };
+std::string_view SearchModeName(SearchMode mode);  // "auto", "exact", "indexed"
+
+// Whether a Searcher attaches its database's index when it opens: kAuto when the manifest lists
+// one, kIndexed always (an error without one), kExact never.
+enum class IndexUse { kAuto, kExact, kIndexed };
+std::string_view IndexUseName(IndexUse use);  // "auto", "exact", "indexed"
+Result<IndexUse> ParseIndexUse(std::string_view name);
+
+struct SearcherOptions {
+  // The Searcher's one thread pool, started at open and used by every phase (opening, the lazy
+  // caches, every search). -1: all cores; at most MaxNumThreads() (base/thread_pool.h).
+  int num_threads = -1;
+  bool verify = false;  // Open: hash every shard section (Database::Open)
+  IndexUse use_index = IndexUse::kAuto;
+  // A process that runs one or a few queries: exact searches bound A with the shards' stored box
+  // fields when every shard has them (SetExactFieldKind(kBox): ~0.1 s to prepare against ~0.7 s
+  // for the centre fields, more than one query gains; the results are the same).
+  bool few_queries = false;
+  bool Check() const;
+};
 
 struct SearchOptions {
   int top_k = 10;  // number of matches returned
@@ -60,7 +80,8 @@ struct SearchOptions {
   // grids. The library default stays kRight (the rendered test sets are right hands);
   // `handdb query` defaults to kEither.
   Hand hand = Hand::kRight;
-  int num_threads = -1;      // -1: all cores
+  // -1: every thread of the Searcher's pool; fewer caps this search (never more than the pool).
+  int num_threads = -1;
   bool brute_force = false;  // D_c for every (view, roll), no pruning (the reference)
   KdTreeBackend kdtree = KdTreeBackend::kNanoflann;
   float dt_cell_px = 1.0f;  // distance-transform grid step: 1, 1/2, 1/4, 1/8 or 1/16 px
@@ -75,8 +96,9 @@ struct SearchOptions {
   // `--bruteforce` and big photo queries otherwise ran for minutes without a sign of life.
   bool progress = false;
   std::chrono::steady_clock::time_point progress_since{};
-  // kIndexed needs an index (Searcher::SetIndex); `index` says how many candidates per hand.
-  SearchMode mode = SearchMode::kExact;
+  // kIndexed needs an index (attached at open, or Searcher::SetIndex); `index` says how many
+  // candidates per hand. kAuto follows the Searcher: indexed when it has an index.
+  SearchMode mode = SearchMode::kAuto;
   IndexSearchOptions index;
   bool Check() const;
 };
@@ -121,7 +143,8 @@ struct SearchStats {
   uint64_t probe_abandoned = 0;  // of those, dropped by the linear scans' running bound
   uint64_t view_trees = 0;       // kd-trees built over view points
   uint64_t query_points = 0;
-  uint32_t searches = 0;      // hands searched: 1, or 2 for Hand::kEither
+  uint32_t searches = 0;                 // hands searched: 1, or 2 for Hand::kEither
+  SearchMode mode = SearchMode::kExact;  // what the search ran: kExact or kIndexed
   uint64_t candidates = 0;    // kIndexed: pairs the index proposed (the only ones bounded)
   double seconds_index = 0;   // kIndexed: the index's candidate search
   double seconds_bounds = 0;  // step 1 (rotations, coarse bounds, distance transforms, B bounds)
@@ -133,14 +156,22 @@ class ThreadPool;
 
 class Searcher {
  public:
-  // The database is shared (a Searcher is cheap; many may search one Database).
-  explicit Searcher(std::shared_ptr<const Database> db);
+  // The database is shared (a Searcher is cheap; many may search one Database). Starts the pool
+  // of options.num_threads (throws std::system_error when the system refuses a thread: Create
+  // and Open return that as a Status); attaches no index (see Create).
+  explicit Searcher(std::shared_ptr<const Database> db, const SearcherOptions& options = {});
   ~Searcher();
   Searcher(const Searcher&) = delete;
   Searcher& operator=(const Searcher&) = delete;
 
-  // Opens a database directory (Database::Open) and wraps it.
-  static Result<std::unique_ptr<Searcher>> Open(const std::filesystem::path& dir);
+  // Opens a database directory (Database::Open, on the Searcher's pool) and wraps it as Create
+  // does: every caller that opens a database this way searches it the same way.
+  static Result<std::unique_ptr<Searcher>> Open(const std::filesystem::path& dir,
+                                                const SearcherOptions& options = {});
+  // Wraps an open database: checks the options, starts the pool, and attaches the index its
+  // manifest lists (ViewIndex::Open) as options.use_index says.
+  static Result<std::unique_ptr<Searcher>> Create(std::shared_ptr<const Database> db,
+                                                  const SearcherOptions& options = {});
 
   // Top-k matches for a query edge point set in the normalised frame (px), best first.
   // kInvalidArgument for an empty query or bad options. Const: safe from many threads.
@@ -168,11 +199,27 @@ class Searcher {
   void SetIndex(std::shared_ptr<const ViewIndex> index) { index_ = std::move(index); }
   const ViewIndex* index() const { return index_.get(); }
 
+  // What a search with these options runs: kExact or kIndexed (kAuto resolved by index(); brute
+  // force is exact).
+  SearchMode ModeFor(const SearchOptions& options) const;
+  // The threads a search may use: the pool's plus the calling thread.
+  int num_threads() const { return num_threads_; }
+
  private:
+  Searcher(std::shared_ptr<const Database> db,
+           const SearcherOptions& options,
+           std::unique_ptr<ThreadPool> pool);
+  // Attaches the index the options ask for to a new Searcher over `db` and `pool`.
+  static Result<std::unique_ptr<Searcher>> Make(std::shared_ptr<const Database> db,
+                                                const SearcherOptions& options,
+                                                std::unique_ptr<ThreadPool> pool);
   Result<std::vector<Match>> SearchImpl(std::span<const Point2f> query_px,
                                         const SearchOptions& options,
                                         SearchStats* stats) const;
   std::shared_ptr<const Database> db_;
+  // num_threads_ - 1 workers (none for one thread): the calling thread is always worker 0.
+  int num_threads_ = 1;
+  std::unique_ptr<ThreadPool> pool_;
   std::vector<int32_t> max_abs_;  // per view: max |x|, |y| of its points (PointQ units)
   // Per view: 1 if its points are sorted by y and on the coarse grid (every converted view), so
   // the linear scans may read a window of rows (docs/query.md).

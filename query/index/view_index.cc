@@ -65,6 +65,20 @@ std::vector<view_id_t> EvenSample(size_t total, size_t n) {
 
 int Threads(int requested) { return ResolveNumThreads(requested); }
 
+// OpenMP's thread count for the regions this thread starts (FAISS's k-means and assignment)
+// while the guard lives, restored after: the count is an ICV of the calling thread, so no other
+// thread and nothing after the build sees a change.
+class ScopedOmpThreads {
+ public:
+  explicit ScopedOmpThreads(int n) : saved_(omp_get_max_threads()) { omp_set_num_threads(n); }
+  ~ScopedOmpThreads() { omp_set_num_threads(saved_); }
+  ScopedOmpThreads(const ScopedOmpThreads&) = delete;
+  ScopedOmpThreads& operator=(const ScopedOmpThreads&) = delete;
+
+ private:
+  int saved_;
+};
+
 }  // namespace
 
 uint64_t DatabaseFingerprint(const Manifest& manifest) {
@@ -105,9 +119,9 @@ Result<ViewIndex> ViewIndex::Build(const Database& db, const IndexBuildOptions& 
   }
   const auto start = std::chrono::steady_clock::now();
   const int threads = Threads(options.num_threads);
-  // Eigen would use OpenMP threads (this library is built with it): one thread keeps the sums in
-  // one order, so the file is the same for any --threads.
-  Eigen::setNbThreads(1);
+  // Eigen's products here never start threads (EIGEN_DONT_PARALLELIZE for this file,
+  // query/CMakeLists.txt): one thread keeps the sums in one order, so the file is the same for
+  // any --threads.
   const EmbeddingGrid& grid = options.grid;
   const int D = grid.dims();
   const int H = grid.cells();
@@ -241,7 +255,7 @@ Result<ViewIndex> ViewIndex::Build(const Database& db, const IndexBuildOptions& 
   //    matter, and the quantizer's |x|^2 + |y|^2 - 2<x, y> in float lost them: recall@10 0.02-0.12
   //    at nprobe = lists / 8.)
   // FAISS's k-means sums in OpenMP chunks: one thread keeps the result independent of --threads.
-  omp_set_num_threads(1);
+  const ScopedOmpThreads one_omp_thread(1);
   try {
     std::vector<float> train(sample.size() * static_cast<size_t>(d));
     for (size_t i = 0; i < sample.size(); ++i) {
@@ -601,7 +615,8 @@ constexpr size_t kScanBlocks = 64;
 }  // namespace
 
 std::vector<Candidate> ViewIndex::Candidates(std::span<const Point2f> query_px,
-                                             const IndexSearchOptions& options) const {
+                                             const IndexSearchOptions& options,
+                                             ThreadPool* pool) const {
   const int D = grid_.dims();
   const int d = dims_;
   const int threads = Threads(options.num_threads);
@@ -613,12 +628,13 @@ std::vector<Candidate> ViewIndex::Candidates(std::span<const Point2f> query_px,
   // s(v, r) = offset_r - <w_r, z_v>: the query vectors u_r in parallel, then one product with the
   // projection and the mean (query_blocks_).
   std::vector<float> u(static_cast<size_t>(rolls) * static_cast<size_t>(D));
-  ParallelFor(rolls, threads, [&](size_t r, int) {
+  auto rolled_vectors = [&](size_t r, int) {
     const std::vector<PointQ> rolled =
         RotateAndQuantise(query_px, -RollAngle(static_cast<roll_id_t>(r), rolls));
     QueryVector(grid_, rolled, weight_, u.data() + r * D);
     return true;
-  });
+  };
+  ParallelFor(rolls, threads, rolled_vectors, pool);
   const size_t query_rows = query_blocks_.size() / static_cast<size_t>(D);
   std::vector<float> projected(static_cast<size_t>(rolls) * query_rows);
   CodeInnerProducts(u.data(),
@@ -673,7 +689,7 @@ std::vector<Candidate> ViewIndex::Candidates(std::span<const Point2f> query_px,
     const size_t blocks = ids_.size() / lane;
     const size_t tasks = (blocks + kScanBlocks - 1) / kScanBlocks;
     std::vector<std::vector<float>> scratch(static_cast<size_t>(threads));
-    ParallelFor(tasks, threads, [&](size_t t, int worker) {
+    auto scan_blocks = [&](size_t t, int worker) {
       const size_t b0 = t * kScanBlocks;
       const size_t nb = std::min(kScanBlocks, blocks - b0);
       std::vector<float>& ip = scratch[static_cast<size_t>(worker)];
@@ -687,12 +703,13 @@ std::vector<Candidate> ViewIndex::Candidates(std::span<const Point2f> query_px,
             b0 * lane,
             nb * lane);
       return true;
-    });
+    };
+    ParallelFor(tasks, threads, scan_blocks, pool);
   } else {
     // IVF: per rolled query, the nprobe lists of largest <centroid, w_r> (= smallest s at the
     // centroid; ties: lower list), scanned in list order.
     std::vector<std::vector<float>> scratch(static_cast<size_t>(threads));
-    ParallelFor(rolls, threads, [&](size_t r, int worker) {
+    auto probe_rolls = [&](size_t r, int worker) {
       const float* wr = w.data() + r * d;
       std::vector<std::pair<float, uint32_t>> lists(static_cast<size_t>(nlist_));
       for (size_t l = 0; l < lists.size(); ++l) {
@@ -725,7 +742,8 @@ std::vector<Candidate> ViewIndex::Candidates(std::span<const Point2f> query_px,
               list_sizes_[l]);
       }
       return true;
-    });
+    };
+    ParallelFor(rolls, threads, probe_rolls, pool);
   }
 
   std::vector<Candidate> all;

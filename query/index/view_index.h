@@ -34,6 +34,7 @@
 namespace handdb {
 
 class Database;
+class ThreadPool;
 
 constexpr char kIndexFileName[] = "index.hdbi";
 constexpr char kIndexKind[] = "chamfer-wpca-ivf";
@@ -87,9 +88,11 @@ class ViewIndex {
   static Result<ViewIndex> Open(const std::filesystem::path& db_dir, const Manifest& manifest);
 
   // The best `options.candidates` pairs by approximate bound, best first (ties: view, roll), for
-  // a query in the normalised frame (px), as searched (no mirroring here).
+  // a query in the normalised frame (px), as searched (no mirroring here). On options.num_threads
+  // workers, from `pool` when given (then at most its threads and the caller).
   std::vector<Candidate> Candidates(std::span<const Point2f> query_px,
-                                    const IndexSearchOptions& options) const;
+                                    const IndexSearchOptions& options,
+                                    ThreadPool* pool = nullptr) const;
 
   int dims() const { return dims_; }
   const EmbeddingGrid& grid() const { return grid_; }

@@ -353,3 +353,28 @@ def test_coded_database_reads_and_searches_like_the_plain_one(handdb, db, tmp_pa
         want = db.search(view_image, top_k=10, threads=2, hand=hand)
         got = coded.search(view_image, top_k=10, threads=2, hand=hand)
         assert [m.to_dict() for m in got] == [m.to_dict() for m in want]
+
+
+def test_search_uses_the_index_the_manifest_lists(handdb, tmp_path, view_image):
+    """A database with an index searches indexed by default, as `handdb query` does, and
+    search="exact" opts out."""
+    import pickle
+
+    from handdb_testing import WRITER
+
+    path = tmp_path / "indexed"
+    subprocess.run([WRITER, str(path)], check=True, capture_output=True)
+    run_handdb("index", path, "--dims", 16, "--nlist", 4, "--cell-px", 16, "--grid-side", 15)
+    indexed = handdb.Database(str(path))
+    assert indexed.search_mode == "auto"
+    matches, stats = indexed.search(view_image, top_k=5, threads=2, return_stats=True)
+    assert stats["candidates"] > 0
+    cli = handdb_json("query", path, view_image, "--json", "--top", 5, "--threads", 2)
+    assert cli["options"]["search"] == "indexed"
+    assert [m.to_dict() for m in matches] == cli["matches"]
+    exact = handdb.Database(str(path), search="exact")
+    _, exact_stats = exact.search(view_image, top_k=5, threads=2, return_stats=True)
+    assert exact_stats["candidates"] == 0
+    assert pickle.loads(pickle.dumps(exact)).search_mode == "exact"
+    with pytest.raises(ValueError):
+        handdb.Database(str(path), search="fast")
