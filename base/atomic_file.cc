@@ -7,6 +7,7 @@
 #include <cerrno>
 #include <cstring>
 #include <random>
+#include <utility>
 
 #include "base/hex.h"
 
@@ -39,11 +40,42 @@ void AtomicFileWriter::Abort() {
     std::filesystem::remove(temp_, ec);
   }
   temp_.clear();
+  streamed_ = false;
+}
+
+Status AtomicFileWriter::OpenStreamed() {
+  // O_NONBLOCK: a FIFO nobody reads fails at once (ENXIO) instead of blocking; blocking writes
+  // are restored below.
+  fd_ = ::open(target_.c_str(), O_WRONLY | O_CLOEXEC | O_NONBLOCK | O_NOCTTY);
+  if (fd_ < 0) {
+    if (errno == ENXIO) {
+      return Status(StatusCode::kIoError, target_.string() + ": a FIFO with no reader");
+    }
+    return Errno("cannot open for writing", target_);
+  }
+  struct stat st {};
+  if (::fstat(fd_, &st) != 0 || S_ISREG(st.st_mode) || S_ISDIR(st.st_mode)) {
+    // Swapped for a regular file since the stat: take the atomic path after all.
+    ::close(fd_);
+    fd_ = -1;
+    return Status(StatusCode::kIoError,
+                  target_.string() + ": changed while being opened for writing");
+  }
+  const int flags = ::fcntl(fd_, F_GETFL);
+  if (flags >= 0) ::fcntl(fd_, F_SETFL, flags & ~O_NONBLOCK);
+  size_ = 0;
+  committed_ = false;
+  streamed_ = true;
+  return Status::Ok();
 }
 
 Status AtomicFileWriter::Open(const std::filesystem::path& target) {
   THROW_CHECK_MSG(fd_ < 0, "AtomicFileWriter::Open called twice");
   target_ = target;
+  struct stat st {};
+  if (::stat(target.c_str(), &st) == 0 && !S_ISREG(st.st_mode) && !S_ISDIR(st.st_mode)) {
+    return OpenStreamed();
+  }
   std::filesystem::path dir = target.parent_path();
   if (dir.empty()) dir = ".";
   std::error_code ec;
@@ -84,6 +116,10 @@ Status AtomicFileWriter::Write(const void* data, size_t size) {
 Status AtomicFileWriter::WriteAt(uint64_t offset, const void* data, size_t size) {
   THROW_CHECK_MSG(fd_ >= 0, "AtomicFileWriter::WriteAt before Open");
   THROW_CHECK_LE(offset + size, size_);
+  if (streamed_) {
+    return Status(StatusCode::kIoError,
+                  target_.string() + ": not a regular file (this output cannot be streamed)");
+  }
   const char* p = static_cast<const char*>(data);
   size_t left = size;
   while (left > 0) {
@@ -101,6 +137,12 @@ Status AtomicFileWriter::WriteAt(uint64_t offset, const void* data, size_t size)
 
 Status AtomicFileWriter::Commit() {
   THROW_CHECK_MSG(fd_ >= 0, "AtomicFileWriter::Commit before Open");
+  if (streamed_) {
+    const int fd = std::exchange(fd_, -1);
+    if (::close(fd) != 0 && errno != EINTR) return Errno("close failed", target_);
+    committed_ = true;
+    return Status::Ok();
+  }
   if (::fsync(fd_) != 0) return Errno("fsync failed", target_);
   if (::close(fd_) != 0) {
     fd_ = -1;

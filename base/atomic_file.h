@@ -1,6 +1,10 @@
 // Every file handdb writes appears atomically: written to a temp file in the same directory,
 // fsync'ed, renamed over the target, and the directory fsync'ed. A crash leaves either the old
 // file or the new one, never a half-written one; stale temp files are named "<target>.tmp-*".
+//
+// A target that exists and is not a regular file or a directory (a device such as /dev/null or
+// /dev/stdout's pipe, a FIFO, a socket) is never renamed over: the bytes are streamed into it
+// directly, as a shell redirection would, so `-o /dev/null` never replaces /dev/null.
 #pragma once
 
 #include <cstdint>
@@ -22,22 +26,28 @@ class AtomicFileWriter {
   Status Open(const std::filesystem::path& target);
   Status Write(const void* data, size_t size);
   Status Write(std::string_view data) { return Write(data.data(), data.size()); }
-  // Overwrites bytes already written (used to patch headers after streaming).
+  // Overwrites bytes already written (used to patch headers after streaming). kIoError on a
+  // streamed target (a device or FIFO cannot be patched).
   Status WriteAt(uint64_t offset, const void* data, size_t size);
   uint64_t bytes_written() const { return size_; }
-  // fsync + rename + fsync(dir).
+  // fsync + rename + fsync(dir); on a streamed target, close.
   Status Commit();
+  // True when the target is a device, FIFO or socket written in place (no temp file).
+  bool streamed() const { return streamed_; }
   void Abort();
 
   const std::filesystem::path& target() const { return target_; }
   const std::filesystem::path& temp_path() const { return temp_; }
 
  private:
+  Status OpenStreamed();
+
   std::filesystem::path target_;
   std::filesystem::path temp_;
   int fd_ = -1;
   uint64_t size_ = 0;
   bool committed_ = false;
+  bool streamed_ = false;
 };
 
 // Convenience: the whole content at once.

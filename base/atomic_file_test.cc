@@ -1,7 +1,10 @@
 #include "base/atomic_file.h"
 
+#include <fcntl.h>
 #include <gtest/gtest.h>
 #include <sys/stat.h>
+#include <sys/sysmacros.h>
+#include <unistd.h>
 
 #include <filesystem>
 
@@ -88,6 +91,39 @@ TEST(AtomicFile, ReadRefusesAFileLargerThanTheLimit) {
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.status().message(),
             (dir / "f").string() + ": 10 bytes, more than the 9 allowed for this kind of file");
+}
+
+// A device or FIFO as the target was renamed over (as root, `-o /dev/null` replaced /dev/null):
+// it is written in place now, and a FIFO without a reader is an error, not a block.
+TEST(AtomicFile, DevicesAndFifosAreWrittenInPlaceNotReplaced) {
+  auto dir = TempDir("device");
+  const auto dev = dir / "null";
+  if (::mknod(dev.c_str(), S_IFCHR | 0666, makedev(1, 3)) == 0) {
+    ASSERT_TRUE(WriteFileAtomic(dev, "into the device").ok());
+    struct stat st {};
+    ASSERT_EQ(::stat(dev.c_str(), &st), 0);
+    EXPECT_TRUE(S_ISCHR(st.st_mode));
+    AtomicFileWriter w;
+    ASSERT_TRUE(w.Open(dev).ok());
+    EXPECT_TRUE(w.streamed());
+    ASSERT_TRUE(w.Write("abc").ok());
+    EXPECT_FALSE(w.WriteAt(0, "x", 1).ok());  // a stream cannot be patched
+  }
+  const auto fifo = dir / "fifo";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0644), 0);
+  const Status no_reader = WriteFileAtomic(fifo, "lost");
+  EXPECT_EQ(no_reader.message(), fifo.string() + ": a FIFO with no reader");
+  const int reader = ::open(fifo.c_str(), O_RDONLY | O_NONBLOCK);
+  ASSERT_GE(reader, 0);
+  ASSERT_TRUE(WriteFileAtomic(fifo, "through").ok());
+  char buf[16] = {};
+  EXPECT_EQ(::read(reader, buf, sizeof buf), 7);
+  EXPECT_EQ(std::string(buf), "through");
+  ::close(reader);
+  struct stat st {};
+  ASSERT_EQ(::stat(fifo.c_str(), &st), 0);
+  EXPECT_TRUE(S_ISFIFO(st.st_mode));
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

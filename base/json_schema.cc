@@ -627,8 +627,17 @@ Status CheckJsonDepth(std::string_view text, const std::string& what, int max_de
   return Status::Ok();
 }
 
+Status CheckJsonText(std::string_view text, const std::string& what) {
+  if (const size_t nul = text.find('\0'); nul != std::string_view::npos) {
+    return Status(
+        StatusCode::kBadJson,
+        what + ": NUL byte at offset " + std::to_string(nul) + " (not allowed in JSON text)");
+  }
+  return CheckJsonDepth(text, what);
+}
+
 Result<nlohmann::json> ParseJsonText(std::string_view text, const std::string& what) {
-  if (Status s = CheckJsonDepth(text, what); !s.ok()) return s;
+  if (Status s = CheckJsonText(text, what); !s.ok()) return s;
   // nlohmann keeps the last of two equal keys without a word, so a config with two "seed"s ran
   // with one of them (issue 14 item 12): the parser's callback watches each object's keys.
   std::vector<std::set<std::string>> keys;  // one set per object being parsed

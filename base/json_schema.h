@@ -45,7 +45,12 @@ Status CheckJsonDepth(std::string_view text,
                       const std::string& what,
                       int max_depth = kMaxJsonDepth);
 
-// CheckJsonDepth, then parse. kBadJson "<what>: line L, column C: <problem>".
+// CheckJsonDepth, and kBadJson "<what>: NUL byte at offset N (not allowed in JSON text)" for the
+// first NUL: nlohmann's parser takes a NUL for the end of the input, so "{...}\0junk" would parse
+// as "{...}" with the rest ignored.
+Status CheckJsonText(std::string_view text, const std::string& what);
+
+// CheckJsonText, then parse. kBadJson "<what>: line L, column C: <problem>".
 Result<nlohmann::json> ParseJsonText(std::string_view text, const std::string& what);
 
 // Reads (at most MaxJsonFileBytes(schema_name) bytes of a regular file), parses (at most

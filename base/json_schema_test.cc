@@ -6,6 +6,7 @@
 #include <stdexcept>
 
 #include "base/atomic_file.h"
+#include "base/json_number.h"
 #include "base/testing.h"
 
 namespace handdb {
@@ -231,6 +232,38 @@ TEST(JsonSchema, WriteThenReadRoundTripsWithStableBytes) {
   auto back = ReadJsonFile(dir / "a.json", "");
   ASSERT_TRUE(back.ok());
   EXPECT_EQ(*back, doc);
+}
+
+// nlohmann stops at a NUL byte: "{...}\0junk" parsed as "{...}" with the junk ignored.
+TEST(JsonSchema, NulByteIsRefusedWithItsOffset) {
+  const std::string text = std::string("{\"a\": 1}\0junk", 13);
+  auto r = ParseJsonText(text, "x.json");
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), StatusCode::kBadJson);
+  EXPECT_EQ(r.status().message(), "x.json: NUL byte at offset 8 (not allowed in JSON text)");
+  EXPECT_FALSE(CheckJsonText(std::string("[\"a\0\"]", 6), "y").ok());
+  EXPECT_TRUE(CheckJsonText("{\"a\": \"\\u0000\"}", "z").ok());  // an escaped NUL is JSON
+}
+
+// get<uint32_t>() cut 2^32 + 12 to 12; 2^64 + 12 parses as a double.
+TEST(JsonNumber, IntegersAreRangeCheckedBeforeNarrowing) {
+  EXPECT_EQ(*JsonInteger<uint32_t>(json(4294967295ull), "f", "rolls"), 4294967295u);
+  auto over = JsonInteger<uint32_t>(json(4294967308ull), "f", "rolls");
+  ASSERT_FALSE(over.ok());
+  EXPECT_EQ(over.status().code(), StatusCode::kOutOfRange);
+  EXPECT_EQ(over.status().message(), "f: rolls is 4294967308, not an integer in 0..4294967295");
+  auto huge = JsonInteger<uint64_t>(json::parse("18446744073709551628"), "f", "seed");
+  ASSERT_FALSE(huge.ok());
+  EXPECT_EQ(huge.status().message(),
+            "f: seed is 1.8446744073709552e+19, not an integer in 0..18446744073709551615");
+  EXPECT_FALSE(JsonInteger<uint32_t>(json(-1), "f", "n").ok());
+  EXPECT_FALSE(JsonInteger<int>(json(2.0), "f", "n").ok());  // a float, even an integral one
+  EXPECT_EQ(*JsonInteger<int>(json(-5), "f", "n"), -5);
+  EXPECT_FALSE(JsonInteger<int>(json(int64_t{1} << 31), "f", "n").ok());
+  EXPECT_EQ(*JsonInteger<uint64_t>(json(18446744073709551615ull), "f", "n"),
+            18446744073709551615ull);
+  EXPECT_THROW(JsonIntegerOrThrow<uint16_t>(json(65536), "n"), JsonRangeError);
+  EXPECT_EQ(JsonIntegerOrThrow<uint16_t>(json(65535), "n"), 65535);
 }
 
 }  // namespace

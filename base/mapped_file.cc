@@ -6,8 +6,11 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cerrno>
+#include <csignal>
 #include <cstring>
+#include <mutex>
 #include <string>
 #include <utility>
 
@@ -21,6 +24,101 @@ struct FdCloser {
   int fd;
   ~FdCloser() { ::close(fd); }
 };
+
+// The registry the SIGBUS handler reads: fixed arrays of atomics and characters, so the handler
+// allocates nothing and takes no lock (async-signal-safe). A slot is claimed (kFree -> kWriting),
+// filled, then published (kReady); the handler reads only kReady slots.
+constexpr int kRegistrySlots = 4096;
+constexpr size_t kRegistryPathBytes = 512;
+enum SlotState : int { kFree = 0, kWriting = 1, kReady = 2 };
+struct RegistrySlot {
+  std::atomic<int> state{kFree};
+  std::atomic<uintptr_t> begin{0};
+  std::atomic<uintptr_t> end{0};
+  char path[kRegistryPathBytes] = {};
+};
+RegistrySlot g_registry[kRegistrySlots];
+struct sigaction g_previous_sigbus {};
+
+void WriteAll(const char* text, size_t size) {
+  while (size > 0) {
+    const ssize_t n = ::write(STDERR_FILENO, text, size);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) return;
+    text += n;
+    size -= static_cast<size_t>(n);
+  }
+}
+
+void OnSigbus(int sig, siginfo_t* info, void* context) {
+  const auto addr = reinterpret_cast<uintptr_t>(info->si_addr);
+  // si_code <= 0: sent by kill/raise, where si_addr means nothing.
+  for (RegistrySlot& slot : g_registry) {
+    if (info->si_code <= 0) break;
+    if (slot.state.load(std::memory_order_acquire) != kReady) continue;
+    if (addr < slot.begin.load(std::memory_order_relaxed) ||
+        addr >= slot.end.load(std::memory_order_relaxed)) {
+      continue;
+    }
+    static const char kPrefix[] = "handdb: ";
+    static const char kSuffix[] = ": changed or truncated while being read\n";
+    WriteAll(kPrefix, sizeof kPrefix - 1);
+    WriteAll(slot.path, ::strnlen(slot.path, kRegistryPathBytes));
+    WriteAll(kSuffix, sizeof kSuffix - 1);
+    ::_exit(1);
+  }
+  // Not one of ours: hand it on as if this handler were not there.
+  if (g_previous_sigbus.sa_flags & SA_SIGINFO) {
+    if (g_previous_sigbus.sa_sigaction != nullptr) {
+      g_previous_sigbus.sa_sigaction(sig, info, context);
+      return;
+    }
+  } else if (g_previous_sigbus.sa_handler != SIG_DFL && g_previous_sigbus.sa_handler != SIG_IGN) {
+    g_previous_sigbus.sa_handler(sig);
+    return;
+  }
+  // The default action, at once (SA_NODEFER: the signal is not blocked in here).
+  ::signal(SIGBUS, SIG_DFL);
+  ::raise(sig);
+}
+
+void InstallSigbusHandler() {
+  static std::once_flag once;
+  std::call_once(once, [] {
+    struct sigaction action {};
+    action.sa_sigaction = OnSigbus;
+    action.sa_flags = SA_SIGINFO | SA_NODEFER;
+    sigemptyset(&action.sa_mask);
+    ::sigaction(SIGBUS, &action, &g_previous_sigbus);
+  });
+}
+
+int Register(const void* map, size_t size, const std::string& path) {
+  InstallSigbusHandler();
+  for (int i = 0; i < kRegistrySlots; ++i) {
+    RegistrySlot& slot = g_registry[i];
+    int expected = kFree;
+    if (!slot.state.compare_exchange_strong(expected, kWriting, std::memory_order_acquire)) {
+      continue;
+    }
+    const size_t n = std::min(path.size(), kRegistryPathBytes - 1);
+    std::memcpy(slot.path, path.data(), n);
+    slot.path[n] = '\0';
+    slot.begin.store(reinterpret_cast<uintptr_t>(map), std::memory_order_relaxed);
+    slot.end.store(reinterpret_cast<uintptr_t>(map) + size, std::memory_order_relaxed);
+    slot.state.store(kReady, std::memory_order_release);
+    return i;
+  }
+  return -1;  // full: the mapping works, a SIGBUS in it is not explained
+}
+
+void Unregister(int i) {
+  if (i < 0) return;
+  g_registry[i].state.store(kWriting, std::memory_order_release);
+  g_registry[i].begin.store(0, std::memory_order_relaxed);
+  g_registry[i].end.store(0, std::memory_order_relaxed);
+  g_registry[i].state.store(kFree, std::memory_order_release);
+}
 
 }  // namespace
 
@@ -51,6 +149,7 @@ Result<MappedFile> MappedFile::Open(const std::filesystem::path& path, Advice ad
   }
   file.map_ = map;
   file.size_ = size;
+  file.registry_slot_ = Register(map, size, name);
   file.Advise(0, size, advice);
   return file;
 }
@@ -68,18 +167,24 @@ void MappedFile::Advise(uint64_t begin, uint64_t end, Advice advice) const {
 MappedFile::~MappedFile() { Reset(); }
 
 MappedFile::MappedFile(MappedFile&& other) noexcept
-    : map_(std::exchange(other.map_, nullptr)), size_(std::exchange(other.size_, 0)) {}
+    : map_(std::exchange(other.map_, nullptr)),
+      size_(std::exchange(other.size_, 0)),
+      registry_slot_(std::exchange(other.registry_slot_, -1)) {}
 
 MappedFile& MappedFile::operator=(MappedFile&& other) noexcept {
   if (this != &other) {
     Reset();
     map_ = std::exchange(other.map_, nullptr);
     size_ = std::exchange(other.size_, 0);
+    registry_slot_ = std::exchange(other.registry_slot_, -1);
   }
   return *this;
 }
 
 void MappedFile::Reset() {
+  // Unlisted before the range is unmapped, so a new mapping at the same address is never
+  // explained by this file's name.
+  Unregister(std::exchange(registry_slot_, -1));
   if (map_ != nullptr) ::munmap(map_, size_);
   map_ = nullptr;
   size_ = 0;

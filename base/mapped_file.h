@@ -1,5 +1,11 @@
 // A read-only memory mapping of a whole regular file: RAII (unmapped on destruction), move-only.
 // An empty file maps to an empty span.
+//
+// A file truncated or rewritten in place while mapped makes the next read of a page past its new
+// end a SIGBUS. Every mapping is listed in a fixed, lock-free registry, and a SIGBUS handler
+// (installed with the first mapping) that finds the faulting address in it writes
+// "handdb: FILE: changed or truncated while being read" to stderr and exits with status 1; a
+// SIGBUS at an address it does not know goes to the previous handler (the default: a core dump).
 #pragma once
 
 #include <cstddef>
@@ -44,6 +50,7 @@ class MappedFile {
 
   void* map_ = nullptr;
   size_t size_ = 0;
+  int registry_slot_ = -1;  // -1: not listed (the registry was full)
 };
 
 }  // namespace handdb

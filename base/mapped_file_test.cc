@@ -2,6 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <csignal>
+#include <cstdlib>
+#include <filesystem>
 #include <string>
 #include <utility>
 
@@ -54,6 +57,36 @@ TEST(MappedFile, ErrorsNameThePath) {
   ASSERT_FALSE(not_regular.ok());
   EXPECT_EQ(not_regular.status().code(), StatusCode::kIoError);
   EXPECT_EQ(not_regular.status().message(), dir.string() + ": is a directory, expected a file");
+}
+
+// A file truncated while mapped: the read past its new end is one line naming the file and exit
+// status 1, not a SIGBUS (status 135 from a shell).
+TEST(MappedFileDeathTest, TruncatedWhileMappedIsOneLineAndExitOne) {
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  const auto path = TempPath("truncated");
+  ASSERT_TRUE(WriteFileAtomic(path, std::string(3 * 4096, 'x')).ok());
+  EXPECT_EXIT(
+      {
+        auto file = MappedFile::Open(path);
+        if (!file.ok()) std::_Exit(3);
+        std::filesystem::resize_file(path, 0);
+        volatile uint8_t byte = file->bytes()[2 * 4096];
+        (void)byte;
+        std::_Exit(4);  // not reached: the read faults
+      },
+      ::testing::ExitedWithCode(1),
+      // The threadsafe style runs the test again in the child, with its own temp dir.
+      "^handdb: /.*/handdb_test_mapped_[0-9]+/truncated: changed or truncated while being "
+      "read\n$");
+  // A SIGBUS outside every mapping still kills as before.
+  EXPECT_EXIT(
+      {
+        auto file = MappedFile::Open(path);
+        std::raise(SIGBUS);
+      },
+      ::testing::KilledBySignal(SIGBUS),
+      "");
+  std::filesystem::remove(path);
 }
 
 }  // namespace

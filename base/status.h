@@ -71,6 +71,8 @@ class [[nodiscard]] Result {
   T* operator->() { return &checked(); }
   const T* operator->() const { return &const_cast<Result*>(this)->checked(); }
   T& operator*() { return checked(); }
+  // The value, or `fallback` when this holds an error (the error is dropped).
+  T value_or(T fallback) && { return value_ ? std::move(*value_) : std::move(fallback); }
 
  private:
   T& checked() {

@@ -435,6 +435,11 @@ int RunEvaluate(int argc, char** argv) {
   auto points_fn =
       MakeQueryPointsFn(query_input, db_dir, (*searcher)->database(), flags.landmarker);
   if (!points_fn.ok()) return Fail("evaluate", points_fn.status());
+  if (Status s =
+          CheckTestSetInputs(*testset, query_input, SelectTestViews(*testset, flags.options));
+      !s.ok()) {
+    return Fail("evaluate", s);
+  }
   auto report = Evaluate(**searcher, *testset, query_input, *points_fn, flags.options);
   if (!report.ok()) return Fail("evaluate", report.status());
   if (!quiet) std::printf("%s", ReportToText(*report).c_str());

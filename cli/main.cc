@@ -1,8 +1,11 @@
 // One `handdb` binary dispatching subcommands from a table (after COLMAP).
+#include <unistd.h>
+
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
 #include <exception>
+#include <ext/stdio_sync_filebuf.h>
 #include <iostream>
 #include <string>
 #include <vector>
@@ -63,18 +66,48 @@ void PrintHelp(std::FILE* out) {
   std::fprintf(out, "  %-10s %s\n", "help", "show this help");
 }
 
+// The errno of the first write to fd 1 that failed. errno itself is no witness by the time the
+// command returns: a buffer flushed mid-command failed long before, and later calls (isatty's
+// ENOTTY, an open's ENOENT) overwrote it.
+int g_stdout_write_errno = 0;
+
+ssize_t WriteToFdOne(void* /*cookie*/, const char* data, size_t size) {
+  size_t done = 0;
+  while (done < size) {
+    const ssize_t n = ::write(STDOUT_FILENO, data + done, size - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      if (g_stdout_write_errno == 0) g_stdout_write_errno = n < 0 ? errno : EIO;
+      return static_cast<ssize_t>(done);  // short: the stream records the error
+    }
+    done += static_cast<size_t>(n);
+  }
+  return static_cast<ssize_t>(size);
+}
+
+// Routes printf and std::cout through one stream over fd 1 whose writes go through
+// WriteToFdOne, buffered as glibc buffers stdout (by line on a terminal, in blocks otherwise).
+void RecordStdoutWriteErrors() {
+  static const cookie_io_functions_t kIo = {nullptr, WriteToFdOne, nullptr, nullptr};
+  FILE* out = ::fopencookie(nullptr, "w", kIo);
+  if (out == nullptr) return;  // keep the plain stdout; reasons may then be less precise
+  std::setvbuf(out, nullptr, ::isatty(STDOUT_FILENO) ? _IOLBF : _IOFBF, BUFSIZ);
+  std::fflush(stdout);
+  stdout = out;
+  // Never freed: std::cout is flushed at exit, after function-local statics are destroyed.
+  std::cout.rdbuf(new __gnu_cxx::stdio_sync_filebuf<char>(out));
+}
+
 // Output that never reached its file is a failure (a full disk, /dev/full, a closed pipe): flush
-// stdout once the command is done and turn a write error into exit 1 with one line, so
-// `handdb info DB --json > out.json` never exits 0 over an empty file.
+// stdout once the command is done and turn a write error into exit 1 with one line naming the
+// failed write's reason, so `handdb info DB --json > out.json` never exits 0 over an empty file.
 int CheckStdout(const char* command, int code) {
-  // A command may have flushed (and failed) already: its errno is the best reason left.
-  const int earlier_errno = errno;
   std::cout.flush();
   errno = 0;
   const bool flush_failed = std::fflush(stdout) != 0;
   const int flush_errno = errno;
   if (!flush_failed && !std::ferror(stdout) && std::cout.good()) return code;
-  const int reason = flush_failed && flush_errno != 0 ? flush_errno : earlier_errno;
+  const int reason = g_stdout_write_errno != 0 ? g_stdout_write_errno : flush_errno;
   const char* why = reason != 0 ? std::strerror(reason) : "write error";
   std::fprintf(stderr, "handdb %s: cannot write to stdout: %s\n", command, why);
   return code == kExitOk ? kExitError : code;
@@ -95,6 +128,7 @@ int RunVersion(int argc, char** argv) {
 
 int main(int argc, char** argv) {
   using namespace handdb::cli;
+  RecordStdoutWriteErrors();
   if (argc < 2) {
     PrintHelp(stderr);
     return kExitUsage;
@@ -104,7 +138,7 @@ int main(int argc, char** argv) {
     PrintHelp(stdout);
     return CheckStdout("help", kExitOk);
   }
-  if (name == "--version") return RunVersion(1, argv + 1);
+  if (name == "--version") return CheckStdout("version", RunVersion(1, argv + 1));
   for (const auto& c : Commands()) {
     if (name == c.name) {
       try {

@@ -7,6 +7,7 @@
 #include <limits>
 #include <sstream>
 
+#include "base/atomic_file.h"
 #include "base/json_number.h"
 #include "base/json_schema.h"
 #include "base/progress.h"
@@ -67,7 +68,46 @@ nlohmann::json ChanceToJson(const EvaluationReport& report) {
           {"mean_correct_per_view", report.mean_correct_per_view},
           {"success", cells}};
 }
+
+// A file a test set names: relative, and below the test set's directory, so a label of
+// "../../etc/passwd" or "/dev/zero" is refused when the test set is read.
+Result<fs::path> InsideTestSet(const fs::path& dir,
+                               const std::string& relative,
+                               const std::string& what,
+                               const std::string& field) {
+  const fs::path p(relative);
+  bool escapes = p.empty() || p.is_absolute() || p.has_root_name();
+  for (const fs::path& part : p) escapes = escapes || part == "..";
+  if (escapes) {
+    return Status(StatusCode::kOutOfRange,
+                  what + ": " + field + " is \"" + relative.substr(0, 60) +
+                      "\", not a relative path inside the test set's directory");
+  }
+  return dir / p;
+}
+
 }  // namespace
+
+Status CheckTestSetInputs(const TestSet& testset,
+                          QueryInput input,
+                          std::span<const uint32_t> positions) {
+  for (uint32_t i : positions) {
+    if (i >= testset.views.size()) continue;  // EvaluateViews reports it
+    const TestView& v = testset.views[i];
+    const fs::path& file = input == QueryInput::kPhoto ? v.photo : v.label;
+    if (file.empty()) {
+      return Status(StatusCode::kNotFound,
+                    testset.file.string() + ": test view " + std::to_string(v.id) +
+                        " has no photo (render the test set with photos)");
+    }
+    if (Status s = CheckRegularFile(file); !s.ok()) {
+      return Status(s.code(),
+                    s.message() + " (" + QueryInputName(input) + " input of test view " +
+                        std::to_string(v.id) + " in " + testset.file.string() + ")");
+    }
+  }
+  return Status::Ok();
+}
 
 const char* QueryInputName(QueryInput input) {
   return input == QueryInput::kClean ? "clean" : "photo";
@@ -141,8 +181,14 @@ Result<TestSet> ReadTestSet(const fs::path& dir_or_file) {
           v.truth.keypoints[k][c] = *x;
         }
       }
-      v.label = set.dir / j.at("label").get<std::string>();
-      if (j.contains("photo")) v.photo = set.dir / j.at("photo").get<std::string>();
+      auto label = InsideTestSet(set.dir, j.at("label").get<std::string>(), what, item + "label");
+      if (!label.ok()) return label.status();
+      v.label = *label;
+      if (j.contains("photo")) {
+        auto photo = InsideTestSet(set.dir, j.at("photo").get<std::string>(), what, item + "photo");
+        if (!photo.ok()) return photo.status();
+        v.photo = *photo;
+      }
       set.views.push_back(std::move(v));
     }
   } catch (const nlohmann::json::exception& e) {

@@ -62,6 +62,13 @@ Result<TestSet> ReadTestSet(const std::filesystem::path& dir_or_file);
 enum class QueryInput { kClean, kPhoto };
 const char* QueryInputName(QueryInput input);
 
+// Every file `input` reads for the test views at `positions` (labels for clean queries, photos
+// for photo queries) is a regular file: kNotFound / kIoError name the first that is missing or
+// is a device, FIFO or directory, so a broken test set is refused instead of scored as misses.
+Status CheckTestSetInputs(const TestSet& testset,
+                          QueryInput input,
+                          std::span<const uint32_t> positions);
+
 // A test view's query: edge points in the normalised frame (px) and, for a photo, the photo
 // path's whole result, whose hand landmarks (if any) re-rank the search (pose/landmark_rank.h).
 struct TestQuery {

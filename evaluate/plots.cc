@@ -11,6 +11,7 @@
 #include "base/atomic_file.h"
 #include "base/image_file.h"
 #include "format/skeleton.h"
+#include "photo/image_read.h"
 
 namespace handdb {
 namespace {
@@ -215,8 +216,8 @@ Status WriteExampleSheetPng(const std::filesystem::path& path,
         // pixels.
         const std::optional<ImageSize> size = ReadImageSize(tile.image);
         const bool huge = size && size->width * size->height > kMaxImagePixels;
-        cv::Mat img =
-            cv::imread(tile.image.string(), huge ? cv::IMREAD_REDUCED_COLOR_8 : cv::IMREAD_COLOR);
+        cv::Mat img = ReadImage(tile.image, huge ? cv::IMREAD_REDUCED_COLOR_8 : cv::IMREAD_COLOR)
+                          .value_or(cv::Mat());
         if (!img.empty()) {
           cv::resize(img, panel, panel.size(), 0, 0, cv::INTER_AREA);
           const double sx = double(kPanel) / (huge ? size->width : img.cols);

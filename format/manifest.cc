@@ -8,6 +8,7 @@
 #include <regex>
 #include <set>
 
+#include "base/json_number.h"
 #include "base/json_schema.h"
 
 namespace handdb {
@@ -123,28 +124,32 @@ Result<Manifest> ManifestFromJson(const json& doc, const std::string& what) {
   HANDDB_RETURN_IF_ERROR(ValidateJson(doc, "manifest.schema.json", what));
   Manifest m;
   try {
-    m.version = doc.at("version").get<int>();
+    m.version = JsonIntegerOrThrow<int>(doc.at("version"), "version");
     m.tool_version = doc.at("tool_version").get<std::string>();
-    m.rolls = doc.at("rolls").get<uint32_t>();
-    m.num_views = doc.at("num_views").get<uint64_t>();
-    m.num_virtual_views = doc.at("num_virtual_views").get<uint64_t>();
+    m.rolls = JsonIntegerOrThrow<uint32_t>(doc.at("rolls"), "rolls");
+    m.num_views = JsonIntegerOrThrow<uint64_t>(doc.at("num_views"), "num_views");
+    m.num_virtual_views =
+        JsonIntegerOrThrow<uint64_t>(doc.at("num_virtual_views"), "num_virtual_views");
     for (const auto& s : doc.at("shards")) {
+      const std::string at = "shards[" + std::to_string(m.shards.size()) + "].";
       m.shards.push_back({s.at("file").get<std::string>(),
-                          s.at("views").get<uint64_t>(),
-                          s.at("points").get<uint64_t>(),
-                          s.at("bytes").get<uint64_t>(),
+                          JsonIntegerOrThrow<uint64_t>(s.at("views"), at + "views"),
+                          JsonIntegerOrThrow<uint64_t>(s.at("points"), at + "points"),
+                          JsonIntegerOrThrow<uint64_t>(s.at("bytes"), at + "bytes"),
                           s.at("xxh3").get<std::string>()});
     }
     m.labels.clear();
     for (const auto& l : doc.at("labels")) {
+      const std::string at = "labels[" + std::to_string(m.labels.size()) + "].count";
       m.labels.push_back({l.at("name").get<std::string>(),
                           l.at("unit").get<std::string>(),
-                          l.at("count").get<uint32_t>(),
+                          JsonIntegerOrThrow<uint32_t>(l.at("count"), at),
                           l.value("description", "")});
     }
     m.metadata = doc.at("metadata");
     for (const auto& s : doc.at("skipped")) {
-      m.skipped.push_back({s.at("render_id").get<render_id_t>(),
+      const std::string at = "skipped[" + std::to_string(m.skipped.size()) + "].render_id";
+      m.skipped.push_back({JsonIntegerOrThrow<render_id_t>(s.at("render_id"), at),
                            s.at("file").get<std::string>(),
                            s.at("reason").get<std::string>()});
     }
@@ -152,10 +157,12 @@ Result<Manifest> ManifestFromJson(const json& doc, const std::string& what) {
       const json& ix = doc.at("index");
       m.index = ManifestIndex{ix.at("file").get<std::string>(),
                               ix.at("kind").get<std::string>(),
-                              ix.at("bytes").get<uint64_t>(),
+                              JsonIntegerOrThrow<uint64_t>(ix.at("bytes"), "index.bytes"),
                               ix.at("xxh3").get<std::string>(),
                               ix.value("options", json::object())};
     }
+  } catch (const JsonRangeError& e) {
+    return Status(StatusCode::kOutOfRange, what + ": " + e.what());
   } catch (const json::exception& e) {
     // The schema has been checked, so this is a value out of the C++ type's range.
     return Status(StatusCode::kSchemaViolation, what + ": " + e.what());

@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <tuple>
+#include <vector>
 
 #include "base/atomic_file.h"
 #include "base/json_schema.h"
@@ -165,6 +167,30 @@ TEST(Manifest, ReadErrors) {
   doc["format"] = "something-else";
   ASSERT_TRUE(WriteFileAtomic(dir / "manifest.json", doc.dump()).ok());
   EXPECT_EQ(ReadManifest(dir).status().code(), StatusCode::kSchemaViolation);
+  fs::remove_all(dir);
+}
+
+// rolls 2^32 + 12 was read as 12 and a label count of 2^32 + 1 as 1.
+TEST(Manifest, IntegersBeyondTheirFieldsTypeAreRefused) {
+  auto dir = TempDir("integers");
+  for (const auto& [pointer, value, message] :
+       std::vector<std::tuple<std::string, nlohmann::json, std::string>>{
+           {"/rolls", 4294967308ull, "rolls is 4294967308, not an integer in 0..4294967295"},
+           {"/labels/0/count",
+            4294967297ull,
+            "labels[0].count is 4294967297, not an integer in 0..4294967295"},
+           {"/num_views",
+            nlohmann::json::parse("18446744073709551628"),
+            "num_views is 1.8446744073709552e+19, not an integer in 0..18446744073709551615"}}) {
+    SCOPED_TRACE(pointer);
+    auto doc = ManifestToJson(Sample());
+    doc[nlohmann::json::json_pointer(pointer)] = value;
+    ASSERT_TRUE(WriteFileAtomic(dir / "manifest.json", doc.dump()).ok());
+    auto r = ReadManifest(dir);
+    ASSERT_FALSE(r.ok());
+    EXPECT_EQ(r.status().code(), StatusCode::kOutOfRange);
+    EXPECT_EQ(r.status().message(), (dir / "manifest.json").string() + ": " + message);
+  }
   fs::remove_all(dir);
 }
 

@@ -58,7 +58,7 @@ std::optional<RecordedLimits> ParseMetadata(std::string_view text,
                                             uint64_t offset,
                                             ProblemList* problems,
                                             nlohmann::json* parsed) {
-  if (Status s = CheckJsonDepth(text, "metadata section"); !s.ok()) {
+  if (Status s = CheckJsonText(text, "metadata section"); !s.ok()) {
     problems->Add("metadata", StatusCode::kBadJson, offset, s.message());
     return std::nullopt;
   }

@@ -16,6 +16,7 @@
 #include "edges/exr_io.h"
 #include "edges/normalise.h"
 #include "edges/view_conversion.h"
+#include "photo/image_read.h"
 
 namespace handdb {
 namespace {
@@ -429,7 +430,7 @@ Result<QueryEdges> FromPhoto(const std::filesystem::path& path,
     if (!std::filesystem::exists(options.mask, ec)) {
       return Status(StatusCode::kNotFound, options.mask.string() + ": no such mask file");
     }
-    cv::Mat m = cv::imread(options.mask.string(), cv::IMREAD_GRAYSCALE);
+    cv::Mat m = ReadImage(options.mask, cv::IMREAD_GRAYSCALE).value_or(cv::Mat());
     if (!m.empty() && m.size() == source && source != bgr.size()) {
       cv::resize(m, m, bgr.size(), 0, 0, cv::INTER_AREA);
     }
@@ -822,7 +823,9 @@ Result<QueryEdges> LoadQueryEdges(const std::filesystem::path& image,
             : pixels <= 16 * kMaxImagePixels ? cv::IMREAD_REDUCED_COLOR_4
                                              : cv::IMREAD_REDUCED_COLOR_8;
   }
-  const cv::Mat any = cv::imread(image.string(), flags);
+  Result<cv::Mat> read = ReadImage(image, flags);
+  if (!read.ok()) return read.status();
+  const cv::Mat any = std::move(*read);
   if (any.empty()) {
     return Status(StatusCode::kBadImage,
                   image.string() + ": cannot read the image (not a PNG/JPEG/... or corrupt)");

@@ -8,6 +8,7 @@
 #include "base/atomic_file.h"
 #include "base/image_file.h"
 #include "format/skeleton.h"
+#include "photo/image_read.h"
 
 namespace handdb {
 namespace {
@@ -66,8 +67,9 @@ Status WriteContactSheet(const std::filesystem::path& out_png,
         size && size->width * size->height > kMaxImagePixels) {
       flags = cv::IMREAD_REDUCED_COLOR_8;
     }
-    cv::Mat img =
-        query.kind == QueryInputKind::kLabels ? cv::Mat() : cv::imread(input_image.string(), flags);
+    cv::Mat img = query.kind == QueryInputKind::kLabels
+                      ? cv::Mat()
+                      : ReadImage(input_image, flags).value_or(cv::Mat());
 
     cv::Mat tile(th, t, CV_8UC3, kWhite);
     if (img.empty()) {

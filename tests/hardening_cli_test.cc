@@ -11,6 +11,7 @@
 // `timeout`, so a regression fails instead of hanging.
 #include <gtest/gtest.h>
 #include <sys/stat.h>
+#include <sys/sysmacros.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -538,6 +539,255 @@ TEST_F(HardeningCli, SecondWriterIsRefusedAndABadConfigLeavesNoDirectory) {
   EXPECT_EQ(r.code, 1) << r.err;
   EXPECT_EQ(Lines(r.err), 1) << r.err;
   EXPECT_FALSE(fs::exists(fresh));
+}
+
+// Reads a file whole (binary), for editing a copy.
+std::string ReadAll(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+// Output paths that are a device or a FIFO were replaced by a regular file (the atomic rename
+// went over them; as root, `-o /dev/null` replaced /dev/null). They are written in place now.
+TEST_F(HardeningCli, DeviceAndFifoOutputsAreWrittenNotReplaced) {
+  const fs::path dev = *dir_ / "null-device";
+  if (::mknod(dev.c_str(), S_IFCHR | 0666, makedev(1, 3)) != 0) {
+    GTEST_SKIP() << "cannot mknod here: " << std::strerror(errno);
+  }
+  const std::string q = (*dir_ / "q.pgm").string();
+  const std::vector<std::string> runs = {
+      "query " + Db() + " " + q + " --input edges -q --sheet " + dev.string(),
+      "show " + Db() + " --view 1 -o " + dev.string(),
+      "plan configs/demo.json -o " + dev.string(),
+  };
+  for (const std::string& args : runs) {
+    SCOPED_TRACE(args);
+    const CliRun r = Handdb(args);
+    EXPECT_EQ(r.code, 0) << r.err;
+    struct stat st {};
+    ASSERT_EQ(::stat(dev.c_str(), &st), 0);
+    EXPECT_TRUE(S_ISCHR(st.st_mode)) << "replaced by a regular file";
+  }
+  // A FIFO with a reader receives the bytes; one without is one line, exit 1.
+  const fs::path fifo = *dir_ / "plan-fifo";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0644), 0);
+  const fs::path got = *dir_ / "plan-from-fifo.json";
+  ASSERT_EQ(
+      std::system(("(timeout 20 cat " + fifo.string() + " > " + got.string() + ") &").c_str()), 0);
+  CliRun r = Handdb("plan configs/demo.json -o " + fifo.string());
+  EXPECT_EQ(r.code, 0) << r.err;
+  for (int i = 0; i < 100 && Slurp(got).find("\"units\"") == std::string::npos; ++i) {
+    ::usleep(50000);
+  }
+  EXPECT_NE(Slurp(got).find("\"units\""), std::string::npos);
+  struct stat st {};
+  ASSERT_EQ(::stat(fifo.c_str(), &st), 0);
+  EXPECT_TRUE(S_ISFIFO(st.st_mode));
+  r = Handdb("plan configs/demo.json -o " + fifo.string());
+  EXPECT_EQ(r.code, 1) << r.err;
+  EXPECT_EQ(r.err, "handdb plan: " + fifo.string() + ": a FIFO with no reader\n");
+}
+
+// Manifest integers were cut to their field's 32 bits: rolls 2^32 + 12 searched 12 rolls; a
+// label count of 2^32 + 1 validated; 2^64 + 12 (a float to the parser) showed as "252 x 0".
+TEST_F(HardeningCli, ManifestIntegersBeyondTheirTypeAreRefused) {
+  const nlohmann::json original = nlohmann::json::parse(Slurp(*dir_ / "db" / "manifest.json"));
+  const std::string q = (*dir_ / "q.pgm").string();
+  struct Case {
+    std::string name;
+    std::string pointer;
+    nlohmann::json value;
+    std::string message;
+  };
+  const std::vector<Case> cases = {
+      {"rolls32", "/rolls", 4294967308ull, "rolls is 4294967308, not an integer in 0..4294967295"},
+      {"rolls64",
+       "/rolls",
+       nlohmann::json::parse("18446744073709551628"),
+       "rolls is 1.8446744073709552e+19, not an integer in 0..4294967295"},
+      {"count32",
+       "/labels/0/count",
+       4294967297ull,
+       "labels[0].count is 4294967297, not an integer in 0..4294967295"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    nlohmann::json edited = original;
+    edited[nlohmann::json::json_pointer(c.pointer)] = c.value;
+    const std::string db = DbWithManifest(
+        "int-" + c.name, [&](const fs::path& m) { std::ofstream(m) << edited.dump(); });
+    for (const std::string cmd : {"info", "validate", "query"}) {
+      SCOPED_TRACE(cmd);
+      const CliRun r = Handdb(cmd + " " + db + (cmd == "query" ? " " + q + " --input edges" : "") +
+                              (cmd == "validate" ? " -q" : ""));
+      EXPECT_EQ(r.code, 1) << r.err;
+      EXPECT_NE(r.err.find(db + "/manifest.json: " + c.message), std::string::npos) << r.err;
+      EXPECT_EQ(Lines(r.err), 1) << r.err;
+    }
+  }
+}
+
+// A NUL byte ended JSON parsing: whatever followed was ignored (a config, a manifest and shard
+// metadata with "\0junk" appended were accepted).
+TEST_F(HardeningCli, NulBytesInJsonAreRefusedNamingTheOffset) {
+  const std::string demo = ReadAll(fs::path(HANDDB_SOURCE_DIR) / "configs" / "demo.json");
+  const fs::path config = *dir_ / "nul-config.json";
+  std::ofstream(config, std::ios::binary) << demo << std::string("\0junk", 5);
+  CliRun r = Handdb("plan " + config.string() + " -o " + (*dir_ / "nul-plan.json").string());
+  EXPECT_EQ(r.code, 1) << r.err;
+  EXPECT_EQ(r.err,
+            "handdb plan: " + config.string() + ": NUL byte at offset " +
+                std::to_string(demo.size()) + " (not allowed in JSON text)\n");
+  EXPECT_FALSE(fs::exists(*dir_ / "nul-plan.json"));
+
+  const std::string manifest = ReadAll(*dir_ / "db" / "manifest.json");
+  const std::string db = DbWithManifest("nul-db", [&](const fs::path& m) {
+    std::ofstream(m, std::ios::binary) << manifest << std::string("\0junk{{", 7);
+  });
+  r = Handdb("validate " + db + " -q");
+  EXPECT_EQ(r.code, 1) << r.err;
+  EXPECT_NE(r.err.find(db + "/manifest.json: NUL byte at offset " +
+                       std::to_string(manifest.size()) + " (not allowed in JSON text)"),
+            std::string::npos)
+      << r.err;
+
+  const std::string metadata_db = WriteDb(*dir_ / "nul-metadata",
+                                          std::string("{\"unit\": 0}\0junk", 16),
+                                          12,
+                                          [](std::vector<uint8_t>*) {});
+  r = Handdb("validate " + metadata_db + "/shard-00000.hdb");
+  EXPECT_EQ(r.code, 1) << r.err;
+  EXPECT_NE(r.err.find("metadata section: NUL byte at offset 11 (not allowed in JSON text)"),
+            std::string::npos)
+      << r.err;
+}
+
+// A test-set config's seed of 2^64 was recorded as 0; plan-time numbers that overflow (a PCA
+// scale of 1e308) are refused naming the field; an icosahedron of 655,362 directions is refused
+// from the config before 200 s of sampling.
+TEST_F(HardeningCli, ConfigNumbersAreCheckedBeforeTheyAreUsed) {
+  nlohmann::json testset =
+      nlohmann::json::parse(ReadAll(fs::path(HANDDB_SOURCE_DIR) / "configs" / "testset-demo.json"));
+  testset["seed"] = nlohmann::json::parse("18446744073709551616");
+  const fs::path testset_config = *dir_ / "testset-seed.json";
+  std::ofstream(testset_config) << testset.dump();
+  CliRun r = Handdb("testset " + testset_config.string() + " --out " + (*dir_ / "ts").string());
+  EXPECT_EQ(r.code, 1) << r.err;
+  EXPECT_EQ(r.err,
+            "handdb testset: " + testset_config.string() +
+                ": seed is 1.8446744073709552e+19, not an integer in 0..18446744073709551615\n");
+  EXPECT_FALSE(fs::exists(*dir_ / "ts"));
+
+  const fs::path pca = *dir_ / "pca-scale.json";
+  std::ofstream(pca) << R"({"seed": 0, "shapes": {"method": "pca", "count": 4, "scale": 1e308},
+                           "views": {"method": "fibonacci", "count": 10}})";
+  r = Handdb("plan " + pca.string() + " -o " + (*dir_ / "pca-plan.json").string());
+  EXPECT_EQ(r.code, 1) << r.err;
+  EXPECT_EQ(r.err.rfind("handdb plan: " + pca.string() +
+                            ": shapes: scale 1e+308 gives a coefficient or joint angle that is "
+                            "not finite",
+                        0),
+            0u)
+      << r.err;
+  EXPECT_EQ(Lines(r.err), 1) << r.err;
+
+  const fs::path ico = *dir_ / "ico8.json";
+  std::ofstream(ico) << R"({"seed": 0, "shapes": {"method": "basic", "names": ["fist"]},
+                           "views": {"method": "icosahedron", "subdivisions": 8}})";
+  const auto start = std::chrono::steady_clock::now();
+  r = Handdb("plan " + ico.string() + " -o " + (*dir_ / "ico-plan.json").string());
+  EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(10));
+  EXPECT_EQ(r.code, 1) << r.err;
+  EXPECT_EQ(r.err,
+            "handdb plan: " + ico.string() +
+                ": views: icosahedron subdivisions 8 give 655362 directions, more than the 250000 "
+                "renders a plan may hold\n");
+}
+
+// evaluate followed a test-set label of ../../../../etc/passwd or /dev/zero, and counted a
+// missing label a miss (exit 0).
+TEST_F(HardeningCli, TestSetLabelsOutsideTheTestSetOrMissingAreRefused) {
+  const nlohmann::json two = nlohmann::json::parse(ReadAll(
+      fs::path(HANDDB_SOURCE_DIR) / "tests" / "fuzz" / "corpus" / "testset" / "two-views.json"));
+  for (const std::string label : {"../../../../etc/passwd", "/dev/zero"}) {
+    SCOPED_TRACE(label);
+    nlohmann::json edited = two;
+    edited["items"][0]["label"] = label;
+    const fs::path set = *dir_ / "escape-set";
+    fs::create_directories(set);
+    std::ofstream(set / "testset.json") << edited.dump();
+    const CliRun r = Handdb("evaluate " + Db() + " " + set.string() + " -q");
+    EXPECT_EQ(r.code, 1) << r.err;
+    EXPECT_EQ(r.err,
+              "handdb evaluate: " + (set / "testset.json").string() + ": items[0].label is \"" +
+                  label + "\", not a relative path inside the test set's directory\n");
+  }
+  const fs::path set = *dir_ / "missing-set";
+  fs::create_directories(set);
+  std::ofstream(set / "testset.json") << two.dump();
+  const CliRun r = Handdb("evaluate " + Db() + " " + set.string() + " -q");
+  EXPECT_EQ(r.code, 1) << r.err;
+  EXPECT_EQ(r.err,
+            "handdb evaluate: " + (set / "units/u00000/r000000.exr").string() +
+                ": no such file (clean input of test view 0 in " + (set / "testset.json").string() +
+                ")\n");
+}
+
+// A JPEG with a damaged body was searched with libjpeg's stray "Corrupt JPEG data" line; a
+// damaged PNG printed "libpng error: ..." before handdb's line; a TIFF (whose size no header
+// check reads) was decoded at any size. Each is one line naming the file now.
+TEST_F(HardeningCli, DamagedOrUncheckedPicturesAreOneLine) {
+  const cv::Mat img = cv::imread((*dir_ / "q.pgm").string(), cv::IMREAD_GRAYSCALE);
+  ASSERT_FALSE(img.empty());
+  const fs::path jpg = *dir_ / "damaged.jpg";
+  ASSERT_TRUE(cv::imwrite(jpg.string(), img));
+  std::string bytes = ReadAll(jpg);
+  const size_t sos = bytes.find("\xFF\xDA");
+  ASSERT_NE(sos, std::string::npos);
+  for (size_t i = sos + 100; i < sos + 160 && i + 2 < bytes.size(); ++i) bytes[i] ^= 0x5A;
+  std::ofstream(jpg, std::ios::binary) << bytes;
+  CliRun r = Handdb("query " + Db() + " " + jpg.string() + " --input edges");
+  EXPECT_EQ(r.code, 1) << r.err;
+  EXPECT_EQ(r.err.rfind("handdb query: " + jpg.string() + ": corrupt JPEG: ", 0), 0u) << r.err;
+  EXPECT_EQ(Lines(r.err), 1) << r.err;
+
+  const fs::path png =
+      fs::path(HANDDB_SOURCE_DIR) / "tests" / "data" / "images" / "corrupt_crc.png";
+  r = Handdb("query " + Db() + " " + png.string());
+  EXPECT_EQ(r.code, 1) << r.err;
+  EXPECT_EQ(r.err, "handdb query: " + png.string() + ": corrupt PNG: IDAT: CRC error\n");
+
+  const fs::path tiff = *dir_ / "q.tiff";
+  ASSERT_TRUE(cv::imwrite(tiff.string(), img));
+  r = Handdb("query " + Db() + " " + tiff.string());
+  EXPECT_EQ(r.code, 1) << r.err;
+  EXPECT_EQ(r.err,
+            "handdb query: " + tiff.string() +
+                ": not a PNG, JPEG, PNM or BMP image (the formats read)\n");
+}
+
+// stdout on a full disk named the wrong reason ("Inappropriate ioctl for device", "No such file
+// or directory", "write error"): the failed write's own errno is reported.
+TEST_F(HardeningCli, StdoutOnFullDiskNamesNoSpaceLeft) {
+  const std::string q = (*dir_ / "q.pgm").string();
+  const std::string plan = (*dir_ / "plan-full.json").string();
+  const std::vector<std::pair<std::string, std::string>> runs = {
+      {"info", "info " + Db() + " --json"},
+      {"info", "info " + Db()},
+      {"validate", "validate " + Db() + " --json -q"},
+      {"query", "query " + Db() + " " + q + " --input edges"},
+      {"query", "query " + Db() + " " + q + " --input edges --json"},
+      {"plan", "plan configs/demo.json -o " + plan + " --json"},
+      {"version", "version"},
+      {"version", "--version"},
+      {"help", "--help"},
+  };
+  for (const auto& [name, args] : runs) {
+    SCOPED_TRACE(args);
+    const CliRun full = Handdb(args, "/dev/full");
+    EXPECT_EQ(full.code, 1) << full.err;
+    EXPECT_EQ(full.err, "handdb " + name + ": cannot write to stdout: No space left on device\n");
+  }
 }
 
 }  // namespace

@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <cstdlib>
 
+#include "base/json_number.h"
 #include "base/json_schema.h"
 #include "generator/hand/hand_model.h"
 #include "generator/sampling/random.h"
@@ -58,6 +59,21 @@ Result<SampledShapes> SampleShapes(const json& spec,
                " directions, more than the " + std::to_string(kMaxPlanRenders) +
                " renders a plan may hold");
   };
+  // A huge scale or span overflows the coefficients (the plan would record null); refused here,
+  // naming the field, rather than by `render` naming the plan.
+  auto check_finite = [&](const std::vector<ShapeSample>& samples, const char* field) -> Status {
+    for (size_t i = 0; i < samples.size(); ++i) {
+      bool finite = true;
+      for (double c : samples[i].coeffs) finite = finite && std::isfinite(c);
+      for (double j : samples[i].joints) finite = finite && std::isfinite(j);
+      if (!finite) {
+        return bad(std::string(field) + " " + spec[field].dump() +
+                   " gives a coefficient or joint angle that is not finite (sample " +
+                   std::to_string(i) + ")");
+      }
+    }
+    return Status::Ok();
+  };
   auto allow_only = [&](std::initializer_list<const char*> keys) -> Status {
     for (const auto& [key, value] : spec.items()) {
       bool ok = key == "method";
@@ -76,7 +92,12 @@ Result<SampledShapes> SampleShapes(const json& spec,
   SampledShapes out;
   out.report = {{"method", method}, {"library", PathForPlan(*library_path)}};
   std::vector<std::string> names = spec.value("names", std::vector<std::string>{});
-  const uint32_t count = spec.value("count", 0u);
+  uint32_t count = 0;
+  if (spec.contains("count")) {
+    Result<uint32_t> checked = JsonInteger<uint32_t>(spec["count"], cfg, "shapes.count");
+    if (!checked.ok()) return checked.status();
+    count = *checked;
+  }
 
   if (method == "basic" || method == "pairs") {
     if (method == "basic") {
@@ -88,6 +109,7 @@ Result<SampledShapes> SampleShapes(const json& spec,
     Result<std::vector<ShapeSample>> basic = SampleBasic(*library, names, count);
     if (!basic.ok()) return bad(basic.status().message());
     if (method == "basic") {
+      HANDDB_RETURN_IF_ERROR(check_count(basic->size(), "basic shapes would"));
       out.samples = std::move(*basic);
     } else {
       if (basic->size() < 2) return bad("pairs needs at least 2 basic shapes");
@@ -149,6 +171,8 @@ Result<SampledShapes> SampleShapes(const json& spec,
     opts.max_sigma = spec.value("max_sigma", 3.0);
     opts.seed = seed;
     out.samples = SamplePca(*basis, opts, limits, &out.clamped);
+    if (spec.contains("scale")) HANDDB_RETURN_IF_ERROR(check_finite(out.samples, "scale"));
+    if (spec.contains("max_sigma")) HANDDB_RETURN_IF_ERROR(check_finite(out.samples, "max_sigma"));
     out.report["sampling"] = sampling;
     out.report["scale"] = opts.scale;
     out.report["max_sigma"] = opts.max_sigma;
@@ -169,6 +193,7 @@ Result<SampledShapes> SampleShapes(const json& spec,
     Result<std::vector<ShapeSample>> grid = SampleGrid(*basis, levels, span, limits, &out.clamped);
     if (!grid.ok()) return bad(grid.status().message());
     out.samples = std::move(*grid);
+    if (spec.contains("span")) HANDDB_RETURN_IF_ERROR(check_finite(out.samples, "span"));
     out.report["levels"] = levels;
     out.report["span"] = span;
   }
@@ -177,40 +202,58 @@ Result<SampledShapes> SampleShapes(const json& spec,
   return out;
 }
 
-Result<std::vector<Eigen::Vector3d>> SampleViews(const json& spec,
-                                                 const fs::path& config_path,
-                                                 json* report) {
+// A views spec, checked and counted without generating a direction.
+struct ViewsSpec {
+  std::string method;
+  int fibonacci_count = 0;  // method "fibonacci"
+  int subdivisions = -1;    // method "icosahedron"
+  uint64_t count = 0;       // directions it gives
+};
+
+Result<ViewsSpec> ParseViews(const json& spec, const fs::path& config_path) {
   const std::string cfg = config_path.string();
-  const std::string method = spec.at("method").get<std::string>();
-  std::vector<Eigen::Vector3d> dirs;
-  if (method == "fibonacci") {
+  ViewsSpec views;
+  views.method = spec.at("method").get<std::string>();
+  if (views.method == "fibonacci") {
     if (spec.contains("subdivisions")) {
       return Status(StatusCode::kInvalidArgument,
                     cfg + ": views: 'subdivisions' is for method 'icosahedron'");
     }
-    dirs = FibonacciDirections(spec.value("count", 86));
-  } else {
-    int k = spec.value("subdivisions", -1);
-    if (spec.contains("count")) {
-      const int from_count = IcosahedronSubdivisionsForCount(spec["count"].get<int>());
-      if (from_count < 0) {
-        return Status(StatusCode::kInvalidArgument,
-                      cfg + ": views: icosahedron count " + spec["count"].dump() +
-                          " is not 10*4^k+2 (12, 42, 162, 642, 2562, ...)");
-      }
-      if (k >= 0 && k != from_count) {
-        return Status(StatusCode::kInvalidArgument,
-                      cfg + ": views: count and subdivisions disagree");
-      }
-      k = from_count;
+    views.fibonacci_count = spec.value("count", 86);
+    views.count = static_cast<uint64_t>(std::max(views.fibonacci_count, 0));
+    return views;
+  }
+  int k = spec.value("subdivisions", -1);
+  if (spec.contains("count")) {
+    const int from_count = IcosahedronSubdivisionsForCount(spec["count"].get<int>());
+    if (from_count < 0) {
+      return Status(StatusCode::kInvalidArgument,
+                    cfg + ": views: icosahedron count " + spec["count"].dump() +
+                        " is not 10*4^k+2 (12, 42, 162, 642, 2562, ...)");
     }
-    if (k < 0) k = 1;
-    dirs = IcosahedronDirections(k);
-    (*report)["subdivisions"] = k;
+    if (k >= 0 && k != from_count) {
+      return Status(StatusCode::kInvalidArgument, cfg + ": views: count and subdivisions disagree");
+    }
+    k = from_count;
+  }
+  if (k < 0) k = 1;
+  views.subdivisions = k;
+  // The schema bounds k to 0..8, so 4^k cannot overflow.
+  views.count = 10 * (uint64_t{1} << (2 * k)) + 2;
+  return views;
+}
+
+std::vector<Eigen::Vector3d> SampleViews(const ViewsSpec& views, json* report) {
+  std::vector<Eigen::Vector3d> dirs;
+  if (views.method == "fibonacci") {
+    dirs = FibonacciDirections(views.fibonacci_count);
+  } else {
+    dirs = IcosahedronDirections(views.subdivisions);
+    (*report)["subdivisions"] = views.subdivisions;
   }
   const int probes = static_cast<int>(std::clamp<size_t>(40 * dirs.size(), 20000, 200000));
   const CoveringRadius cover = ComputeCoveringRadius(dirs, probes);
-  (*report)["method"] = method;
+  (*report)["method"] = views.method;
   (*report)["count"] = dirs.size();
   (*report)["covering_radius_deg"] = std::round(cover.radians * 180.0 / M_PI * 1e6) / 1e6;
   return dirs;
@@ -284,14 +327,24 @@ Result<json> MakePlan(const json& config, const fs::path& config_path, PlanSumma
   Result<HandModel> model = LoadHandModel(*hand_path);
   if (!model.ok()) return model.status();
 
-  // Directions first: their count bounds the shapes (kMaxPlanRenders).
-  json views_report = json::object();
-  Result<std::vector<Eigen::Vector3d>> dirs =
-      SampleViews(config.at("views"), config_path, &views_report);
-  if (!dirs.ok()) return dirs.status();
+  // Directions are counted first, from the config alone: their count bounds the shapes
+  // (kMaxPlanRenders), and every count is checked before anything is sampled.
+  Result<ViewsSpec> views = ParseViews(config.at("views"), config_path);
+  if (!views.ok()) return views.status();
+  if (views->count > kMaxPlanRenders) {
+    return Status(
+        StatusCode::kInvalidArgument,
+        cfg + ": views: " + views->method +
+            (views->subdivisions >= 0 ? " subdivisions " + std::to_string(views->subdivisions)
+                                      : std::string()) +
+            " give " + std::to_string(views->count) + " directions, more than the " +
+            std::to_string(kMaxPlanRenders) + " renders a plan may hold");
+  }
   Result<SampledShapes> shapes = SampleShapes(
-      config.at("shapes"), config_path, *model, seed, std::max<size_t>(dirs->size(), 1));
+      config.at("shapes"), config_path, *model, seed, std::max<uint64_t>(views->count, 1));
   if (!shapes.ok()) return shapes.status();
+  json views_report = json::object();
+  const std::vector<Eigen::Vector3d> dirs = SampleViews(*views, &views_report);
 
   const json render_cfg = config.value("render", json::object());
   const int resolution = render_cfg.value("resolution", 256);
@@ -304,7 +357,7 @@ Result<json> MakePlan(const json& config, const fs::path& config_path, PlanSumma
   const uint32_t unit_size = config.value("unit_size", 256u);
 
   const uint64_t num_shapes = shapes->samples.size();
-  const uint64_t num_dirs = dirs->size();
+  const uint64_t num_dirs = dirs.size();
   const uint64_t num_renders = num_shapes * num_dirs;
   if (num_renders > kMaxPlanRenders) {  // checked per method above; this guards a new method
     return Status(StatusCode::kInvalidArgument,
@@ -339,7 +392,7 @@ Result<json> MakePlan(const json& config, const fs::path& config_path, PlanSumma
   std::vector<std::array<double, 3>> dir_values;
   json dir_list = json::array();
   for (uint64_t i = 0; i < num_dirs; ++i) {
-    const Eigen::Vector3d& d = (*dirs)[i];
+    const Eigen::Vector3d& d = dirs[i];
     const std::array<double, 3> v = {Round(d.x()), Round(d.y()), Round(d.z())};
     dir_values.push_back(v);
     dir_list.push_back({{"id", i},
@@ -403,24 +456,26 @@ Status WritePlanFromConfig(const fs::path& config_path,
   return WriteJsonFileAtomic(plan_path, *plan);
 }
 
-Result<Plan> ParsePlan(const json& doc, const std::string& what) {
-  HANDDB_RETURN_IF_ERROR(ValidateJson(doc, "render_plan.schema.json", what));
+namespace {
+
+// ParsePlan after the schema check; integers are narrowed by JsonIntegerOrThrow.
+Result<Plan> ParsePlanFields(const json& doc, const std::string& what) {
   auto bad = [&](const std::string& msg) {
     return Status(StatusCode::kSchemaViolation, what + ": " + msg);
   };
   Plan plan;
-  plan.seed = doc["seed"].get<uint64_t>();
+  plan.seed = JsonIntegerOrThrow<uint64_t>(doc["seed"], "/seed");
   plan.hand_model_path = doc["hand_model"]["path"].get<std::string>();
   plan.hand_model_sha256 = doc["hand_model"]["sha256"].get<std::string>();
-  plan.resolution = doc["render"]["resolution"].get<int>();
+  plan.resolution = JsonIntegerOrThrow<int>(doc["render"]["resolution"], "/render/resolution");
   plan.ortho_scale = doc["render"]["ortho_scale"].get<double>();
-  plan.rolls = doc["rolls"].get<int>();
-  plan.unit_size = doc["unit_size"].get<uint32_t>();
+  plan.rolls = JsonIntegerOrThrow<int>(doc["rolls"], "/rolls");
+  plan.unit_size = JsonIntegerOrThrow<uint32_t>(doc["unit_size"], "/unit_size");
 
   const json& shapes = doc["shapes"];
   for (size_t i = 0; i < shapes.size(); ++i) {
     PlanShape s;
-    s.id = shapes[i]["id"].get<uint32_t>();
+    s.id = JsonIntegerOrThrow<uint32_t>(shapes[i]["id"], "/shapes/" + std::to_string(i) + "/id");
     if (s.id != i)
       return bad("/shapes/" + std::to_string(i) + "/id: " + std::to_string(s.id) + ", expected " +
                  std::to_string(i));
@@ -432,7 +487,7 @@ Result<Plan> ParsePlan(const json& doc, const std::string& what) {
   const json& dirs = doc["directions"];
   for (size_t i = 0; i < dirs.size(); ++i) {
     PlanDirection d;
-    d.id = dirs[i]["id"].get<uint32_t>();
+    d.id = JsonIntegerOrThrow<uint32_t>(dirs[i]["id"], "/directions/" + std::to_string(i) + "/id");
     if (d.id != i)
       return bad("/directions/" + std::to_string(i) + "/id: " + std::to_string(d.id) +
                  ", expected " + std::to_string(i));
@@ -455,7 +510,7 @@ Result<Plan> ParsePlan(const json& doc, const std::string& what) {
   for (size_t u = 0; u < units.size(); ++u) {
     const std::string where = "/units/" + std::to_string(u);
     PlanUnit unit;
-    unit.id = units[u]["id"].get<uint32_t>();
+    unit.id = JsonIntegerOrThrow<uint32_t>(units[u]["id"], where + "/id");
     if (unit.id != u)
       return bad(where + "/id: " + std::to_string(unit.id) + ", expected " + std::to_string(u));
     const json& renders = units[u]["renders"];
@@ -467,11 +522,11 @@ Result<Plan> ParsePlan(const json& doc, const std::string& what) {
       const json& jr = renders[i];
       const std::string rw = where + "/renders/" + std::to_string(i);
       PlanRender r;
-      r.render_id = jr["render_id"].get<uint32_t>();
-      r.shape_id = jr["shape_id"].get<uint32_t>();
-      r.dir_id = jr["dir_id"].get<uint32_t>();
+      r.render_id = JsonIntegerOrThrow<uint32_t>(jr["render_id"], rw + "/render_id");
+      r.shape_id = JsonIntegerOrThrow<uint32_t>(jr["shape_id"], rw + "/shape_id");
+      r.dir_id = JsonIntegerOrThrow<uint32_t>(jr["dir_id"], rw + "/dir_id");
       r.roll = jr["roll"].get<double>();
-      r.seed = jr.value("seed", uint64_t{0});
+      r.seed = jr.contains("seed") ? JsonIntegerOrThrow<uint64_t>(jr["seed"], rw + "/seed") : 0;
       if (r.render_id != next_render) {
         return bad(rw + "/render_id: " + std::to_string(r.render_id) + ", expected " +
                    std::to_string(next_render));
@@ -507,6 +562,17 @@ Result<Plan> ParsePlan(const json& doc, const std::string& what) {
   }
   plan.doc = doc;
   return plan;
+}
+
+}  // namespace
+
+Result<Plan> ParsePlan(const json& doc, const std::string& what) {
+  HANDDB_RETURN_IF_ERROR(ValidateJson(doc, "render_plan.schema.json", what));
+  try {
+    return ParsePlanFields(doc, what);
+  } catch (const JsonRangeError& e) {
+    return Status(StatusCode::kOutOfRange, what + ": " + e.what());
+  }
 }
 
 Result<Plan> ReadPlan(const fs::path& plan_path) {

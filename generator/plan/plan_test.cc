@@ -236,5 +236,42 @@ TEST(Plan, FileNames) {
   EXPECT_EQ(ResolvePlanPath("configs/x.json"), RepoRoot() / "configs/x.json");
 }
 
+// 655,362 icosahedron directions were generated (and their covering radius measured, 210 s)
+// before the count was refused; a PCA scale of 1e308 planned coefficients of null; a shapes
+// count of 2^32 + 5 planned 5 shapes.
+TEST(Plan, CountsAndNumbersAreCheckedFromTheConfig) {
+  const auto start = std::chrono::steady_clock::now();
+  json c = SmallConfig();
+  c["views"] = {{"method", "icosahedron"}, {"subdivisions", 8}};
+  auto r = MakePlan(c, kConfigPath);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().message(),
+            kConfigPath.string() +
+                ": views: icosahedron subdivisions 8 give 655362 directions, more than the "
+                "250000 renders a plan may hold");
+  c["views"] = {{"method", "icosahedron"}, {"subdivisions", 7}};  // 163842 x 3 shapes
+  r = MakePlan(c, kConfigPath);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find("give 3 shapes x 163842 directions"), std::string::npos)
+      << r.status().message();
+  EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(5));
+
+  c = SmallConfig();
+  c["shapes"] = {{"method", "pca"}, {"components", 4}, {"count", 4}, {"scale", 1e308}};
+  r = MakePlan(c, kConfigPath);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find(": shapes: scale 1e+308 gives a coefficient or joint angle "
+                                      "that is not finite"),
+            std::string::npos)
+      << r.status().message();
+  c["shapes"] = {{"method", "basic"}, {"count", 4294967301ull}};
+  r = MakePlan(c, kConfigPath);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(
+      r.status().message().find("shapes.count is 4294967301, not an integer in 0..4294967295"),
+      std::string::npos)
+      << r.status().message();
+}
+
 }  // namespace
 }  // namespace handdb

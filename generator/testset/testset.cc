@@ -9,6 +9,7 @@
 #include <thread>
 
 #include "base/atomic_file.h"
+#include "base/json_number.h"
 #include "base/json_schema.h"
 #include "base/progress.h"
 #include "base/thread_pool.h"
@@ -84,8 +85,14 @@ Result<nlohmann::json> MakeTestSetPlan(const nlohmann::json& config,
   auto basic = SampleBasic(*library, basic_names, 0);
   if (!basic.ok()) return Status(basic.status().code(), what + ": " + basic.status().message());
 
-  const uint64_t seed = config.at("seed").get<uint64_t>();
-  const uint32_t count = config.at("count").get<uint32_t>();
+  // As the generation config's seed: 2^64 and above parse as a double that the schema's
+  // "integer" accepts and a cast would turn into 0.
+  Result<uint64_t> seed_checked = JsonInteger<uint64_t>(config.at("seed"), what, "seed");
+  if (!seed_checked.ok()) return seed_checked.status();
+  const uint64_t seed = *seed_checked;
+  Result<uint32_t> count_checked = JsonInteger<uint32_t>(config.at("count"), what, "count");
+  if (!count_checked.ok()) return count_checked.status();
+  const uint32_t count = *count_checked;
   const double basic_fraction = config.value("basic_fraction", 0.25);
   const uint32_t num_basic = static_cast<uint32_t>(std::lround(basic_fraction * count));
   const uint32_t num_pca = count - num_basic;
@@ -227,29 +234,32 @@ Result<nlohmann::json> MakeTestSetPlan(const nlohmann::json& config,
   return plan;
 }
 
-Result<TestSetPlan> ParseTestSetPlan(const nlohmann::json& doc, const std::string& what) {
-  HANDDB_RETURN_IF_ERROR(ValidateJson(doc, kPlanSchema, what));
+namespace {
+
+// ParseTestSetPlan after the schema check; integers are narrowed by JsonIntegerOrThrow.
+Result<TestSetPlan> ParseTestSetPlanFields(const nlohmann::json& doc, const std::string& what) {
   TestSetPlan plan;
   plan.doc = doc;
   plan.name = doc.at("name").get<std::string>();
-  plan.seed = doc.at("seed").get<uint64_t>();
+  plan.seed = JsonIntegerOrThrow<uint64_t>(doc.at("seed"), "seed");
   plan.hand_model_path = doc.at("hand_model").at("path").get<std::string>();
   plan.hand_model_sha256 = doc.at("hand_model").at("sha256").get<std::string>();
   plan.forward_axis = Vec3FromJson(doc.at("forward_axis"));
   plan.palm_normal = Vec3FromJson(doc.at("palm_normal"));
-  plan.resolution = doc.at("render").at("resolution").get<int>();
+  plan.resolution = JsonIntegerOrThrow<int>(doc.at("render").at("resolution"), "render.resolution");
   plan.ortho_scale = doc.at("render").at("ortho_scale").get<double>();
-  plan.unit_size = doc.at("unit_size").get<uint32_t>();
+  plan.unit_size = JsonIntegerOrThrow<uint32_t>(doc.at("unit_size"), "unit_size");
   const auto& photo = doc.at("photo");
-  plan.photo.samples = photo.at("samples").get<int>();
+  plan.photo.samples = JsonIntegerOrThrow<int>(photo.at("samples"), "photo.samples");
   plan.photo.skin_rgb = Vec3FromJson(photo.at("skin_rgb"));
   plan.photo.background_rgb = Vec3FromJson(photo.at("background_rgb"));
   plan.photo.clutter = photo.at("clutter").get<bool>();
   plan.photo.forearm = photo.value("forearm", false);  // absent in plans written before it
   for (const auto& j : doc.at("items")) {
     TestSetItem item;
-    item.id = j.at("id").get<uint32_t>();
-    item.unit = j.at("unit").get<uint32_t>();
+    const std::string at = "items[" + std::to_string(plan.items.size()) + "].";
+    item.id = JsonIntegerOrThrow<uint32_t>(j.at("id"), at + "id");
+    item.unit = JsonIntegerOrThrow<uint32_t>(j.at("unit"), at + "unit");
     const std::string where = what + ": item " + std::to_string(plan.items.size());
     if (item.id != plan.items.size()) {
       return Status(
@@ -276,10 +286,21 @@ Result<TestSetPlan> ParseTestSetPlan(const nlohmann::json& doc, const std::strin
     item.theta = j.at("theta").get<double>();
     item.phi = j.at("phi").get<double>();
     item.roll = j.at("roll").get<double>();
-    item.seed = j.at("seed").get<uint64_t>();
+    item.seed = JsonIntegerOrThrow<uint64_t>(j.at("seed"), at + "seed");
     plan.items.push_back(std::move(item));
   }
   return plan;
+}
+
+}  // namespace
+
+Result<TestSetPlan> ParseTestSetPlan(const nlohmann::json& doc, const std::string& what) {
+  HANDDB_RETURN_IF_ERROR(ValidateJson(doc, kPlanSchema, what));
+  try {
+    return ParseTestSetPlanFields(doc, what);
+  } catch (const JsonRangeError& e) {
+    return Status(StatusCode::kOutOfRange, what + ": " + e.what());
+  }
 }
 
 Result<TestSetPlan> ReadTestSetPlan(const fs::path& path) {

@@ -211,5 +211,19 @@ TEST(TestSetPlan, FileNames) {
   EXPECT_EQ(TestSetPhotoPath("/d", 3, 123), fs::path("/d/photos/u00003/r000123.png"));
 }
 
+// A seed of 2^64 parsed as a double and was recorded as 0 (the generation config refused it).
+TEST(TestSetPlan, SeedBeyondItsTypeIsRefused) {
+  nlohmann::json config = DemoConfig();
+  config["seed"] = nlohmann::json::parse("18446744073709551616");
+  auto bad = MakeTestSetPlan(config, DemoConfigPath(), false);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.status().code(), StatusCode::kOutOfRange);
+  EXPECT_EQ(bad.status().message(),
+            DemoConfigPath().string() +
+                ": seed is 1.8446744073709552e+19, not an integer in 0..18446744073709551615");
+  config["seed"] = 18446744073709551615ull;
+  EXPECT_TRUE(MakeTestSetPlan(config, DemoConfigPath(), false).ok());
+}
+
 }  // namespace
 }  // namespace handdb
