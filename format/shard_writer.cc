@@ -8,6 +8,7 @@
 #include "format/coarse_field.h"
 #include "format/field_codec.h"
 #include "format/point_codec.h"
+#include "format/shard_checks.h"
 #include "format/shard_layout.h"
 
 namespace handdb {

@@ -20,6 +20,7 @@
 #include "format/field_codec.h"
 #include "format/manifest.h"
 #include "format/point_codec.h"
+#include "format/shard_checks.h"
 #include "format/shard_layout.h"
 
 namespace handdb {
