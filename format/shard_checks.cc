@@ -201,7 +201,7 @@ bool CheckFooterMagic(LayoutScan& c) {
 }
 
 bool CheckFooterSize(LayoutScan& c) {
-  const uint64_t footer_size = Load<uint64_t>(c.b + c.footer_at);
+  const uint64_t footer_size = LoadLittleEndian<uint64_t>(c.b + c.footer_at);
   if (footer_size == c.n) return true;
   c.problems->Add("footer",
                   footer_size > c.n ? StatusCode::kTruncated : StatusCode::kSizeMismatch,
@@ -416,7 +416,7 @@ bool CheckSectionEntries(LayoutScan& c) {
   c.prev_name = "section table";
   for (uint32_t i = 0; i < h.section_count; ++i) {
     const uint64_t entry_at = h.section_table_offset + uint64_t{i} * h.section_entry_size;
-    const RawSection s = ParseSection(c.b + entry_at);
+    const RawSection s = RawSection::DecodeFrom(c.b + entry_at);
     c.layout->sections.push_back(s);
     const std::string name = SectionName(s.type);
     const std::string label = "section " + std::to_string(i) + " " + Quote(name);
@@ -530,7 +530,7 @@ void CheckHeaderCounts(LayoutScan& c) {
 
 // View i's reserved flags (record at file offset `at`) are zero.
 void CheckViewFlags(LayoutScan& c, uint64_t i, uint64_t at) {
-  const uint32_t flags = Load<uint32_t>(c.b + at + kViewOffFlags);
+  const uint32_t flags = LoadLittleEndian<uint32_t>(c.b + at + kViewOffFlags);
   if (flags != 0 && c.know_minor) {
     c.problems->Add("reserved",
                     StatusCode::kNonZeroReserved,
@@ -552,8 +552,8 @@ void CheckViewRanges(LayoutScan& c) {
     const uint64_t at = vs.offset + i * vs.element_size;
     const uint8_t* rec = c.b + at;
     CheckViewFlags(c, i, at);
-    const uint64_t off = Load<uint64_t>(rec + kViewOffPointOffset);
-    const uint32_t cnt = Load<uint32_t>(rec + kViewOffPointCount);
+    const uint64_t off = LoadLittleEndian<uint64_t>(rec + kViewOffPointOffset);
+    const uint32_t cnt = LoadLittleEndian<uint32_t>(rec + kViewOffPointCount);
     if (off > ps.count || cnt > ps.count - off) {
       c.problems->Add("view-range",
                       StatusCode::kOutOfRange,
@@ -601,8 +601,8 @@ void CheckCodeRanges(LayoutScan& c) {
     const uint64_t at = vs.offset + i * vs.element_size;
     const uint8_t* rec = c.b + at;
     CheckViewFlags(c, i, at);
-    const uint64_t off = Load<uint64_t>(rec + kViewOffPointOffset);
-    points += Load<uint32_t>(rec + kViewOffPointCount);
+    const uint64_t off = LoadLittleEndian<uint64_t>(rec + kViewOffPointOffset);
+    points += LoadLittleEndian<uint32_t>(rec + kViewOffPointCount);
     const bool first = i == 0;
     if ((first && off != 0) || (!first && off <= prev) || off >= pc.size) {
       c.problems->Add(
@@ -647,7 +647,7 @@ void CheckCodeRanges(LayoutScan& c) {
   uint64_t last = table_bytes;
   for (uint64_t i = 0; i <= vs.count; ++i) {
     const uint64_t at = fc.offset + 8 * i;
-    const uint64_t off = Load<uint64_t>(c.b + at);
+    const uint64_t off = LoadLittleEndian<uint64_t>(c.b + at);
     const bool ok = i == 0 ? off == table_bytes
                            : (off >= last && off <= fc.size && (i < vs.count || off == fc.size));
     if (!ok) {
@@ -680,7 +680,7 @@ Layout CheckLayout(std::span<const uint8_t> bytes, ProblemList* problems) {
   c.layout = &layout;
   // Header: fatal problems first (nothing after them can be interpreted).
   if (!CheckMagic(c) || !CheckMinimumSize(c)) return layout;
-  layout.header = ParseHeader(bytes);
+  layout.header = RawHeader::DecodeFrom(bytes);
   c.know_minor = layout.header.version_minor <= kVersionMinor;
   layout.coded = (layout.header.required_features & kFeatureCodedViews) != 0;
   c.footer_at = c.n - kFooterSize;
@@ -779,11 +779,12 @@ bool CheckLabelRanges(const uint8_t* rec,
   // set; OR-ing that over the record vectorises, and the message loop runs only on a bad one.
   uint32_t any_non_finite = 0;
   for (size_t o = kViewFloatsBegin; o < kViewFloatsEnd; o += 4) {
-    any_non_finite |= static_cast<uint32_t>((Load<uint32_t>(rec + o) & 0x7f800000u) == 0x7f800000u);
+    any_non_finite |=
+        static_cast<uint32_t>((LoadLittleEndian<uint32_t>(rec + o) & 0x7f800000u) == 0x7f800000u);
   }
   bool finite = true;
   for (size_t o = kViewFloatsBegin; any_non_finite != 0 && o < kViewFloatsEnd; o += 4) {
-    const float v = Load<float>(rec + o);
+    const float v = LoadLittleEndian<float>(rec + o);
     if (!std::isfinite(v)) {
       problems->Add("label-finite",
                     StatusCode::kOutOfRange,
@@ -796,7 +797,7 @@ bool CheckLabelRanges(const uint8_t* rec,
   for (auto [offset, field] : {std::pair{kViewOffRenderId, "render_id"},
                                std::pair{kViewOffShapeId, "shape_id"},
                                std::pair{kViewOffDirId, "dir_id"}}) {
-    if (Load<uint32_t>(rec + offset) == kInvalidRenderId) {
+    if (LoadLittleEndian<uint32_t>(rec + offset) == kInvalidRenderId) {
       problems->Add("label-id",
                     StatusCode::kOutOfRange,
                     at,
@@ -806,7 +807,7 @@ bool CheckLabelRanges(const uint8_t* rec,
   }
   if (!finite) return false;
   for (int j = 0; j < kNumJointAngles; ++j) {
-    const double a = Load<float>(rec + kViewOffJointAngles + 4 * j);
+    const double a = LoadLittleEndian<float>(rec + kViewOffJointAngles + 4 * j);
     const double lo = limits ? limits->min[j] : -kMaxAbsAngle;
     const double hi = limits ? limits->max[j] : kMaxAbsAngle;
     if (a < lo - tolerance || a > hi + tolerance) {
@@ -819,7 +820,7 @@ bool CheckLabelRanges(const uint8_t* rec,
       if (problems->done()) return true;
     }
   }
-  const float roll = Load<float>(rec + kViewOffCameraRoll);
+  const float roll = LoadLittleEndian<float>(rec + kViewOffCameraRoll);
   constexpr double kAngleTolerance = 1e-3;  // rad: a roll of exactly 2 pi in float rounds up
   if (std::abs(roll) > kMaxAbsAngle + kAngleTolerance) {
     problems->Add("label-roll",
@@ -830,7 +831,8 @@ bool CheckLabelRanges(const uint8_t* rec,
   }
   for (int k = 0; k < kNumKeypoints; ++k) {
     const uint8_t* kp = rec + kViewOffKeypoints + 12 * k;
-    const float x = Load<float>(kp), y = Load<float>(kp + 4), z = Load<float>(kp + 8);
+    const float x = LoadLittleEndian<float>(kp), y = LoadLittleEndian<float>(kp + 4),
+                z = LoadLittleEndian<float>(kp + 8);
     if (std::abs(x) > kMaxAbsKeypointXY || std::abs(y) > kMaxAbsKeypointXY ||
         std::abs(z) > kMaxAbsKeypointZ) {
       problems->Add("label-keypoints",

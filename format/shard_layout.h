@@ -1,8 +1,9 @@
-// The byte layout of a shard (docs/format.md) and its codecs. Parsing (ParseHeader, ParseSection)
-// only decodes bytes; meaning (CheckLayout, CheckSectionChecksums: format/shard_checks.h) is
-// checked separately, and every problem goes to a ProblemList, which either stops at the first
-// problem (the reader) or collects all of them (the validator). Little-endian on disk; this code
-// assumes a little-endian host.
+// The byte layout of a shard (docs/format.md) and the codecs of its structs. Decoding
+// (RawHeader::DecodeFrom, RawSection::DecodeFrom) only reads bytes; meaning (CheckLayout,
+// CheckSectionChecksums: format/shard_checks.h) is checked separately, and every problem goes to
+// a ProblemList, which either stops at the first problem (the reader) or collects all of them
+// (the validator). Little-endian on disk (base/endian.h); the label arrays are copied whole, so
+// this code assumes a little-endian host.
 #pragma once
 
 #include <array>
@@ -14,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "base/endian.h"
 #include "base/status.h"
 #include "format/view.h"
 
@@ -118,17 +120,6 @@ constexpr uint32_t kPointSize = sizeof(PointQ);
 // Largest |x| or |y| of a stored point: 384 px (twice the normalised diameter) in 1/16 px.
 constexpr int kMaxAbsPointCoord = 6144;
 
-template <typename T>
-inline T Load(const uint8_t* p) {
-  T v;
-  std::memcpy(&v, p, sizeof(T));
-  return v;
-}
-template <typename T>
-inline void Store(uint8_t* p, T v) {
-  std::memcpy(p, &v, sizeof(T));
-}
-
 inline constexpr uint64_t AlignUp(uint64_t x) { return (x + kAlignment - 1) & ~(kAlignment - 1); }
 
 // XXH3-64 with seed 0, the only checksum the format uses.
@@ -169,6 +160,11 @@ struct RawHeader {
   uint32_t section_entry_size = 0;
   uint64_t section_table_checksum = 0;
   uint64_t header_checksum = 0;  // at header_size - 8 (when that lies inside the bytes given)
+
+  // Decodes the fixed v1 fields from `bytes` (needs at least kHeaderSize bytes; THROW_CHECK).
+  static RawHeader DecodeFrom(std::span<const uint8_t> bytes);
+  // Writes a v1.0 header into out[0, kHeaderSize): reserved bytes zero, header_checksum computed.
+  void EncodeTo(std::span<uint8_t> out) const;
 };
 
 struct RawSection {
@@ -180,14 +176,12 @@ struct RawSection {
   uint32_t element_size = 0;
   uint32_t reserved = 0;
   uint64_t checksum = 0;
+
+  // A section table entry of kSectionEntrySize bytes.
+  static RawSection DecodeFrom(const uint8_t* entry);
+  void EncodeTo(uint8_t* entry) const;
 };
 
-// Decodes the fixed v1 fields from `bytes` (needs at least kHeaderSize bytes; THROW_CHECK).
-RawHeader ParseHeader(std::span<const uint8_t> bytes);
-// Writes a v1.0 header into out[0, kHeaderSize): reserved bytes zero, header_checksum computed.
-void SerializeHeader(const RawHeader& header, std::span<uint8_t> out);
-RawSection ParseSection(const uint8_t* entry);
-void SerializeSection(const RawSection& section, uint8_t* entry);
 // Checksum of the header bytes [0, header_size - 8).
 uint64_t HeaderChecksum(std::span<const uint8_t> header_bytes);
 
