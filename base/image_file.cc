@@ -12,6 +12,7 @@
 #include <string_view>
 
 #include "base/atomic_file.h"
+#include "base/endian.h"
 
 namespace handdb {
 namespace {
@@ -35,12 +36,6 @@ std::string ReadAt(int fd, off_t offset, size_t size) {
 uint32_t BigEndian(std::string_view b, size_t at, int bytes) {
   uint32_t v = 0;
   for (int i = 0; i < bytes; ++i) v = (v << 8) | static_cast<uint8_t>(b[at + i]);
-  return v;
-}
-
-uint32_t LittleEndian32(std::string_view b, size_t at) {
-  uint32_t v = 0;
-  for (int i = 3; i >= 0; --i) v = (v << 8) | static_cast<uint8_t>(b[at + i]);
   return v;
 }
 
@@ -106,8 +101,8 @@ std::optional<ImageSize> SizeFromHeader(int fd) {
     return PnmSize(h);
   }
   if (h.size() >= 26 && h.substr(0, 2) == "BM") {
-    const auto height = static_cast<int32_t>(LittleEndian32(h, 22));
-    return ImageSize{LittleEndian32(h, 18),
+    const auto height = static_cast<int32_t>(LoadLittleEndian<uint32_t>(h.data() + 22));
+    return ImageSize{LoadLittleEndian<uint32_t>(h.data() + 18),
                      static_cast<uint64_t>(height < 0 ? -static_cast<int64_t>(height) : height),
                      "BMP"};
   }

@@ -20,6 +20,7 @@
 #include <map>
 #include <sstream>
 
+#include "bench/bench_args.h"
 #include "bench/query_sets.h"
 
 namespace handdb {
@@ -269,55 +270,26 @@ int Run(const Args& args) {
   return 0;
 }
 
-std::vector<int> IntList(const std::string& s) {
-  std::vector<int> out;
-  std::stringstream ss(s);
-  for (std::string item; std::getline(ss, item, ',');) out.push_back(std::stoi(item));
-  return out;
-}
-
 }  // namespace
 }  // namespace handdb
 
 int main(int argc, char** argv) {
   handdb::Args args;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "index_bench: %s needs a value\n", a.c_str());
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    if (a == "--db") {
-      args.db = next();
-    } else if (a == "--photos") {
-      args.photos = next();
-    } else if (a == "--testset") {
-      args.testset = next();
-    } else if (a == "--cache") {
-      args.cache = next();
-    } else if (a == "--set-queries") {
-      args.set_queries = std::stoi(next());
-    } else if (a == "--perturbed") {
-      args.perturbed = std::stoi(next());
-    } else if (a == "--threads") {
-      args.threads = std::stoi(next());
-    } else if (a == "--candidates") {
-      args.candidates = handdb::IntList(next());
-    } else if (a == "--nprobe") {
-      args.nprobe = std::stoi(next());
-    } else if (a == "--exact-queries") {
-      args.exact_queries = std::stoi(next());
-    } else {
-      std::fprintf(stderr,
-                   "usage: index_bench --db DIR [--photos DIR] [--testset DIR] [--set-queries N] "
-                   "[--perturbed N] [--threads N] [--candidates N,M] [--nprobe N] [--cache FILE] "
-                   "[--exact-queries N]\n");
-      return 2;
-    }
-  }
+  CLI::App app("Indexed search against exact search, per query set (docs/index.md).",
+               "index_bench");
+  handdb::bench::AddQuerySetFlags(app, args);
+  app.add_option("--cache", args.cache, "exact results cache (read, then extended)");
+  app.add_option("--perturbed", args.perturbed, "perturbed database views")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  handdb::bench::AddList(app, "--candidates", args.candidates, "candidate counts, N,M");
+  app.add_option("--nprobe", args.nprobe, "IVF lists probed (0: the index's default)")
+      ->capture_default_str();
+  app.add_option("--exact-queries",
+                 args.exact_queries,
+                 "exact latency measured on the first N queries per set (default all; their "
+                 "results always come from the cache when it has them)");
+  if (int rc = handdb::bench::ParseBenchArgs(app, argc, argv); rc >= 0) return rc;
   if (args.db.empty()) {
     std::fprintf(stderr, "index_bench: --db DIR is required\n");
     return 2;

@@ -23,6 +23,7 @@
 #include <sstream>
 
 #include "base/thread_pool.h"
+#include "bench/bench_args.h"
 #include "bench/query_sets.h"
 #include "format/coarse_field.h"
 #include "query/chamfer.h"
@@ -484,53 +485,23 @@ int Run(const Args& args) {
   return 0;
 }
 
-std::vector<int> IntList(const std::string& s) {
-  std::vector<int> out;
-  std::stringstream ss(s);
-  for (std::string item; std::getline(ss, item, ',');) out.push_back(std::stoi(item));
-  return out;
-}
-
 }  // namespace
 }  // namespace handdb
 
 int main(int argc, char** argv) {
   handdb::Args args;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "index_study: %s needs a value\n", a.c_str());
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    if (a == "--db")
-      args.db = next();
-    else if (a == "--photos")
-      args.photos = next();
-    else if (a == "--testset")
-      args.testset = next();
-    else if (a == "--cache")
-      args.cache = next();
-    else if (a == "--set-queries")
-      args.set_queries = std::stoi(next());
-    else if (a == "--perturbed")
-      args.perturbed = std::stoi(next());
-    else if (a == "--threads")
-      args.threads = std::stoi(next());
-    else if (a == "--pca")
-      args.pca = handdb::IntList(next());
-    else if (a == "--pca-sample")
-      args.pca_sample = std::stoi(next());
-    else if (a == "--sets") {
-      std::stringstream ss(next());
-      for (std::string item; std::getline(ss, item, ',');) args.sets.push_back(item);
-    } else {
-      std::fprintf(stderr, "usage: index_study --db DIR [--photos DIR] [--testset DIR] ...\n");
-      return 2;
-    }
-  }
+  CLI::App app("How cheap scores rank the exact top-10 per query set (docs/index.md).",
+               "index_study");
+  handdb::bench::AddQuerySetFlags(app, args);
+  app.add_option("--cache", args.cache, "exact results cache (read, then extended)");
+  app.add_option("--perturbed", args.perturbed, "perturbed database views")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  handdb::bench::AddList(app, "--pca", args.pca, "PCA dimensions, N,M");
+  app.add_option("--pca-sample", args.pca_sample, "views sampled for the PCA")
+      ->capture_default_str();
+  handdb::bench::AddList(app, "--sets", args.sets, "query sets to study, a,b (default all)");
+  if (int rc = handdb::bench::ParseBenchArgs(app, argc, argv); rc >= 0) return rc;
   if (args.db.empty()) {
     std::fprintf(stderr, "index_study: --db DIR is required\n");
     return 2;

@@ -50,6 +50,8 @@
 #include <thread>
 #include <vector>
 
+#include "bench/bench_args.h"
+#include "bench/query_sets.h"
 #include "edges/view_conversion.h"
 #include "evaluate/evaluate.h"
 #include "evaluate/photos.h"
@@ -61,6 +63,10 @@
 
 namespace handdb {
 namespace {
+
+using bench::Median;
+using bench::Percentile;
+using bench::QuerySet;
 
 struct Args {
   std::string db;
@@ -88,17 +94,6 @@ double CpuSeconds() {
   getrusage(RUSAGE_SELF, &ru);
   return static_cast<double>(ru.ru_utime.tv_sec + ru.ru_stime.tv_sec) +
          1e-6 * static_cast<double>(ru.ru_utime.tv_usec + ru.ru_stime.tv_usec);
-}
-
-double Now() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return std::nan("");
-  std::sort(v.begin(), v.end());
-  const size_t n = v.size();
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
 }
 
 long PeakRssKb() {
@@ -199,26 +194,6 @@ Status WriteSyntheticDatabase(const std::filesystem::path& dir, const Args& args
   return WriteManifest(dir, manifest);
 }
 
-// A query near virtual view (v, r): rotated by up to 0.4 roll steps, shifted by up to 2 px,
-// 20% of the points dropped, 0.5 px jitter.
-std::vector<Point2f> MakeQuery(const Database& db, std::mt19937* rng, view_id_t* v, roll_id_t* r) {
-  std::uniform_int_distribution<uint32_t> view(0, static_cast<uint32_t>(db.num_views() - 1));
-  std::uniform_int_distribution<uint32_t> roll(0, db.num_rolls() - 1);
-  std::uniform_real_distribution<float> u(-1, 1);
-  *v = view(*rng);
-  *r = roll(*rng);
-  const auto base = testing::RolledView(db, *v, *r);
-  const float extra = 0.4f * u(*rng) * static_cast<float>(2 * M_PI / db.num_rolls());
-  const float c = std::cos(extra), s = std::sin(extra);
-  const float dx = 2 * u(*rng), dy = 2 * u(*rng);
-  std::vector<Point2f> q;
-  for (const auto& p : base) {
-    if (u(*rng) < -0.6f) continue;
-    q.push_back({c * p.x - s * p.y + dx + 0.5f * u(*rng), s * p.x + c * p.y + dy + 0.5f * u(*rng)});
-  }
-  return q;
-}
-
 // (c): per (view, roll) a PCL kd-tree over the rolled view (float px) and both directed terms.
 // Returns the seconds for the views with index % stride == 0.
 double NaiveBaseline(const Database& db,
@@ -234,7 +209,7 @@ double NaiveBaseline(const Database& db,
     qcloud->push_back(x);
   }
   pcl::KdTreeFLANN<pcl::PointXY> qtree;
-  const double t0 = Now();
+  const double t0 = bench::NowSeconds();
   qtree.setInputCloud(qcloud);
   std::atomic<size_t> next{0};
   std::vector<double> best(threads, 1e300);
@@ -272,13 +247,13 @@ double NaiveBaseline(const Database& db,
   work(0);
   for (auto& t : pool) t.join();
   *best_distance = *std::min_element(best.begin(), best.end());
-  return Now() - t0;
+  return bench::NowSeconds() - t0;
 }
 
 // (d): read every point byte once (threads split the views).
 double ReadFloor(const Database& db, int threads) {
   std::atomic<uint64_t> sink{0};
-  const double t0 = Now();
+  const double t0 = bench::NowSeconds();
   std::vector<std::thread> pool;
   for (int t = 0; t < threads; ++t) {
     pool.emplace_back([&, t] {
@@ -292,7 +267,7 @@ double ReadFloor(const Database& db, int threads) {
     });
   }
   for (auto& t : pool) t.join();
-  const double dt = Now() - t0;
+  const double dt = bench::NowSeconds() - t0;
   if (sink.load() == 42) std::printf(" ");  // keep the reads
   return dt;
 }
@@ -312,116 +287,6 @@ bool SameResults(const std::vector<Match>& a, const std::vector<Match>& b) {
 namespace fs = std::filesystem;
 
 // Nearest-rank percentile, p in (0, 1].
-double Percentile(std::vector<double> v, double p) {
-  if (v.empty()) return std::nan("");
-  std::sort(v.begin(), v.end());
-  const auto rank = static_cast<size_t>(std::ceil(p * static_cast<double>(v.size())));
-  return v[std::clamp<size_t>(rank, 1, v.size()) - 1];
-}
-
-// At most `cap` of n items, evenly spread (item floor((2i + 1) n / 2cap)); over sorted paths this
-// takes from every folder instead of the first folder's files. cap <= 0: all.
-std::vector<size_t> SpreadSample(size_t n, int cap) {
-  std::vector<size_t> picks;
-  const size_t c = cap <= 0 ? n : std::min(n, static_cast<size_t>(cap));
-  for (size_t i = 0; i < c; ++i) picks.push_back(c == n ? i : (2 * i + 1) * n / (2 * c));
-  return picks;
-}
-
-struct QuerySet {
-  std::string key;                 // first column of the output: photos, testset-photo, ...
-  std::string description;         // what the queries are
-  std::string skipped;             // not empty: the set was not measured, and why
-  std::vector<std::string> names;  // per query: the file, or the perturbed view
-  std::vector<std::vector<Point2f>> points;
-  std::vector<std::string> failed;  // "name: error" of inputs without a usable query
-  std::vector<double> input_ms;     // image -> query points
-};
-
-// The picture -> points step of `handdb query` (cli/query_commands.cc): LoadQueryEdges with the
-// query's options, so a failure here is a failure there.
-void AddImageQuery(const fs::path& image,
-                   const std::string& name,
-                   const ImageEdgeOptions& options,
-                   QuerySet* set) {
-  const double t0 = Now();
-  auto edges = LoadQueryEdges(image, options);
-  const double ms = (Now() - t0) * 1e3;
-  if (!edges.ok()) {
-    set->failed.push_back(name + ": " + edges.status().message());
-    return;
-  }
-  set->names.push_back(name);
-  set->points.push_back(edges->points_px());
-  set->input_ms.push_back(ms);
-}
-
-QuerySet PhotoQuerySet(const Args& args, const ImageEdgeOptions& options) {
-  QuerySet set;
-  set.key = "photos";
-  if (args.photos.empty()) {
-    set.skipped = "no --photos DIR";
-    return set;
-  }
-  std::error_code ec;
-  if (!fs::is_directory(args.photos, ec)) {
-    set.skipped = args.photos + ": no such directory";
-    return set;
-  }
-  std::vector<fs::path> files;
-  for (auto it = fs::recursive_directory_iterator(
-           args.photos, fs::directory_options::skip_permission_denied, ec);
-       !ec && it != fs::recursive_directory_iterator();
-       it.increment(ec)) {
-    std::error_code type_ec;
-    if (it->is_regular_file(type_ec) && IsPhotoFile(it->path())) files.push_back(it->path());
-  }
-  std::sort(files.begin(), files.end());
-  if (files.empty()) {
-    set.skipped = args.photos + ": no images";
-    return set;
-  }
-  const std::vector<size_t> picks = SpreadSample(files.size(), args.set_queries);
-  for (size_t i : picks) {
-    AddImageQuery(files[i], fs::relative(files[i], args.photos).string(), options, &set);
-  }
-  set.description = std::to_string(picks.size()) + " of " + std::to_string(files.size()) +
-                    " real photos under " + args.photos;
-  return set;
-}
-
-// The photo-like renders (photo = true) or the clean label renders of a test set, each through
-// `handdb query`'s path (the label EXRs with the database's recorded edge options).
-QuerySet TestSetQuerySet(const Args& args,
-                         const TestSet* testset,
-                         bool photo,
-                         const ImageEdgeOptions& options) {
-  QuerySet set;
-  set.key = photo ? "testset-photo" : "testset-clean";
-  if (testset == nullptr) {
-    set.skipped = "no --testset DIR (made by `handdb testset`, docs/evaluation.md)";
-    return set;
-  }
-  std::vector<const TestView*> views;
-  for (const TestView& v : testset->views) {
-    if (!photo || !v.photo.empty()) views.push_back(&v);
-  }
-  if (views.empty()) {
-    set.skipped = testset->dir.string() + ": no photos (made with --no-photos)";
-    return set;
-  }
-  const std::vector<size_t> picks = SpreadSample(views.size(), args.set_queries);
-  for (size_t i : picks) {
-    const fs::path& file = photo ? views[i]->photo : views[i]->label;
-    AddImageQuery(file, fs::relative(file, testset->dir).string(), options, &set);
-  }
-  set.description = std::to_string(picks.size()) + " of " + std::to_string(views.size()) +
-                    (photo ? " photo-like renders (" : " clean label renders (") +
-                    (testset->clutter ? "cluttered" : "plain") + " background) of test set " +
-                    testset->dir.string();
-  return set;
-}
-
 // The merged top-k of two searches, in the order Searcher::Search documents for Hand::kEither:
 // (D_c, view id, roll, right before left).
 std::vector<Match> MergeHands(std::vector<Match> right, const std::vector<Match>& left, int k) {
@@ -457,9 +322,9 @@ Status SearchInto(const Searcher& searcher,
                   HandRun* run) {
   SearchStats stats;
   const double c0 = CpuSeconds();
-  const double t0 = Now();
+  const double t0 = bench::NowSeconds();
   auto res = searcher.Search(query, options, &stats);
-  const double ms = (Now() - t0) * 1e3;
+  const double ms = (bench::NowSeconds() - t0) * 1e3;
   const double cpu_ms = (CpuSeconds() - c0) * 1e3;
   if (!res.ok()) return res.status();
   run->ms.push_back(ms);
@@ -535,16 +400,16 @@ Status CheckAgainstBruteForce(const Searcher& searcher,
     if (i < right_brute.size()) {
       brute_right = right_brute[i];
     } else {
-      const double t0 = Now();
+      const double t0 = bench::NowSeconds();
       auto res = searcher.Search(set.points[i], brute);
-      m.brute_ms.push_back((Now() - t0) * 1e3);
+      m.brute_ms.push_back((bench::NowSeconds() - t0) * 1e3);
       if (!res.ok()) return res.status();
       brute_right = std::move(res).value();
     }
     brute.hand = Hand::kLeft;
-    const double t0 = Now();
+    const double t0 = bench::NowSeconds();
     auto brute_left = searcher.Search(set.points[i], brute);
-    m.brute_ms.push_back((Now() - t0) * 1e3);
+    m.brute_ms.push_back((bench::NowSeconds() - t0) * 1e3);
     if (!brute_left.ok()) return brute_left.status();
     const std::vector<Match> brute_either = MergeHands(brute_right, *brute_left, options.top_k);
     ++m.brute_checked;
@@ -620,9 +485,9 @@ int RunQuerySets(const Args& args,
   }
   const TestSet* ts = testset ? &*testset : nullptr;
   std::vector<QuerySet> sets;
-  sets.push_back(PhotoQuerySet(args, image_options));
-  sets.push_back(TestSetQuerySet(args, ts, /*photo=*/true, image_options));
-  sets.push_back(TestSetQuerySet(args, ts, /*photo=*/false, image_options));
+  sets.push_back(bench::PhotoQuerySet(args.photos, args.set_queries, image_options));
+  sets.push_back(bench::TestSetQuerySet(ts, /*photo=*/true, args.set_queries, image_options));
+  sets.push_back(bench::TestSetQuerySet(ts, /*photo=*/false, args.set_queries, image_options));
   sets.push_back(std::move(perturbed));
 
   // Round-robin over the sets, query i of every set before query i + 1 of any, so a change of the
@@ -738,7 +603,7 @@ int Run(const Args& args) {
     }
     dir = tmpl;
     made = true;
-    const double t0 = Now();
+    const double t0 = bench::NowSeconds();
     const pid_t pid = fork();
     if (pid == 0) {
       const Status st = WriteSyntheticDatabase(dir, args);
@@ -748,13 +613,14 @@ int Run(const Args& args) {
     int status = 0;
     waitpid(pid, &status, 0);
     if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) return 1;
-    std::printf("synthetic database written to %s in %.1f s\n", dir.c_str(), Now() - t0);
+    std::printf(
+        "synthetic database written to %s in %.1f s\n", dir.c_str(), bench::NowSeconds() - t0);
   }
 
   const long rss_before = CurrentRssKb();
   const MemoryBreakdown mem_before = ReadMemoryBreakdown();
   const long peak_before = PeakRssKb();
-  const double t_open = Now();
+  const double t_open = bench::NowSeconds();
   auto searcher_or = Searcher::Open(dir);
   if (!searcher_or.ok()) {
     std::fprintf(stderr, "query_bench: %s\n", searcher_or.status().ToString().c_str());
@@ -764,7 +630,7 @@ int Run(const Args& args) {
   // What the first exact search would build (the cell-major fields), counted as opening.
   searcher.PrepareExactSearch();
   const Database& db = searcher.database();
-  const double open_s = Now() - t_open;
+  const double open_s = bench::NowSeconds() - t_open;
   std::printf(
       "database: %zu canonical views x %u rolls = %llu virtual views, %llu points "
       "(%.0f per view), %.2f MB on disk; opened in %.1f ms\n",
@@ -792,14 +658,14 @@ int Run(const Args& args) {
   for (int i = 0; i < args.queries; ++i) {
     view_id_t v;
     roll_id_t r;
-    queries.push_back(MakeQuery(db, &rng, &v, &r));
+    queries.push_back(bench::PerturbedView(db, &rng, &v, &r));
     query_names.push_back(std::to_string(i) + " (near view " + std::to_string(v) + " roll " +
                           std::to_string(r) + ")");
     SearchStats stats;
     const double c0 = CpuSeconds();
-    const double t0 = Now();
+    const double t0 = bench::NowSeconds();
     auto res = searcher.Search(queries.back(), options, &stats);
-    t_pruned.push_back(Now() - t0);
+    t_pruned.push_back(bench::NowSeconds() - t0);
     cpu_pruned.push_back(CpuSeconds() - c0);
     if (!res.ok()) {
       std::fprintf(stderr, "query_bench: %s\n", res.status().ToString().c_str());
@@ -824,9 +690,9 @@ int Run(const Args& args) {
   brute.brute_force = true;
   for (int i = 0; i < std::min(args.brute_queries, args.queries); ++i) {
     const double c0 = CpuSeconds();
-    const double t0 = Now();
+    const double t0 = bench::NowSeconds();
     auto res = searcher.Search(queries[i], brute);
-    t_brute.push_back(Now() - t0);
+    t_brute.push_back(bench::NowSeconds() - t0);
     cpu_brute.push_back(CpuSeconds() - c0);
     identical = identical && res.ok() && SameResults(*res, pruned_results[i]);
     if (res.ok()) brute_results.push_back(*res);
@@ -943,57 +809,36 @@ int Run(const Args& args) {
 
 int main(int argc, char** argv) {
   handdb::Args args;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "query_bench: %s needs a value\n", a.c_str());
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    if (a == "--db")
-      args.db = next();
-    else if (a == "--shapes")
-      args.shapes = std::stoul(next());
-    else if (a == "--directions")
-      args.directions = std::stoul(next());
-    else if (a == "--rolls")
-      args.rolls = std::stoul(next());
-    else if (a == "--points")
-      args.points = std::stoul(next());
-    else if (a == "--queries")
-      args.queries = std::stoi(next());
-    else if (a == "--brute-queries")
-      args.brute_queries = std::stoi(next());
-    else if (a == "--baseline-fraction")
-      args.baseline_fraction = std::stod(next());
-    else if (a == "--threads")
-      args.threads = std::stoi(next());
-    else if (a == "--kdtree")
-      args.kdtree = *handdb::ParseKdTreeBackend(next());
-    else if (a == "--dt-cell")
-      args.dt_cell = std::stof(next());
-    else if (a == "--keep")
-      args.keep = true;
-    else if (a == "--photos")
-      args.photos = next();
-    else if (a == "--testset")
-      args.testset = next();
-    else if (a == "--set-queries")
-      args.set_queries = std::stoi(next());
-    else {
-      std::fprintf(stderr,
-                   "usage: query_bench [--db DIR] [--shapes N] [--directions N] [--rolls R] "
-                   "[--points N] [--queries N] [--brute-queries N] [--baseline-fraction F] "
-                   "[--threads N] [--kdtree nanoflann|pcl] [--dt-cell PX] [--keep] "
-                   "[--photos DIR] [--testset DIR] [--set-queries N]\n");
-      return 2;
-    }
-  }
-  if (args.queries < 1 || args.threads < 1 || args.baseline_fraction <= 0 ||
-      args.baseline_fraction > 1 || args.set_queries < 0 || args.brute_queries < 0) {
-    std::fprintf(stderr, "query_bench: bad arguments\n");
+  CLI::App app(
+      "Query benchmark: pruned exact search against brute force, a PCL baseline and the "
+      "read floor; with --db also the query sets (see the top of query_bench.cc).",
+      "query_bench");
+  handdb::bench::AddQuerySetFlags(app, args);
+  app.add_option("--shapes", args.shapes, "synthetic database: shapes")->capture_default_str();
+  app.add_option("--directions", args.directions, "synthetic database: view directions")
+      ->capture_default_str();
+  app.add_option("--rolls", args.rolls, "synthetic database: rolls")->capture_default_str();
+  app.add_option("--points", args.points, "synthetic database: points per view")
+      ->capture_default_str();
+  app.add_option("--queries", args.queries, "perturbed views timed")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--brute-queries", args.brute_queries, "queries also searched by brute force")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  app.add_option("--baseline-fraction", args.baseline_fraction, "views the PCL baseline times")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+  std::string kdtree = "nanoflann";
+  app.add_option("--kdtree", kdtree, "view kd-tree backend")
+      ->check(CLI::IsMember({"nanoflann", "pcl"}))
+      ->capture_default_str();
+  app.add_option("--dt-cell", args.dt_cell, "distance transform cell, px")->capture_default_str();
+  app.add_flag("--keep", args.keep, "keep the synthetic database");
+  if (int rc = handdb::bench::ParseBenchArgs(app, argc, argv); rc >= 0) return rc;
+  args.kdtree = *handdb::ParseKdTreeBackend(kdtree);
+  if (args.baseline_fraction <= 0) {
+    std::fprintf(stderr, "query_bench: --baseline-fraction must be > 0\n");
     return 2;
   }
   return handdb::Run(args);

@@ -1,7 +1,7 @@
 // The query sets of the benchmarks (issue 15 item 1, "measure what users send"; issue 12): real
 // photos, a test set's photo-like and clean label renders, and perturbed database views, each
-// turned into query points by `handdb query`'s own input path. Shared by bench/index_bench.cc and
-// bench/index_study.cc; header-only (benchmarks are single files).
+// turned into query points by `handdb query`'s own input path. Shared by bench/query_bench.cc,
+// bench/index_bench.cc and bench/index_study.cc; header-only (benchmarks are single files).
 #pragma once
 
 #include <algorithm>
@@ -57,20 +57,25 @@ struct QuerySet {
   std::vector<std::string> names;  // per query: the file, or the perturbed view
   std::vector<std::vector<Point2f>> points;
   std::vector<std::string> failed;  // "name: error" of inputs without a usable query
+  std::vector<double> input_ms;     // per image query: the picture -> points step
 };
 
-// The picture -> points step of `handdb query`: LoadQueryEdges with the query's options.
+// The picture -> points step of `handdb query` (cli/query_commands.cc): LoadQueryEdges with the
+// query's options, so a failure here is a failure there.
 inline void AddImageQuery(const std::filesystem::path& image,
                           const std::string& name,
                           const ImageEdgeOptions& options,
                           QuerySet* set) {
+  const double t0 = NowSeconds();
   auto edges = LoadQueryEdges(image, options);
+  const double ms = (NowSeconds() - t0) * 1e3;
   if (!edges.ok()) {
     set->failed.push_back(name + ": " + edges.status().message());
     return;
   }
   set->names.push_back(name);
   set->points.push_back(edges->points_px());
+  set->input_ms.push_back(ms);
 }
 
 // At most `cap` photos found recursively under `dir`, spread over the sorted paths.
@@ -130,13 +135,14 @@ inline QuerySet TestSetQuerySet(const TestSet* testset,
     AddImageQuery(file, fs::relative(file, testset->dir).string(), options, &set);
   }
   set.description = std::to_string(picks.size()) + " of " + std::to_string(views.size()) +
-                    (photo ? " photo-like renders" : " clean label renders") + " of test set " +
+                    (photo ? " photo-like renders (" : " clean label renders (") +
+                    (testset->clutter ? "cluttered" : "plain") + " background) of test set " +
                     testset->dir.string();
   return set;
 }
 
 // A query near virtual view (v, r): rotated by up to 0.4 roll steps, shifted by up to 2 px, 20%
-// of the points dropped, 0.5 px jitter (query_bench's perturbed views).
+// of the points dropped, 0.5 px jitter.
 inline std::vector<Point2f> PerturbedView(const Database& db,
                                           std::mt19937* rng,
                                           view_id_t* v,

@@ -7,7 +7,7 @@
 #include "base/status.h"
 
 namespace handdb {
-struct IndexBuildOptions;  // query/index/view_index.h
+struct DatabaseIndexSummary;  // query/index/database_index.h
 }  // namespace handdb
 
 namespace handdb::cli {
@@ -30,12 +30,10 @@ int RunEvaluate(int argc, char** argv);  // cli/evaluate_commands.cc
 int RunQuery(int argc, char** argv);     // cli/query_commands.cc
 int RunIndex(int argc, char** argv);     // cli/index_commands.cc
 
-// What `handdb index DB` does once it holds DB's lock (also `handdb generate --index`, which holds
-// it already): builds the index, writes DB/index-<xxh3>.hdbi atomically, lists it in the manifest
-// and removes the file it replaces; with `print_summary`, one line on stdout led by `cmd`.
-Status WriteDatabaseIndex(const std::filesystem::path& db_dir,
-                          const IndexBuildOptions& options,
-                          bool print_summary,
-                          const char* cmd);
+// The one-line summary of an index written by WriteDatabaseIndex (query/index/database_index.h),
+// led by `cmd`, on stdout.
+void PrintIndexSummary(const char* cmd,
+                       const std::filesystem::path& db_dir,
+                       const DatabaseIndexSummary& summary);
 
 }  // namespace handdb::cli

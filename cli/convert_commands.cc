@@ -28,9 +28,11 @@
 #include "format/validator.h"
 #include "format/view.h"
 #include "generator/convert/converter.h"
+#include "generator/pipeline.h"
 #include "generator/plan/plan.h"
 #include "generator/render/render_driver.h"
 #include "query/database.h"
+#include "query/index/database_index.h"
 #include "query/index/view_index.h"
 
 namespace handdb::cli {
@@ -186,51 +188,39 @@ int RunGenerate(int argc, char** argv) {
   slurm.Add(app);
   if (int rc = ParseArgs(app, argc, argv); rc >= 0) return rc;
   jobs = ResolveNumThreads(jobs);
-  if (work_dir.empty()) work_dir = db_dir / "render";
 
-  // 1. Plan. An existing plan must be the one this config makes (else the work dir belongs to
-  // another database).
-  const int stages = build_index ? 5 : 4;
-  auto numbered = [&](int k, const char* what) {
+  GenerateOptions options;
+  options.config_path = config_path;
+  options.db_dir = db_dir;
+  options.work_dir = work_dir;
+  options.render = render;
+  options.render.jobs = jobs;
+  options.render.blender = blender;
+  options.convert = convert;
+  options.convert.num_threads = jobs;
+  options.convert.edges = edges.Get();
+  options.progress = !quiet;
+  if (build_index) {
+    // As `handdb index DB` would; this run already holds DB's lock.
+    options.index_step = [jobs, quiet, as_json](const fs::path& db) -> Status {
+      IndexBuildOptions index_options;
+      index_options.num_threads = jobs;
+      index_options.progress = !quiet;
+      auto written = WriteDatabaseIndex(db, index_options);
+      if (!written.ok()) return written.status();
+      if (!as_json) PrintIndexSummary("handdb generate", db, *written);
+      return Status::Ok();
+    };
+  }
+  options.on_stage = [quiet](int k, int stages, const char* what) {
     if (!quiet) std::fprintf(stderr, "handdb generate: [%d/%d] %s\n", k, stages, what);
   };
-  numbered(1, "plan");
-  std::error_code ec;
-  const fs::path plan_path = work_dir / "plan.json";
-  // Held until the run ends: a second generate or convert into this --out (or --work) is refused
-  // with one line instead of rendering everything again beside this one (issue 14 item 10).
-  std::vector<DirectoryLock> locks;
-  {
-    // The plan first, so a bad config leaves no directory behind (issue 14 item 12).
-    auto config = ReadJsonFile(config_path, "config.schema.json");
-    if (!config.ok()) return Fail("generate", config.status());
-    auto plan = MakePlan(*config, config_path);
-    if (!plan.ok()) return Fail("generate", plan.status());
-    for (const fs::path& dir : {db_dir, work_dir}) {
-      fs::create_directories(dir, ec);
-      if (ec) {
-        return Fail(
-            "generate",
-            Status(StatusCode::kIoError, dir.string() + ": cannot create: " + ec.message()));
-      }
-      auto lock = DirectoryLock::Acquire(dir);
-      if (!lock.ok()) return Fail("generate", lock.status());
-      locks.push_back(std::move(lock).value());
-    }
-    if (fs::exists(plan_path, ec)) {
-      auto existing = ReadJsonFile(plan_path, "");
-      if (!existing.ok()) return Fail("generate", existing.status());
-      if (*existing != *plan) {
-        return Fail("generate",
-                    Status(StatusCode::kInvalidArgument,
-                           plan_path.string() + ": holds a different plan than " +
-                               config_path.string() + " makes; use another --out/--work"));
-      }
-    } else {
-      Status s = WritePlanFromConfig(config_path, plan_path);
-      if (!s.ok()) return Fail("generate", s);
-    }
+  if (std::string error; !options.Check(&error)) {
+    std::fprintf(stderr, "handdb generate: %s\n", error.c_str());
+    return kExitUsage;
   }
+  GeneratePipeline pipeline(std::move(options));
+  if (Status s = pipeline.Plan(); !s.ok()) return Fail("generate", s);
 
   // On Slurm: one array task per unit (render + convert), then a final job (manifest, validate).
   if (slurm.enabled) {
@@ -240,53 +230,23 @@ int RunGenerate(int argc, char** argv) {
     if (convert.skip_bad) convert_args.push_back("--skip-bad");
     if (convert.coded) convert_args.push_back("--coded");
     return RunGenerateOnSlurm(
-        {db_dir, work_dir, blender, convert, convert_args, build_index, quiet, as_json}, slurm);
+        {db_dir, pipeline.work_dir(), blender, convert, convert_args, build_index, quiet, as_json},
+        slurm);
   }
 
-  // 2. Render.
-  numbered(2, "render");
-  render.jobs = jobs;
-  render.blender = blender;
-  render.progress = !quiet;
-  auto rendered = RenderPlan(plan_path, work_dir, render);
-  if (!rendered.ok()) return Fail("generate", rendered.status());
-
-  // 3. Convert.
-  numbered(3, "convert");
-  convert.num_threads = jobs;
-  convert.edges = edges.Get();
-  convert.progress = !quiet;
-  std::vector<SkippedView> bad;
-  auto summary = ConvertRenderDir(work_dir, db_dir, convert, &bad);
-  if (!summary.ok()) {
-    if (!bad.empty() && !convert.skip_bad) PrintBad("generate", work_dir, bad);
-    return Fail("generate", summary.status());
-  }
-
-  // 4. Validate what was written, as `handdb validate` would.
-  numbered(4, "validate");
-  ValidateOptions vopt;
-  vopt.show_progress = !quiet;
-  const ValidationReport report = ValidateDatabase(db_dir, vopt);
-  if (!report.ok()) {
-    for (const auto& p : report.problems) {
+  GenerateSummary result;
+  if (Status s = pipeline.Run(&result); !s.ok()) {
+    if (!result.bad.empty() && !convert.skip_bad) {
+      PrintBad("generate", pipeline.work_dir(), result.bad);
+    }
+    for (const auto& p : result.validation.problems) {
       std::fprintf(stderr, "handdb generate: %s\n", p.message.c_str());
     }
-    return Fail("generate",
-                Status(StatusCode::kSchemaViolation,
-                       db_dir.string() + ": validation found " +
-                           std::to_string(report.num_problems()) + " problem(s)"));
+    return Fail("generate", s);
   }
-
-  // 5. Index (--index), as `handdb index DB` would; this run already holds DB's lock.
-  if (build_index) {
-    numbered(5, "index");
-    IndexBuildOptions index_options;
-    index_options.num_threads = jobs;
-    index_options.progress = !quiet;
-    Status s = WriteDatabaseIndex(db_dir, index_options, !as_json, "handdb generate");
-    if (!s.ok()) return Fail("generate", s);
-  }
+  const ConvertSummary* summary = &result.convert;
+  const RenderSummary* rendered = &result.render;
+  const ValidationReport& report = result.validation;
   if (as_json) {
     json out = SummaryJson(*summary, db_dir);
     out["render"] = {{"units", rendered->units_total},

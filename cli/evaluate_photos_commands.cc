@@ -62,13 +62,7 @@ Result<std::vector<bool>> CompletePhotoParts(const fs::path& work,
                                              const PhotoSet& photos,
                                              uint32_t num_tasks) {
   return CompleteParts(num_tasks, [&](uint32_t t) {
-    PhotoPartExpectation expect;
-    expect.fingerprint = fp;
-    expect.task = t;
-    for (uint32_t i : PhotoTaskSlice(photos, t, num_tasks)) {
-      expect.photos.push_back(photos.photos[i].relative);
-    }
-    return ReadPhotoPart(PartPath(work, t), expect).status();
+    return ReadPart(PartPath(work, t), ExpectedPart(fp, t, photos)).status();
   });
 }
 
@@ -346,7 +340,7 @@ int UnitEvaluatePhotosCommands::Run() {
     PhotoReport report =
         StartPhotoReport(opened->searcher->database(), opened->photos, flags_.options);
     DescribeAsTyped(db_, flags_, &report);
-    Status s = MergePhotoParts(work_, *fp, opened->photos, &report);
+    Status s = MergeParts(work_, *fp, opened->photos, &report);
     if (!s.ok()) return Fail(cmd, s);
     const std::string text = PhotoReportToText(report);
     s = WritePhotoOutputs(report, *opened, json_out_, out_dir_);
@@ -360,17 +354,14 @@ int UnitEvaluatePhotosCommands::Run() {
     return kExitOk;
   }
 
-  const std::vector<uint32_t> slice = PhotoTaskSlice(opened->photos, task_, tasks_);
-  PhotoPartExpectation expect;
-  expect.fingerprint = *fp;
-  expect.task = task_;
-  for (uint32_t i : slice) expect.photos.push_back(opened->photos.photos[i].relative);
+  const std::vector<uint32_t> slice = TaskSlice(opened->photos.photos.size(), task_, tasks_);
+  const auto expect = ExpectedPart(*fp, task_, opened->photos);
   const fs::path path = PartPath(work_, task_);
-  if (auto existing = ReadPhotoPart(path, expect); existing.ok()) {
+  if (auto existing = ReadPart(path, expect); existing.ok()) {
     std::printf("task %u: %s already complete (%zu photos); kept\n",
                 task_,
                 path.c_str(),
-                existing->photos.size());
+                existing->rows.size());
     return kExitOk;
   }
   PhotoEvaluationPart part;
@@ -382,13 +373,13 @@ int UnitEvaluatePhotosCommands::Run() {
   auto outcomes =
       ScorePhotos(*opened->searcher, opened->photos, opened->query_fn, flags_.options, slice);
   if (!outcomes.ok()) return Fail(cmd, outcomes.status());
-  part.photos = std::move(*outcomes);
+  part.rows = std::move(*outcomes);
   part.finished_at = UnixNow();
-  Status s = WritePhotoPart(path, part);
+  Status s = WritePart(path, part);
   if (!s.ok()) return Fail(cmd, s);
   std::printf("task %u: %zu photos in %.1f s -> %s\n",
               task_,
-              part.photos.size(),
+              part.rows.size(),
               part.finished_at - part.started_at,
               path.c_str());
   return kExitOk;

@@ -64,12 +64,7 @@ Result<std::vector<bool>> CompleteTestSetParts(const fs::path& work,
                                                uint32_t num_tasks,
                                                size_t num_criteria) {
   return CompleteParts(num_tasks, [&](uint32_t t) {
-    PartExpectation expect;
-    expect.fingerprint = fp;
-    expect.task = t;
-    expect.slice = TaskSlice(selected, t, num_tasks);
-    expect.num_criteria = num_criteria;
-    return ReadPart(PartPath(work, t), expect).status();
+    return ReadPart(PartPath(work, t), ExpectedPart(fp, t, selected, num_criteria)).status();
   });
 }
 
@@ -389,17 +384,13 @@ int UnitEvaluateCommands::Run() {
     return kExitOk;
   }
 
-  PartExpectation expect;
-  expect.fingerprint = *fp;
-  expect.task = task_;
-  expect.slice = TaskSlice(selected, task_, tasks_);
-  expect.num_criteria = MakeCriteria(options).size();
+  const auto expect = ExpectedPart(*fp, task_, selected, MakeCriteria(options).size());
   const fs::path path = PartPath(work_, task_);
   if (auto existing = ReadPart(path, expect); existing.ok()) {
     std::printf("task %u: %s already complete (%zu views); kept\n",
                 task_,
                 path.c_str(),
-                existing->views.size());
+                existing->rows.size());
     return kExitOk;
   }
   EvaluationPart part;
@@ -408,15 +399,15 @@ int UnitEvaluateCommands::Run() {
   part.num_tasks = tasks_;
   part.threads = ResolveNumThreads(options.num_threads);
   part.started_at = UnixNow();
-  auto views = EvaluateViews(**searcher, *testset, *points, options, expect.slice);
+  auto views = EvaluateViews(**searcher, *testset, *points, options, expect.rows.slice);
   if (!views.ok()) return Fail(cmd, views.status());
-  part.views = std::move(*views);
+  part.rows = std::move(*views);
   part.finished_at = UnixNow();
   Status s = WritePart(path, part);
   if (!s.ok()) return Fail(cmd, s);
   std::printf("task %u: %zu test views in %.1f s -> %s\n",
               task_,
-              part.views.size(),
+              part.rows.size(),
               part.finished_at - part.started_at,
               path.c_str());
   return kExitOk;

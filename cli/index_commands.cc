@@ -1,7 +1,5 @@
 // handdb index DB: builds the search index of a database (query/index/view_index.h,
 // docs/index.md) and lists it in the manifest.
-#include <xxhash.h>
-
 #include <CLI/CLI.hpp>
 #include <cinttypes>
 #include <cstdio>
@@ -9,65 +7,29 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-#include "base/atomic_file.h"
 #include "base/directory_lock.h"
-#include "base/hex.h"
 #include "cli/cli_util.h"
 #include "cli/commands.h"
-#include "format/manifest.h"
-#include "query/database.h"
+#include "query/index/database_index.h"
 #include "query/index/view_index.h"
 
 namespace handdb::cli {
 namespace fs = std::filesystem;
 
-Status WriteDatabaseIndex(const fs::path& db_dir,
-                          const IndexBuildOptions& options,
-                          bool print_summary,
-                          const char* cmd) {
-  auto db = Database::Open(db_dir);
-  if (!db.ok()) return db.status();
-  auto index = ViewIndex::Build(*db, options);
-  if (!index.ok()) return index.status();
-  const std::string bytes = index->Serialize();
-  const std::string sum = Hex64(XXH3_64bits(bytes.data(), bytes.size()));
-  // A new name per content: a reader holding the previous manifest still finds its own index.
-  const std::string file = "index-" + sum + ".hdbi";
-  const fs::path path = db_dir / file;
-  if (Status s = WriteFileAtomic(path, bytes); !s.ok()) return s;
-
-  Manifest manifest = db->manifest();
-  const std::optional<ManifestIndex> previous = manifest.index;
-  manifest.index = ManifestIndex{file,
-                                 kIndexKind,
-                                 bytes.size(),
-                                 sum,
-                                 {{"dims", index->dims()},
-                                  {"nlist", index->nlist()},
-                                  {"train_views", options.train_views},
-                                  {"cell_px", options.grid.cell_units / 16},
-                                  {"grid_side", options.grid.side}}};
-  if (Status s = WriteManifest(db_dir, manifest); !s.ok()) return s;
-  if (previous && previous->file != file) {
-    std::error_code ec;
-    fs::remove(db_dir / previous->file, ec);  // no longer listed; best effort
-  }
-  if (print_summary) {
-    std::printf("%s: %s: %zu views x %u rolls, %d dims, %d lists, %" PRIu64
-                " bytes (%.2f per canonical view, %.3f per virtual view) in %.1f s -> %s\n",
-                cmd,
-                db_dir.c_str(),
-                db->num_views(),
-                db->num_rolls(),
-                index->dims(),
-                index->nlist(),
-                static_cast<uint64_t>(bytes.size()),
-                static_cast<double>(bytes.size()) / static_cast<double>(db->num_views()),
-                static_cast<double>(bytes.size()) / static_cast<double>(db->num_virtual_views()),
-                index->build_seconds(),
-                path.c_str());
-  }
-  return Status();
+void PrintIndexSummary(const char* cmd, const fs::path& db_dir, const DatabaseIndexSummary& s) {
+  std::printf("%s: %s: %zu views x %u rolls, %d dims, %d lists, %" PRIu64
+              " bytes (%.2f per canonical view, %.3f per virtual view) in %.1f s -> %s\n",
+              cmd,
+              db_dir.c_str(),
+              s.num_views,
+              s.num_rolls,
+              s.dims,
+              s.nlist,
+              s.bytes,
+              static_cast<double>(s.bytes) / static_cast<double>(s.num_views),
+              static_cast<double>(s.bytes) / static_cast<double>(s.num_virtual_views),
+              s.build_seconds,
+              s.path.c_str());
 }
 
 int RunIndex(int argc, char** argv) {
@@ -116,9 +78,9 @@ int RunIndex(int argc, char** argv) {
   // One writer at a time: generate/convert hold the same lock while they write the manifest.
   auto lock = DirectoryLock::Acquire(db_dir);
   if (!lock.ok()) return Fail("index", lock.status());
-  if (Status s = WriteDatabaseIndex(db_dir, options, !quiet, "handdb index"); !s.ok()) {
-    return Fail("index", s);
-  }
+  auto written = WriteDatabaseIndex(db_dir, options);
+  if (!written.ok()) return Fail("index", written.status());
+  if (!quiet) PrintIndexSummary("handdb index", db_dir, *written);
   return kExitOk;
 }
 

@@ -15,6 +15,7 @@
 #include "format/validator.h"
 #include "generator/plan/plan.h"
 #include "generator/render/render_driver.h"
+#include "query/index/database_index.h"
 #include "query/index/view_index.h"
 
 namespace handdb::cli {
@@ -415,9 +416,8 @@ int RunUnitFinalize(const UnitArgs& args) {
     IndexBuildOptions index_options;
     index_options.num_threads = args.threads > 0 ? args.threads : TaskThreads();
     index_options.progress = !args.quiet;
-    if (Status s = WriteDatabaseIndex(db_dir, index_options, false, "handdb unit finalize");
-        !s.ok()) {
-      return Fail(cmd, s);
+    if (auto written = WriteDatabaseIndex(db_dir, index_options); !written.ok()) {
+      return Fail(cmd, written.status());
     }
   }
   if (args.as_json) {

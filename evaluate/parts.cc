@@ -17,71 +17,6 @@ using json = nlohmann::json;
 
 namespace {
 
-json ViewToJson(const ViewOutcome& v) {
-  json j = {{"index", v.testset_index},
-            {"id", v.test_id},
-            {"basic", v.basic},
-            {"shape_name", v.shape_name},
-            {"ranks", v.ranks},
-            {"correct_pairs", v.correct_pairs},
-            {"num_correct", v.num_correct},
-            {"top1_keypoint_error", NumberOrNull(v.top1_keypoint_error)},
-            {"best10_keypoint_error", NumberOrNull(v.best10_keypoint_error)},
-            {"input_seconds", v.input_seconds},
-            {"search_seconds", v.search_seconds},
-            {"deep_search", v.deep_search},
-            {"query_points", v.num_query_points}};
-  if (!v.error.empty()) j["error"] = v.error;
-  if (v.top1) {
-    const CorrectnessDetail& d = v.top1->detail;
-    j["top1"] = {{"view_id", v.top1->view_id},
-                 {"roll", v.top1->roll},
-                 {"distance", v.top1->distance},
-                 {"shape_name", v.top1->shape_name},
-                 {"joint_distance_deg", d.joint_distance_deg},
-                 {"direction_deg", d.direction_deg},
-                 {"roll_deg", d.roll_deg},
-                 {"shape_ok", d.shape_ok},
-                 {"direction_ok", d.direction_ok},
-                 {"roll_ok", d.roll_ok}};
-  }
-  return j;
-}
-
-ViewOutcome ViewFromJson(const json& j) {
-  ViewOutcome v;
-  v.testset_index = j.at("index").get<uint32_t>();
-  v.test_id = j.at("id").get<uint32_t>();
-  v.basic = j.at("basic").get<bool>();
-  v.shape_name = j.at("shape_name").get<std::string>();
-  if (j.contains("error")) v.error = j.at("error").get<std::string>();
-  v.ranks = j.at("ranks").get<std::vector<int64_t>>();
-  v.correct_pairs = j.at("correct_pairs").get<std::vector<int64_t>>();
-  v.num_correct = j.at("num_correct").get<int64_t>();
-  v.top1_keypoint_error = NumberOrNaN(j.at("top1_keypoint_error"));
-  v.best10_keypoint_error = NumberOrNaN(j.at("best10_keypoint_error"));
-  v.input_seconds = j.at("input_seconds").get<double>();
-  v.search_seconds = j.at("search_seconds").get<double>();
-  v.deep_search = j.at("deep_search").get<bool>();
-  v.num_query_points = j.at("query_points").get<size_t>();
-  if (j.contains("top1")) {
-    const json& t = j.at("top1");
-    MatchBrief m;
-    m.view_id = t.at("view_id").get<view_id_t>();
-    m.roll = t.at("roll").get<roll_id_t>();
-    m.distance = t.at("distance").get<double>();
-    m.shape_name = t.at("shape_name").get<std::string>();
-    m.detail.joint_distance_deg = t.at("joint_distance_deg").get<double>();
-    m.detail.direction_deg = t.at("direction_deg").get<double>();
-    m.detail.roll_deg = t.at("roll_deg").get<double>();
-    m.detail.shape_ok = t.at("shape_ok").get<bool>();
-    m.detail.direction_ok = t.at("direction_ok").get<bool>();
-    m.detail.roll_ok = t.at("roll_ok").get<bool>();
-    v.top1 = m;
-  }
-  return v;
-}
-
 // The first key of two objects whose values differ, for messages ("first_k: 100 vs 50").
 std::string FirstDifference(const json& part, const json& expected) {
   for (const auto& [key, value] : expected.items()) {
@@ -154,44 +89,131 @@ Status MissingPart(const fs::path& path, uint32_t task, uint32_t num_tasks) {
                     std::to_string(num_tasks) + " has not written its part)");
 }
 
-// A part's document: its format, the header's fields, and `key`: `items`.
-json PartJson(const char* format, const PartHeader& h, const char* key, json items) {
-  return {{"format", format},
-          {"version", 1},
-          {"fingerprint", h.fingerprint.value},
-          {"inputs", h.fingerprint.inputs},
-          {"task", h.task},
-          {"tasks", h.num_tasks},
-          {"threads", h.threads},
-          {"started_at", h.started_at},
-          {"finished_at", h.finished_at},
-          {key, std::move(items)}};
+EvaluationFingerprint FingerprintOf(json inputs) {
+  EvaluationFingerprint f;
+  f.inputs = std::move(inputs);
+  const std::string text = f.inputs.dump();
+  f.value = shard::ChecksumHex(shard::Checksum(text.data(), text.size()));
+  return f;
 }
 
-// The header's fields of a schema-valid part (json::exception on a missing one).
-void ReadPartHeader(const json& doc, PartHeader* h) {
-  h->fingerprint.value = doc.at("fingerprint").get<std::string>();
-  h->fingerprint.inputs = doc.at("inputs");
-  h->task = doc.at("task").get<uint32_t>();
-  h->num_tasks = doc.at("tasks").get<uint32_t>();
-  h->threads = doc.at("threads").get<int>();
-  h->started_at = doc.at("started_at").get<double>();
-  h->finished_at = doc.at("finished_at").get<double>();
+// The fingerprint inputs, besides options and task count, that a part of each kind must share.
+template <typename Row>
+std::vector<InputCheck> InputChecks();
+
+template <>
+std::vector<InputCheck> InputChecks<ViewOutcome>() {
+  return {{"database_manifest_xxh3", ChecksumDiffers("made from another database (manifest xxh3 ")},
+          {"testset_xxh3", ChecksumDiffers("made from another test set (testset.json xxh3 ")},
+          {"input", [](const json& got, const json& want) {
+             return "made with --input " + got.get<std::string>() + ", not " +
+                    want.get<std::string>();
+           }}};
 }
 
-// Schema-checked, into a directory made if missing, atomic.
-Status WritePartDocument(const fs::path& path, const json& doc, const char* schema) {
-  HANDDB_RETURN_IF_ERROR(ValidateJson(doc, schema, path.string()));
-  std::error_code ec;
-  fs::create_directories(path.parent_path(), ec);
-  if (ec) {
-    return Status(StatusCode::kIoError,
-                  path.parent_path().string() + ": cannot create: " + ec.message());
+template <>
+std::vector<InputCheck> InputChecks<PhotoOutcome>() {
+  return {{"database_manifest_xxh3", ChecksumDiffers("made from another database (manifest xxh3 ")},
+          {"photos_xxh3", ChecksumDiffers("made from other photos (photo names and sizes xxh3 ")},
+          {"keypoints_xxh3", ChecksumDiffers("made with another --keypoints file (xxh3 ")}};
+}
+
+// Parts 0..num_tasks-1 of WORK (num_tasks from the fingerprint), each read and checked against
+// `expect(task)`, their rows appended to `rows` in task order; `threads` the largest of the
+// tasks' and `wall_seconds` from the first task's start to the last one's end.
+template <typename Row>
+Status ReadAllParts(const fs::path& work_dir,
+                    const EvaluationFingerprint& fingerprint,
+                    const std::function<PartExpectation<Row>(uint32_t task)>& expect,
+                    std::vector<Row>* rows,
+                    int* threads,
+                    double* wall_seconds) {
+  const uint32_t num_tasks = fingerprint.inputs.at("tasks").get<uint32_t>();
+  double first_start = std::numeric_limits<double>::infinity();
+  double last_finish = -std::numeric_limits<double>::infinity();
+  *threads = 0;
+  for (uint32_t task = 0; task < num_tasks; ++task) {
+    const fs::path path = PartPath(work_dir, task);
+    auto part = ReadPart(path, expect(task));
+    if (!part.ok()) {
+      if (part.status().code() == StatusCode::kNotFound) return MissingPart(path, task, num_tasks);
+      return part.status();
+    }
+    first_start = std::min(first_start, part->started_at);
+    last_finish = std::max(last_finish, part->finished_at);
+    *threads = std::max(*threads, part->threads);
+    for (auto& r : part->rows) rows->push_back(std::move(r));
   }
-  return WriteJsonFileAtomic(path, doc);
+  *wall_seconds = num_tasks > 0 ? std::max(0.0, last_finish - first_start) : 0;
+  return Status::Ok();
 }
 
 }  // namespace
+
+json PartRow<ViewOutcome>::ToJson(const ViewOutcome& v) {
+  json j = {{"index", v.testset_index},
+            {"id", v.test_id},
+            {"basic", v.basic},
+            {"shape_name", v.shape_name},
+            {"ranks", v.ranks},
+            {"correct_pairs", v.correct_pairs},
+            {"num_correct", v.num_correct},
+            {"top1_keypoint_error", NumberOrNull(v.top1_keypoint_error)},
+            {"best10_keypoint_error", NumberOrNull(v.best10_keypoint_error)},
+            {"input_seconds", v.input_seconds},
+            {"search_seconds", v.search_seconds},
+            {"deep_search", v.deep_search},
+            {"query_points", v.num_query_points}};
+  if (!v.error.empty()) j["error"] = v.error;
+  if (v.top1) {
+    const CorrectnessDetail& d = v.top1->detail;
+    j["top1"] = {{"view_id", v.top1->view_id},
+                 {"roll", v.top1->roll},
+                 {"distance", v.top1->distance},
+                 {"shape_name", v.top1->shape_name},
+                 {"joint_distance_deg", d.joint_distance_deg},
+                 {"direction_deg", d.direction_deg},
+                 {"roll_deg", d.roll_deg},
+                 {"shape_ok", d.shape_ok},
+                 {"direction_ok", d.direction_ok},
+                 {"roll_ok", d.roll_ok}};
+  }
+  return j;
+}
+
+Result<ViewOutcome> PartRow<ViewOutcome>::FromJson(const json& j, const std::string& /*where*/) {
+  ViewOutcome v;
+  v.testset_index = j.at("index").get<uint32_t>();
+  v.test_id = j.at("id").get<uint32_t>();
+  v.basic = j.at("basic").get<bool>();
+  v.shape_name = j.at("shape_name").get<std::string>();
+  if (j.contains("error")) v.error = j.at("error").get<std::string>();
+  v.ranks = j.at("ranks").get<std::vector<int64_t>>();
+  v.correct_pairs = j.at("correct_pairs").get<std::vector<int64_t>>();
+  v.num_correct = j.at("num_correct").get<int64_t>();
+  v.top1_keypoint_error = NumberOrNaN(j.at("top1_keypoint_error"));
+  v.best10_keypoint_error = NumberOrNaN(j.at("best10_keypoint_error"));
+  v.input_seconds = j.at("input_seconds").get<double>();
+  v.search_seconds = j.at("search_seconds").get<double>();
+  v.deep_search = j.at("deep_search").get<bool>();
+  v.num_query_points = j.at("query_points").get<size_t>();
+  if (j.contains("top1")) {
+    const json& t = j.at("top1");
+    MatchBrief m;
+    m.view_id = t.at("view_id").get<view_id_t>();
+    m.roll = t.at("roll").get<roll_id_t>();
+    m.distance = t.at("distance").get<double>();
+    m.shape_name = t.at("shape_name").get<std::string>();
+    m.detail.joint_distance_deg = t.at("joint_distance_deg").get<double>();
+    m.detail.direction_deg = t.at("direction_deg").get<double>();
+    m.detail.roll_deg = t.at("roll_deg").get<double>();
+    m.detail.shape_ok = t.at("shape_ok").get<bool>();
+    m.detail.direction_ok = t.at("direction_ok").get<bool>();
+    m.detail.roll_ok = t.at("roll_ok").get<bool>();
+    v.top1 = m;
+  }
+  return v;
+}
 
 json ScoringOptionsToJson(const EvaluationOptions& options) {
   const CorrectnessOptions& c = options.correctness;
@@ -216,15 +238,11 @@ EvaluationFingerprint MakeEvaluationFingerprint(const std::string& database_mani
                                                 QueryInput input,
                                                 const EvaluationOptions& options,
                                                 uint32_t num_tasks) {
-  EvaluationFingerprint f;
-  f.inputs = {{"database_manifest_xxh3", database_manifest_xxh3},
-              {"testset_xxh3", testset_xxh3},
-              {"input", QueryInputName(input)},
-              {"options", ScoringOptionsToJson(options)},
-              {"tasks", num_tasks}};
-  const std::string text = f.inputs.dump();
-  f.value = shard::ChecksumHex(shard::Checksum(text.data(), text.size()));
-  return f;
+  return FingerprintOf({{"database_manifest_xxh3", database_manifest_xxh3},
+                        {"testset_xxh3", testset_xxh3},
+                        {"input", QueryInputName(input)},
+                        {"options", ScoringOptionsToJson(options)},
+                        {"tasks", num_tasks}});
 }
 
 Result<EvaluationFingerprint> ComputeEvaluationFingerprint(const fs::path& db_dir,
@@ -249,106 +267,204 @@ std::vector<uint32_t> TaskSlice(std::span<const uint32_t> selected,
   return slice;
 }
 
+std::vector<uint32_t> TaskSlice(size_t num_items, uint32_t task, uint32_t num_tasks) {
+  THROW_CHECK_GE(num_tasks, 1u);
+  std::vector<uint32_t> slice;
+  for (size_t k = task; k < num_items; k += num_tasks) slice.push_back(static_cast<uint32_t>(k));
+  return slice;
+}
+
 std::string PartName(uint32_t task) { return SlurmTaskName(kPartPrefix, task); }
 
 fs::path PartPath(const fs::path& work_dir, uint32_t task) {
   return work_dir / "parts" / (PartName(task) + ".json");
 }
 
-json PartToJson(const EvaluationPart& part) {
-  json views = json::array();
-  for (const auto& v : part.views) views.push_back(ViewToJson(v));
-  return PartJson("handdb-evaluation-part", part, "views", std::move(views));
+Status PartRow<ViewOutcome>::Check(const ViewOutcome& v,
+                                   size_t k,
+                                   const Expected& expect,
+                                   const std::string& file) {
+  if (v.testset_index != expect.slice[k]) {
+    return Status(StatusCode::kInvalidArgument,
+                  file + ": views[" + std::to_string(k) + "] is test view " +
+                      std::to_string(v.testset_index) + ", expected " +
+                      std::to_string(expect.slice[k]));
+  }
+  if (v.ranks.size() != expect.num_criteria || v.correct_pairs.size() != expect.num_criteria) {
+    return Status(StatusCode::kInvalidArgument,
+                  file + ": views[" + std::to_string(k) + "]: " + std::to_string(v.ranks.size()) +
+                      " ranks and " + std::to_string(v.correct_pairs.size()) +
+                      " correct-pair counts, expected " + std::to_string(expect.num_criteria) +
+                      " (one per criterion)");
+  }
+  return Status::Ok();
 }
 
-Result<EvaluationPart> PartFromJson(const json& doc, const std::string& where) {
+Status PartRow<PhotoOutcome>::Check(const PhotoOutcome& o,
+                                    size_t k,
+                                    const Expected& expect,
+                                    const std::string& file) {
+  if (o.photo != expect.photos[k]) {
+    return Status(StatusCode::kInvalidArgument,
+                  file + ": photos[" + std::to_string(k) + "] is " + o.photo + ", expected " +
+                      expect.photos[k]);
+  }
+  return Status::Ok();
+}
+
+PartExpectation<ViewOutcome> ExpectedPart(const EvaluationFingerprint& fingerprint,
+                                          uint32_t task,
+                                          std::span<const uint32_t> selected,
+                                          size_t num_criteria) {
+  PartExpectation<ViewOutcome> expect;
+  expect.fingerprint = fingerprint;
+  expect.task = task;
+  expect.rows.slice = TaskSlice(selected, task, fingerprint.inputs.at("tasks").get<uint32_t>());
+  expect.rows.num_criteria = num_criteria;
+  return expect;
+}
+
+PartExpectation<PhotoOutcome> ExpectedPart(const EvaluationFingerprint& fingerprint,
+                                           uint32_t task,
+                                           const PhotoSet& photos) {
+  PartExpectation<PhotoOutcome> expect;
+  expect.fingerprint = fingerprint;
+  expect.task = task;
+  const uint32_t num_tasks = fingerprint.inputs.at("tasks").get<uint32_t>();
+  for (uint32_t i : TaskSlice(photos.photos.size(), task, num_tasks)) {
+    expect.rows.photos.push_back(photos.photos[i].relative);
+  }
+  return expect;
+}
+
+template <typename Row>
+json PartToJson(const Part<Row>& part) {
+  json rows = json::array();
+  for (const Row& r : part.rows) rows.push_back(PartRow<Row>::ToJson(r));
+  return {{"format", PartRow<Row>::kFormat},
+          {"version", 1},
+          {"fingerprint", part.fingerprint.value},
+          {"inputs", part.fingerprint.inputs},
+          {"task", part.task},
+          {"tasks", part.num_tasks},
+          {"threads", part.threads},
+          {"started_at", part.started_at},
+          {"finished_at", part.finished_at},
+          {PartRow<Row>::kKey, std::move(rows)}};
+}
+
+template <typename Row>
+Result<Part<Row>> PartFromJson(const json& doc, const std::string& where) {
   try {
-    EvaluationPart part;
-    ReadPartHeader(doc, &part);
-    for (const auto& v : doc.at("views")) part.views.push_back(ViewFromJson(v));
+    Part<Row> part;
+    part.fingerprint.value = doc.at("fingerprint").get<std::string>();
+    part.fingerprint.inputs = doc.at("inputs");
+    part.task = doc.at("task").get<uint32_t>();
+    part.num_tasks = doc.at("tasks").get<uint32_t>();
+    part.threads = doc.at("threads").get<int>();
+    part.started_at = doc.at("started_at").get<double>();
+    part.finished_at = doc.at("finished_at").get<double>();
+    const json& rows = doc.at(PartRow<Row>::kKey);
+    for (size_t k = 0; k < rows.size(); ++k) {
+      auto r = PartRow<Row>::FromJson(
+          rows.at(k), where + ": " + PartRow<Row>::kKey + "[" + std::to_string(k) + "]");
+      if (!r.ok()) return r.status();
+      part.rows.push_back(std::move(*r));
+    }
     return part;
   } catch (const json::exception& e) {
     return Status(StatusCode::kSchemaViolation, where + ": " + e.what());
   }
 }
 
-Status WritePart(const fs::path& path, const EvaluationPart& part) {
-  return WritePartDocument(path, PartToJson(part), "evaluation_part.schema.json");
+template <typename Row>
+Status WritePart(const fs::path& path, const Part<Row>& part) {
+  const json doc = PartToJson(part);
+  HANDDB_RETURN_IF_ERROR(ValidateJson(doc, PartRow<Row>::kSchema, path.string()));
+  std::error_code ec;
+  fs::create_directories(path.parent_path(), ec);
+  if (ec) {
+    return Status(StatusCode::kIoError,
+                  path.parent_path().string() + ": cannot create: " + ec.message());
+  }
+  return WriteJsonFileAtomic(path, doc);
 }
 
-Result<EvaluationPart> ReadPart(const fs::path& path, const PartExpectation& expect) {
-  auto doc = ReadJsonFile(path, "evaluation_part.schema.json");
+template <typename Row>
+Result<Part<Row>> ReadPart(const fs::path& path, const PartExpectation<Row>& expect) {
+  auto doc = ReadJsonFile(path, PartRow<Row>::kSchema);
   if (!doc.ok()) return doc.status();
-  auto part = PartFromJson(*doc, path.string());
+  auto part = PartFromJson<Row>(*doc, path.string());
   if (!part.ok()) return part.status();
   const std::string file = path.string();
-  const std::vector<InputCheck> checks = {
-      {"database_manifest_xxh3", ChecksumDiffers("made from another database (manifest xxh3 ")},
-      {"testset_xxh3", ChecksumDiffers("made from another test set (testset.json xxh3 ")},
-      {"input", [](const json& got, const json& want) {
-         return "made with --input " + got.get<std::string>() + ", not " + want.get<std::string>();
-       }}};
-  HANDDB_RETURN_IF_ERROR(
-      CheckPartInputs(file, part->fingerprint, part->num_tasks, expect.fingerprint, checks));
+  HANDDB_RETURN_IF_ERROR(CheckPartInputs(
+      file, part->fingerprint, part->num_tasks, expect.fingerprint, InputChecks<Row>()));
   if (part->task != expect.task) {
     return Status(StatusCode::kInvalidArgument,
                   file + ": holds task " + std::to_string(part->task) + ", expected task " +
                       std::to_string(expect.task));
   }
-  if (part->views.size() != expect.slice.size()) {
+  const size_t count = PartRow<Row>::Count(expect.rows);
+  if (part->rows.size() != count) {
     return Status(StatusCode::kInvalidArgument,
-                  file + ": " + std::to_string(part->views.size()) + " views, task " +
-                      std::to_string(expect.task) + " has " + std::to_string(expect.slice.size()));
+                  file + ": " + std::to_string(part->rows.size()) + " " + PartRow<Row>::kKey +
+                      ", task " + std::to_string(expect.task) + " has " + std::to_string(count));
   }
-  for (size_t k = 0; k < part->views.size(); ++k) {
-    const ViewOutcome& v = part->views[k];
-    if (v.testset_index != expect.slice[k]) {
-      return Status(StatusCode::kInvalidArgument,
-                    file + ": views[" + std::to_string(k) + "] is test view " +
-                        std::to_string(v.testset_index) + ", expected " +
-                        std::to_string(expect.slice[k]));
-    }
-    if (v.ranks.size() != expect.num_criteria || v.correct_pairs.size() != expect.num_criteria) {
-      return Status(StatusCode::kInvalidArgument,
-                    file + ": views[" + std::to_string(k) + "]: " + std::to_string(v.ranks.size()) +
-                        " ranks and " + std::to_string(v.correct_pairs.size()) +
-                        " correct-pair counts, expected " + std::to_string(expect.num_criteria) +
-                        " (one per criterion)");
-    }
+  for (size_t k = 0; k < part->rows.size(); ++k) {
+    HANDDB_RETURN_IF_ERROR(PartRow<Row>::Check(part->rows[k], k, expect.rows, file));
   }
   return part;
 }
+
+template json PartToJson(const Part<ViewOutcome>&);
+template json PartToJson(const Part<PhotoOutcome>&);
+template Result<Part<ViewOutcome>> PartFromJson(const json&, const std::string&);
+template Result<Part<PhotoOutcome>> PartFromJson(const json&, const std::string&);
+template Status WritePart(const fs::path&, const Part<ViewOutcome>&);
+template Status WritePart(const fs::path&, const Part<PhotoOutcome>&);
+template Result<Part<ViewOutcome>> ReadPart(const fs::path&, const PartExpectation<ViewOutcome>&);
+template Result<Part<PhotoOutcome>> ReadPart(const fs::path&, const PartExpectation<PhotoOutcome>&);
 
 Status MergeParts(const fs::path& work_dir,
                   const EvaluationFingerprint& fingerprint,
                   std::span<const uint32_t> selected,
                   EvaluationReport* report) {
-  const uint32_t num_tasks = fingerprint.inputs.at("tasks").get<uint32_t>();
   report->views.clear();
   report->views.reserve(selected.size());
-  double first_start = std::numeric_limits<double>::infinity();
-  double last_finish = -std::numeric_limits<double>::infinity();
+  const size_t num_criteria = report->criteria.size();
   int threads = 0;
-  for (uint32_t task = 0; task < num_tasks; ++task) {
-    PartExpectation expect;
-    expect.fingerprint = fingerprint;
-    expect.task = task;
-    expect.slice = TaskSlice(selected, task, num_tasks);
-    expect.num_criteria = report->criteria.size();
-    const fs::path path = PartPath(work_dir, task);
-    auto part = ReadPart(path, expect);
-    if (!part.ok()) {
-      if (part.status().code() == StatusCode::kNotFound) return MissingPart(path, task, num_tasks);
-      return part.status();
-    }
-    first_start = std::min(first_start, part->started_at);
-    last_finish = std::max(last_finish, part->finished_at);
-    threads = std::max(threads, part->threads);
-    for (auto& v : part->views) report->views.push_back(std::move(v));
-  }
+  double wall_seconds = 0;
+  HANDDB_RETURN_IF_ERROR(ReadAllParts<ViewOutcome>(
+      work_dir,
+      fingerprint,
+      [&](uint32_t task) { return ExpectedPart(fingerprint, task, selected, num_criteria); },
+      &report->views,
+      &threads,
+      &wall_seconds));
   if (threads > 0) report->threads = threads;
   FinishReport(report);
-  report->wall_seconds = num_tasks > 0 ? std::max(0.0, last_finish - first_start) : 0;
+  report->wall_seconds = wall_seconds;
+  return Status::Ok();
+}
+
+Status MergeParts(const fs::path& work_dir,
+                  const EvaluationFingerprint& fingerprint,
+                  const PhotoSet& photos,
+                  PhotoReport* report) {
+  report->outcomes.clear();
+  report->outcomes.reserve(photos.photos.size());
+  int threads = 0;
+  double wall_seconds = 0;
+  HANDDB_RETURN_IF_ERROR(ReadAllParts<PhotoOutcome>(
+      work_dir,
+      fingerprint,
+      [&](uint32_t task) { return ExpectedPart(fingerprint, task, photos); },
+      &report->outcomes,
+      &threads,
+      &wall_seconds));
+  if (threads > 0) report->threads = threads;
+  FinishPhotoReport(report);
+  report->wall_seconds = wall_seconds;
   return Status::Ok();
 }
 
@@ -377,15 +493,11 @@ EvaluationFingerprint MakePhotoEvaluationFingerprint(const std::string& database
                                                      const std::string& keypoints_xxh3,
                                                      const json& scoring_options,
                                                      uint32_t num_tasks) {
-  EvaluationFingerprint f;
-  f.inputs = {{"database_manifest_xxh3", database_manifest_xxh3},
-              {"photos_xxh3", photos_xxh3},
-              {"keypoints_xxh3", keypoints_xxh3},
-              {"options", scoring_options},
-              {"tasks", num_tasks}};
-  const std::string text = f.inputs.dump();
-  f.value = shard::ChecksumHex(shard::Checksum(text.data(), text.size()));
-  return f;
+  return FingerprintOf({{"database_manifest_xxh3", database_manifest_xxh3},
+                        {"photos_xxh3", photos_xxh3},
+                        {"keypoints_xxh3", keypoints_xxh3},
+                        {"options", scoring_options},
+                        {"tasks", num_tasks}});
 }
 
 Result<EvaluationFingerprint> ComputePhotoEvaluationFingerprint(const fs::path& db_dir,
@@ -404,105 +516,6 @@ Result<EvaluationFingerprint> ComputePhotoEvaluationFingerprint(const fs::path& 
   }
   return MakePhotoEvaluationFingerprint(
       shard::ChecksumHex(*manifest), *list, keypoints, scoring_options, num_tasks);
-}
-
-std::vector<uint32_t> PhotoTaskSlice(const PhotoSet& photos, uint32_t task, uint32_t num_tasks) {
-  std::vector<uint32_t> all(photos.photos.size());
-  for (uint32_t i = 0; i < all.size(); ++i) all[i] = i;
-  return TaskSlice(all, task, num_tasks);
-}
-
-json PhotoPartToJson(const PhotoEvaluationPart& part) {
-  json photos = json::array();
-  for (const PhotoOutcome& o : part.photos) photos.push_back(o.ToJson());
-  return PartJson("handdb-photo-evaluation-part", part, "photos", std::move(photos));
-}
-
-Result<PhotoEvaluationPart> PhotoPartFromJson(const json& doc, const std::string& where) {
-  try {
-    PhotoEvaluationPart part;
-    ReadPartHeader(doc, &part);
-    const json& photos = doc.at("photos");
-    for (size_t k = 0; k < photos.size(); ++k) {
-      auto o = PhotoOutcome::FromJson(photos.at(k), where + ": photos[" + std::to_string(k) + "]");
-      if (!o.ok()) return o.status();
-      part.photos.push_back(std::move(*o));
-    }
-    return part;
-  } catch (const json::exception& e) {
-    return Status(StatusCode::kSchemaViolation, where + ": " + e.what());
-  }
-}
-
-Status WritePhotoPart(const fs::path& path, const PhotoEvaluationPart& part) {
-  return WritePartDocument(path, PhotoPartToJson(part), "photo_evaluation_part.schema.json");
-}
-
-Result<PhotoEvaluationPart> ReadPhotoPart(const fs::path& path,
-                                          const PhotoPartExpectation& expect) {
-  auto doc = ReadJsonFile(path, "photo_evaluation_part.schema.json");
-  if (!doc.ok()) return doc.status();
-  auto part = PhotoPartFromJson(*doc, path.string());
-  if (!part.ok()) return part.status();
-  const std::string file = path.string();
-  const std::vector<InputCheck> checks = {
-      {"database_manifest_xxh3", ChecksumDiffers("made from another database (manifest xxh3 ")},
-      {"photos_xxh3", ChecksumDiffers("made from other photos (photo names and sizes xxh3 ")},
-      {"keypoints_xxh3", ChecksumDiffers("made with another --keypoints file (xxh3 ")}};
-  HANDDB_RETURN_IF_ERROR(
-      CheckPartInputs(file, part->fingerprint, part->num_tasks, expect.fingerprint, checks));
-  if (part->task != expect.task) {
-    return Status(StatusCode::kInvalidArgument,
-                  file + ": holds task " + std::to_string(part->task) + ", expected task " +
-                      std::to_string(expect.task));
-  }
-  if (part->photos.size() != expect.photos.size()) {
-    return Status(StatusCode::kInvalidArgument,
-                  file + ": " + std::to_string(part->photos.size()) + " photos, task " +
-                      std::to_string(expect.task) + " has " + std::to_string(expect.photos.size()));
-  }
-  for (size_t k = 0; k < part->photos.size(); ++k) {
-    if (part->photos[k].photo != expect.photos[k]) {
-      return Status(StatusCode::kInvalidArgument,
-                    file + ": photos[" + std::to_string(k) + "] is " + part->photos[k].photo +
-                        ", expected " + expect.photos[k]);
-    }
-  }
-  return part;
-}
-
-Status MergePhotoParts(const fs::path& work_dir,
-                       const EvaluationFingerprint& fingerprint,
-                       const PhotoSet& photos,
-                       PhotoReport* report) {
-  const uint32_t num_tasks = fingerprint.inputs.at("tasks").get<uint32_t>();
-  report->outcomes.clear();
-  report->outcomes.reserve(photos.photos.size());
-  double first_start = std::numeric_limits<double>::infinity();
-  double last_finish = -std::numeric_limits<double>::infinity();
-  int threads = 0;
-  for (uint32_t task = 0; task < num_tasks; ++task) {
-    PhotoPartExpectation expect;
-    expect.fingerprint = fingerprint;
-    expect.task = task;
-    for (uint32_t i : PhotoTaskSlice(photos, task, num_tasks)) {
-      expect.photos.push_back(photos.photos[i].relative);
-    }
-    const fs::path path = PartPath(work_dir, task);
-    auto part = ReadPhotoPart(path, expect);
-    if (!part.ok()) {
-      if (part.status().code() == StatusCode::kNotFound) return MissingPart(path, task, num_tasks);
-      return part.status();
-    }
-    first_start = std::min(first_start, part->started_at);
-    last_finish = std::max(last_finish, part->finished_at);
-    threads = std::max(threads, part->threads);
-    for (auto& o : part->photos) report->outcomes.push_back(std::move(o));
-  }
-  if (threads > 0) report->threads = threads;
-  FinishPhotoReport(report);
-  report->wall_seconds = num_tasks > 0 ? std::max(0.0, last_finish - first_start) : 0;
-  return Status::Ok();
 }
 
 }  // namespace handdb

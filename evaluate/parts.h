@@ -53,6 +53,8 @@ Result<EvaluationFingerprint> ComputeEvaluationFingerprint(const std::filesystem
 std::vector<uint32_t> TaskSlice(std::span<const uint32_t> selected,
                                 uint32_t task,
                                 uint32_t num_tasks);
+// The same over positions 0..num_items-1 (a photo evaluation's photos).
+std::vector<uint32_t> TaskSlice(size_t num_items, uint32_t task, uint32_t num_tasks);
 
 // Task 7's part is "part-00007": the stem of its file and (`handdb evaluate --slurm`) of its
 // Slurm task's log and failure marker.
@@ -72,27 +74,91 @@ struct PartHeader {
   double finished_at = 0;
 };
 
-struct EvaluationPart : PartHeader {
-  std::vector<ViewOutcome> views;  // query_points are not stored
+// One API for the parts of both evaluations, over the row type a part holds (ViewOutcome of a
+// test set, PhotoOutcome of photos). PartRow<Row> is what differs: the document's format, schema
+// and key of its rows (also the noun of messages), the row's JSON codec, and what the rows of a
+// task must be (Expected) to belong to this evaluation.
+template <typename Row>
+struct PartRow;
+
+template <>
+struct PartRow<ViewOutcome> {
+  static constexpr char kFormat[] = "handdb-evaluation-part";
+  static constexpr char kSchema[] = "evaluation_part.schema.json";
+  static constexpr char kKey[] = "views";
+  struct Expected {
+    std::vector<uint32_t> slice;  // TaskSlice of the selection: the test-set index of each view
+    size_t num_criteria = 0;      // ranks per view, one per criterion
+  };
+  static size_t Count(const Expected& e) { return e.slice.size(); }
+  // query_points are not stored.
+  static nlohmann::json ToJson(const ViewOutcome& v);
+  // The JSON must already match the schema: a missing field throws json::exception, which
+  // PartFromJson reports naming the file.
+  static Result<ViewOutcome> FromJson(const nlohmann::json& j, const std::string& where);
+  // Row k of `file` against the slice: its test view and its number of ranks.
+  static Status Check(const ViewOutcome& v,
+                      size_t k,
+                      const Expected& expect,
+                      const std::string& file);
 };
 
-nlohmann::json PartToJson(const EvaluationPart& part);
-// `where` names the source in errors. The JSON must already match the schema.
-Result<EvaluationPart> PartFromJson(const nlohmann::json& doc, const std::string& where);
-// Schema-checked, atomic.
-Status WritePart(const std::filesystem::path& path, const EvaluationPart& part);
+template <>
+struct PartRow<PhotoOutcome> {
+  static constexpr char kFormat[] = "handdb-photo-evaluation-part";
+  static constexpr char kSchema[] = "photo_evaluation_part.schema.json";
+  static constexpr char kKey[] = "photos";
+  struct Expected {
+    std::vector<std::string> photos;  // the relative names of the task's slice, in order
+  };
+  static size_t Count(const Expected& e) { return e.photos.size(); }
+  static nlohmann::json ToJson(const PhotoOutcome& o) { return o.ToJson(); }
+  static Result<PhotoOutcome> FromJson(const nlohmann::json& j, const std::string& where) {
+    return PhotoOutcome::FromJson(j, where);
+  }
+  static Status Check(const PhotoOutcome& o,
+                      size_t k,
+                      const Expected& expect,
+                      const std::string& file);
+};
+
+template <typename Row>
+struct Part : PartHeader {
+  std::vector<Row> rows;  // query_points are not stored
+};
+using EvaluationPart = Part<ViewOutcome>;
+using PhotoEvaluationPart = Part<PhotoOutcome>;
 
 // What a part of one evaluation must be.
+template <typename Row>
 struct PartExpectation {
   EvaluationFingerprint fingerprint;
   uint32_t task = 0;
-  std::vector<uint32_t> slice;  // TaskSlice of the selection
-  size_t num_criteria = 0;
+  typename PartRow<Row>::Expected rows;
 };
-// Reads and checks a part: schema, fingerprint (naming what differs: database, test set, options
-// or task count), task number, exactly the views of its slice, one rank per criterion.
+// Task `task` of a test-set evaluation of `selected` views, scored on `num_criteria` criteria.
+PartExpectation<ViewOutcome> ExpectedPart(const EvaluationFingerprint& fingerprint,
+                                          uint32_t task,
+                                          std::span<const uint32_t> selected,
+                                          size_t num_criteria);
+// Task `task` of a photo evaluation of `photos`.
+PartExpectation<PhotoOutcome> ExpectedPart(const EvaluationFingerprint& fingerprint,
+                                           uint32_t task,
+                                           const PhotoSet& photos);
+
+template <typename Row>
+nlohmann::json PartToJson(const Part<Row>& part);
+// `where` names the source in errors. The JSON must already match the schema.
+template <typename Row>
+Result<Part<Row>> PartFromJson(const nlohmann::json& doc, const std::string& where);
+// Schema-checked (PartRow<Row>::kSchema), atomic.
+template <typename Row>
+Status WritePart(const std::filesystem::path& path, const Part<Row>& part);
+// Reads and checks a part: schema, fingerprint (naming what differs: database, test set or photos,
+// options or task count), task number, exactly the rows of its slice (PartRow<Row>::Check).
 // kNotFound when the file does not exist.
-Result<EvaluationPart> ReadPart(const std::filesystem::path& path, const PartExpectation& expect);
+template <typename Row>
+Result<Part<Row>> ReadPart(const std::filesystem::path& path, const PartExpectation<Row>& expect);
 
 // Reads and checks parts 0..num_tasks-1 of WORK (num_tasks from the fingerprint), puts their views
 // into `report` (which StartReport made), and calls FinishReport. The report's thread count is the
@@ -101,6 +167,12 @@ Status MergeParts(const std::filesystem::path& work_dir,
                   const EvaluationFingerprint& fingerprint,
                   std::span<const uint32_t> selected,
                   EvaluationReport* report);
+// The same for a photo evaluation: outcomes into `report` (which StartPhotoReport made), then
+// FinishPhotoReport.
+Status MergeParts(const std::filesystem::path& work_dir,
+                  const EvaluationFingerprint& fingerprint,
+                  const PhotoSet& photos,
+                  PhotoReport* report);
 
 // ---- Photo evaluations ------------------------------------------------------------------------
 
@@ -126,37 +198,5 @@ Result<EvaluationFingerprint> ComputePhotoEvaluationFingerprint(
     const PhotoSet& photos,
     const nlohmann::json& scoring_options,
     uint32_t num_tasks);
-
-// Task `task` of `num_tasks` of a photo evaluation: positions k of photos.photos with
-// k % num_tasks == task (TaskSlice of every position).
-std::vector<uint32_t> PhotoTaskSlice(const PhotoSet& photos, uint32_t task, uint32_t num_tasks);
-
-struct PhotoEvaluationPart : PartHeader {
-  std::vector<PhotoOutcome> photos;  // query_points are not stored
-};
-
-nlohmann::json PhotoPartToJson(const PhotoEvaluationPart& part);
-// `where` names the source in errors. The JSON must already match the schema.
-Result<PhotoEvaluationPart> PhotoPartFromJson(const nlohmann::json& doc, const std::string& where);
-// Schema-checked (schemas/photo_evaluation_part.schema.json), atomic.
-Status WritePhotoPart(const std::filesystem::path& path, const PhotoEvaluationPart& part);
-
-struct PhotoPartExpectation {
-  EvaluationFingerprint fingerprint;
-  uint32_t task = 0;
-  std::vector<std::string> photos;  // the relative names of the task's slice, in order
-};
-// Reads and checks a part as ReadPart does: schema, fingerprint (naming what differs: database,
-// photos, keypoints file, options or task count), task number, exactly the photos of its slice.
-// kNotFound when the file does not exist.
-Result<PhotoEvaluationPart> ReadPhotoPart(const std::filesystem::path& path,
-                                          const PhotoPartExpectation& expect);
-
-// Reads and checks parts 0..num_tasks-1 of WORK, puts their outcomes into `report` (which
-// StartPhotoReport made) and calls FinishPhotoReport; threads and wall_seconds as MergeParts.
-Status MergePhotoParts(const std::filesystem::path& work_dir,
-                       const EvaluationFingerprint& fingerprint,
-                       const PhotoSet& photos,
-                       PhotoReport* report);
 
 }  // namespace handdb

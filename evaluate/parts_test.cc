@@ -105,7 +105,7 @@ void WriteTaskPart(const Case& c,
   part.threads = 1;
   part.started_at = 1000.0 + task;
   part.finished_at = 1010.0 + task;
-  part.views = std::move(*views);
+  part.rows = std::move(*views);
   ASSERT_TRUE(WritePart(PartPath(work, task), part).ok());
 }
 
@@ -125,18 +125,18 @@ TEST(EvalParts, PartJsonRoundTripsExactly) {
   ASSERT_TRUE(views.ok());
   EvaluationPart part;
   part.fingerprint = MakeEvaluationFingerprint("aa", "bb", QueryInput::kClean, options, 1);
-  part.views = std::move(*views);
+  part.rows = std::move(*views);
   const json doc = PartToJson(part);
   ASSERT_TRUE(ValidateJson(doc, "evaluation_part.schema.json", "part").ok());
-  auto back = PartFromJson(json::parse(doc.dump()), "part");
+  auto back = PartFromJson<ViewOutcome>(json::parse(doc.dump()), "part");
   ASSERT_TRUE(back.ok()) << back.status().ToString();
   EXPECT_EQ(PartToJson(*back), doc);
-  ASSERT_EQ(back->views.size(), 9u);
-  EXPECT_TRUE(std::isnan(back->views[5].top1_keypoint_error));  // the failed input
-  EXPECT_EQ(back->views[5].error, "photo: no hand found");
-  ASSERT_TRUE(back->views[2].top1.has_value());
-  EXPECT_EQ(back->views[2].top1->distance, part.views[2].top1->distance);  // bit for bit
-  EXPECT_EQ(back->views[2].top1_keypoint_error, part.views[2].top1_keypoint_error);
+  ASSERT_EQ(back->rows.size(), 9u);
+  EXPECT_TRUE(std::isnan(back->rows[5].top1_keypoint_error));  // the failed input
+  EXPECT_EQ(back->rows[5].error, "photo: no hand found");
+  ASSERT_TRUE(back->rows[2].top1.has_value());
+  EXPECT_EQ(back->rows[2].top1->distance, part.rows[2].top1->distance);  // bit for bit
+  EXPECT_EQ(back->rows[2].top1_keypoint_error, part.rows[2].top1_keypoint_error);
 }
 
 // The guarantee: a report merged from parts equals the report of one run, for any task count
@@ -314,8 +314,11 @@ void WritePhotoTaskPart(const PhotoCase& c,
                         uint32_t task,
                         uint32_t num_tasks,
                         const fs::path& work) {
-  auto photos = ScorePhotos(
-      c.searcher, c.set, c.query_fn, PhotoOptions(), PhotoTaskSlice(c.set, task, num_tasks));
+  auto photos = ScorePhotos(c.searcher,
+                            c.set,
+                            c.query_fn,
+                            PhotoOptions(),
+                            TaskSlice(c.set.photos.size(), task, num_tasks));
   ASSERT_TRUE(photos.ok()) << photos.status().ToString();
   PhotoEvaluationPart part;
   part.fingerprint = fp;
@@ -324,8 +327,8 @@ void WritePhotoTaskPart(const PhotoCase& c,
   part.threads = 2;
   part.started_at = 500.0 + task;
   part.finished_at = 520.0 + task;
-  part.photos = std::move(*photos);
-  ASSERT_TRUE(WritePhotoPart(PartPath(work, task), part).ok());
+  part.rows = std::move(*photos);
+  ASSERT_TRUE(WritePart(PartPath(work, task), part).ok());
 }
 
 EvaluationFingerprint PhotoFingerprint(uint32_t tasks,
@@ -353,7 +356,7 @@ TEST(EvalParts, MergedPhotoPartsEqualOneRun) {
     const auto fp = PhotoFingerprint(tasks);
     for (uint32_t t = tasks; t-- > 0;) WritePhotoTaskPart(c, fp, t, tasks, work);
     PhotoReport merged = StartPhotoReport(c.searcher.database(), c.set, PhotoOptions());
-    Status s = MergePhotoParts(work, fp, c.set, &merged);
+    Status s = MergeParts(work, fp, c.set, &merged);
     ASSERT_TRUE(s.ok()) << s.ToString();
     const json merged_json = PhotoReportToJson(merged);
     EXPECT_TRUE(ValidateJson(merged_json, "photo_evaluation.schema.json", "merged").ok());
@@ -373,7 +376,7 @@ TEST(EvalParts, PhotoPartsOfAnotherEvaluationAreNamed) {
   for (uint32_t t = 0; t < 3; ++t) WritePhotoTaskPart(c, fp, t, 3, work);
   auto merge = [&](const EvaluationFingerprint& f) {
     PhotoReport r = StartPhotoReport(c.searcher.database(), c.set, PhotoOptions());
-    return MergePhotoParts(work, f, c.set, &r);
+    return MergeParts(work, f, c.set, &r);
   };
   ASSERT_TRUE(merge(fp).ok());
   const std::string part0 = PartPath(work, 0).string();

@@ -9,6 +9,7 @@
 #include "format/coarse_field.h"
 #include "format/field_codec.h"
 #include "format/point_codec.h"
+#include "format/shard_checks.h"
 #include "format/shard_layout.h"
 
 namespace handdb {
@@ -37,31 +38,32 @@ struct ShardReader::Impl {
   const uint8_t* record(size_t i) const { return views + i * view_stride; }
   // View i's point code: from its offset to the next view's (checked at open).
   std::span<const uint8_t> point_code(size_t i) const {
-    const uint64_t begin = Load<uint64_t>(record(i) + kViewOffPointOffset);
-    const uint64_t end = i + 1 < num_views ? Load<uint64_t>(record(i + 1) + kViewOffPointOffset)
-                                           : point_codes.size();
+    const uint64_t begin = LoadLittleEndian<uint64_t>(record(i) + kViewOffPointOffset);
+    const uint64_t end = i + 1 < num_views
+                             ? LoadLittleEndian<uint64_t>(record(i + 1) + kViewOffPointOffset)
+                             : point_codes.size();
     return point_codes.subspan(begin, end - begin);
   }
   std::span<const uint8_t> field_code(size_t i) const {
-    const uint64_t begin = Load<uint64_t>(field_codes.data() + 8 * i);
-    const uint64_t end = Load<uint64_t>(field_codes.data() + 8 * (i + 1));
+    const uint64_t begin = LoadLittleEndian<uint64_t>(field_codes.data() + 8 * i);
+    const uint64_t end = LoadLittleEndian<uint64_t>(field_codes.data() + 8 * (i + 1));
     return field_codes.subspan(begin, end - begin);
   }
   Status DecodeCodedPoints(size_t i, std::vector<PointQ>* out) const {
     const uint8_t* r = record(i);
     const std::span<const uint8_t> code = point_code(i);
-    const Status s = DecodeViewPoints(
-        code,
-        Load<float>(r + kViewOffScale),
-        {Load<float>(r + kViewOffSourceCentre), Load<float>(r + kViewOffSourceCentre + 4)},
-        out);
+    const Status s = DecodeViewPoints(code,
+                                      LoadLittleEndian<float>(r + kViewOffScale),
+                                      {LoadLittleEndian<float>(r + kViewOffSourceCentre),
+                                       LoadLittleEndian<float>(r + kViewOffSourceCentre + 4)},
+                                      out);
     const uint64_t at = static_cast<uint64_t>(code.data() - bytes.data());
     if (!s.ok()) {
       return Status(s.code(),
                     name + ": offset " + std::to_string(at) + ": view " + std::to_string(i) +
                         ": point code: " + s.message());
     }
-    const uint32_t want = Load<uint32_t>(r + kViewOffPointCount);
+    const uint32_t want = LoadLittleEndian<uint32_t>(r + kViewOffPointCount);
     if (out->size() != want) {
       return Status(StatusCode::kSizeMismatch,
                     name + ": offset " + std::to_string(at) + ": view " + std::to_string(i) +
@@ -225,7 +227,7 @@ bool ShardReader::coded() const { return impl_->coded; }
 
 uint32_t ShardReader::point_count(size_t i) const {
   THROW_CHECK_LT(i, impl_->num_views);
-  return Load<uint32_t>(impl_->record(i) + kViewOffPointCount);
+  return LoadLittleEndian<uint32_t>(impl_->record(i) + kViewOffPointCount);
 }
 
 std::span<const uint8_t> ShardReader::point_code(size_t i) const {
@@ -253,15 +255,15 @@ Status ShardReader::PeekPoints(size_t i, ViewPointsExtent* extent) const {
   if (!r.coded) return Status::Ok();
   const uint8_t* rec = r.record(i);
   const std::span<const uint8_t> code = r.point_code(i);
-  const Status s = PeekViewPoints(
-      code,
-      Load<float>(rec + kViewOffScale),
-      {Load<float>(rec + kViewOffSourceCentre), Load<float>(rec + kViewOffSourceCentre + 4)},
-      extent);
+  const Status s = PeekViewPoints(code,
+                                  LoadLittleEndian<float>(rec + kViewOffScale),
+                                  {LoadLittleEndian<float>(rec + kViewOffSourceCentre),
+                                   LoadLittleEndian<float>(rec + kViewOffSourceCentre + 4)},
+                                  extent);
   const std::string where = r.name + ": offset " + std::to_string(code.data() - r.bytes.data()) +
                             ": view " + std::to_string(i) + ": ";
   if (!s.ok()) return Status(s.code(), where + "point code: " + s.message());
-  const uint32_t want = Load<uint32_t>(rec + kViewOffPointCount);
+  const uint32_t want = LoadLittleEndian<uint32_t>(rec + kViewOffPointCount);
   if (extent->peeked && extent->count != want) {
     return Status(StatusCode::kSizeMismatch,
                   where + "point code holds " + std::to_string(extent->count) +
@@ -298,7 +300,7 @@ ViewLabel ShardReader::label(size_t i) const {
 uint64_t ShardReader::point_offset(size_t i) const {
   THROW_CHECK_LT(i, impl_->num_views);
   THROW_CHECK_MSG(!impl_->coded, impl_->name + ": a coded shard has no point offsets");
-  return Load<uint64_t>(impl_->record(i) + kViewOffPointOffset);
+  return LoadLittleEndian<uint64_t>(impl_->record(i) + kViewOffPointOffset);
 }
 
 std::span<const PointQ> ShardReader::points(size_t i) const {
@@ -306,8 +308,8 @@ std::span<const PointQ> ShardReader::points(size_t i) const {
   THROW_CHECK_MSG(!impl_->coded,
                   impl_->name + ": a coded shard's points are decoded (ShardReader::DecodePoints)");
   const uint8_t* r = impl_->record(i);
-  const uint64_t off = Load<uint64_t>(r + kViewOffPointOffset);
-  const uint32_t cnt = Load<uint32_t>(r + kViewOffPointCount);
+  const uint64_t off = LoadLittleEndian<uint64_t>(r + kViewOffPointOffset);
+  const uint32_t cnt = LoadLittleEndian<uint32_t>(r + kViewOffPointCount);
   return std::span<const PointQ>(impl_->points + off, cnt);  // range checked at open
 }
 
@@ -362,8 +364,8 @@ Status ShardReader::ScanViews(const ViewCallback& fn, const ScanOptions& options
       HANDDB_RETURN_IF_ERROR(r.DecodeCodedPoints(i, &decoded));
       pts = decoded;
     } else {
-      const uint64_t off = Load<uint64_t>(rec + kViewOffPointOffset);
-      const uint32_t cnt = Load<uint32_t>(rec + kViewOffPointCount);
+      const uint64_t off = LoadLittleEndian<uint64_t>(rec + kViewOffPointOffset);
+      const uint32_t cnt = LoadLittleEndian<uint32_t>(rec + kViewOffPointCount);
       pts = std::span<const PointQ>(r.points + off, cnt);
       if (options.verify_checksums) points_hash.Update(pts.data(), pts.size_bytes());
     }

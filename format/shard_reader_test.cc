@@ -345,9 +345,10 @@ TEST(ShardReader, CoarseFieldsSection) {
     const size_t table = shard::kHeaderSize;
     for (size_t e = 0; e < r->sections().size(); ++e) {
       const size_t at = table + e * shard::kSectionEntrySize;
-      if (shard::Load<uint32_t>(bytes.data() + at) != shard::kSectionCoarseFields) continue;
-      shard::Store<uint64_t>(bytes.data() + at + shard::kSecOffCount, 4);
-      shard::Store<uint64_t>(bytes.data() + at + shard::kSecOffSize, 4 * shard::kCoarseFieldSize);
+      if (LoadLittleEndian<uint32_t>(bytes.data() + at) != shard::kSectionCoarseFields) continue;
+      StoreLittleEndian<uint64_t>(bytes.data() + at + shard::kSecOffCount, 4);
+      StoreLittleEndian<uint64_t>(bytes.data() + at + shard::kSecOffSize,
+                                  4 * shard::kCoarseFieldSize);
     }
   }
   ASSERT_TRUE(shard::RewriteChecksums(bytes));
@@ -437,7 +438,7 @@ TEST(ShardReader, RefusesLabelsOutOfRange) {
   for (const Case& c : cases) {
     SCOPED_TRACE(c.message);
     auto bytes = good;
-    shard::Store<float>(bytes.data() + rec + c.field, c.value);
+    StoreLittleEndian<float>(bytes.data() + rec + c.field, c.value);
     ASSERT_TRUE(shard::RewriteChecksums(bytes));
     auto bad = ShardReader::FromMemory(bytes, "bad.hdb");
     ASSERT_FALSE(bad.ok());
@@ -448,7 +449,7 @@ TEST(ShardReader, RefusesLabelsOutOfRange) {
     EXPECT_EQ(m.find('\n'), std::string::npos) << m;
   }
   auto bytes = good;
-  shard::Store<uint32_t>(bytes.data() + rec + shard::kViewOffShapeId, kInvalidShapeId);
+  StoreLittleEndian<uint32_t>(bytes.data() + rec + shard::kViewOffShapeId, kInvalidShapeId);
   ASSERT_TRUE(shard::RewriteChecksums(bytes));
   EXPECT_EQ(ShardReader::FromMemory(bytes, "bad.hdb").status().message(),
             "bad.hdb: offset " + std::to_string(rec) +
@@ -599,10 +600,10 @@ struct CodedSample {
 
 // File offset of the (first) section of `type`.
 uint64_t SectionOffset(const std::vector<uint8_t>& bytes, uint32_t type) {
-  const shard::RawHeader h = shard::ParseHeader(bytes);
+  const shard::RawHeader h = shard::RawHeader::DecodeFrom(bytes);
   for (uint32_t i = 0; i < h.section_count; ++i) {
-    const shard::RawSection s =
-        shard::ParseSection(bytes.data() + h.section_table_offset + i * h.section_entry_size);
+    const shard::RawSection s = shard::RawSection::DecodeFrom(
+        bytes.data() + h.section_table_offset + i * h.section_entry_size);
     if (s.type == type) return s.offset;
   }
   THROW_CHECK_MSG(false, "no section of type " << type);
@@ -777,7 +778,7 @@ TEST(CodedShard, BadOffsetsAreRefusedAtOpen) {
   {
     std::vector<uint8_t> bytes = c.bytes;
     const uint64_t rec = SectionOffset(c.bytes, shard::kSectionViews) + 2 * shard::kViewRecordSize;
-    shard::Store<uint64_t>(bytes.data() + rec + shard::kViewOffPointOffset, 1);
+    StoreLittleEndian<uint64_t>(bytes.data() + rec + shard::kViewOffPointOffset, 1);
     ASSERT_TRUE(shard::RewriteChecksums(bytes));
     auto r = ShardReader::FromMemory(bytes, "coded.hdb");
     ASSERT_FALSE(r.ok());
@@ -788,7 +789,7 @@ TEST(CodedShard, BadOffsetsAreRefusedAtOpen) {
   {
     std::vector<uint8_t> bytes = c.bytes;
     const uint64_t table = SectionOffset(c.bytes, shard::kSectionFieldCodes);
-    shard::Store<uint64_t>(bytes.data() + table + 8 * 4, uint64_t{1} << 40);
+    StoreLittleEndian<uint64_t>(bytes.data() + table + 8 * 4, uint64_t{1} << 40);
     ASSERT_TRUE(shard::RewriteChecksums(bytes));
     auto r = ShardReader::FromMemory(bytes, "coded.hdb");
     ASSERT_FALSE(r.ok());

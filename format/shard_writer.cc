@@ -8,6 +8,7 @@
 #include "format/coarse_field.h"
 #include "format/field_codec.h"
 #include "format/point_codec.h"
+#include "format/shard_checks.h"
 #include "format/shard_layout.h"
 
 namespace handdb {
@@ -228,9 +229,9 @@ Result<ShardSummary> ShardWriter::Finish() {
     // The offset table (num_views + 1 entries, relative to the section), then the codes.
     const uint64_t table_bytes = 8 * (num_views + 1);
     std::vector<uint8_t> table(table_bytes);
-    Store<uint64_t>(table.data(), table_bytes);
+    StoreLittleEndian<uint64_t>(table.data(), table_bytes);
     for (uint64_t i = 0; i < num_views; ++i) {
-      Store<uint64_t>(table.data() + 8 * (i + 1), table_bytes + w.field_code_ends[i]);
+      StoreLittleEndian<uint64_t>(table.data() + 8 * (i + 1), table_bytes + w.field_code_ends[i]);
     }
     StreamingChecksum hash;
     hash.Update(table.data(), table.size());
@@ -270,14 +271,14 @@ Result<ShardSummary> ShardWriter::Finish() {
   HANDDB_RETURN_IF_ERROR(w.PadTo64());
   const uint64_t file_size = w.Position() + kFooterSize;
   uint8_t footer[kFooterSize];
-  Store<uint64_t>(footer, file_size);
+  StoreLittleEndian<uint64_t>(footer, file_size);
   std::memcpy(footer + 8, kMagic.data(), 8);
   HANDDB_RETURN_IF_ERROR(w.Append(footer, sizeof(footer)));
   HANDDB_RETURN_IF_ERROR(w.Flush());
 
   std::vector<uint8_t> table(sections.size() * kSectionEntrySize);
   for (size_t i = 0; i < sections.size(); ++i) {
-    SerializeSection(sections[i], &table[i * kSectionEntrySize]);
+    sections[i].EncodeTo(&table[i * kSectionEntrySize]);
   }
   RawHeader h;
   h.magic = kMagic;
@@ -293,7 +294,7 @@ Result<ShardSummary> ShardWriter::Finish() {
   h.section_entry_size = kSectionEntrySize;
   h.section_table_checksum = Checksum(table.data(), table.size());
   uint8_t header[kHeaderSize];
-  SerializeHeader(h, header);
+  h.EncodeTo(header);
   HANDDB_RETURN_IF_ERROR(w.file.WriteAt(0, header, sizeof(header)));
   HANDDB_RETURN_IF_ERROR(w.file.WriteAt(kHeaderSize, table.data(), table.size()));
 

@@ -20,6 +20,7 @@
 #include "format/field_codec.h"
 #include "format/manifest.h"
 #include "format/point_codec.h"
+#include "format/shard_checks.h"
 #include "format/shard_layout.h"
 
 namespace handdb {
@@ -188,8 +189,8 @@ void CheckPoints(const uint8_t* b,
                  ProblemList* problems) {
   for (uint64_t k = 0; k < count; ++k) {
     const uint64_t at = offset + (first + k) * kPointSize;
-    const auto x = Load<int16_t>(b + at);
-    const auto y = Load<int16_t>(b + at + 2);
+    const auto x = LoadLittleEndian<int16_t>(b + at);
+    const auto y = LoadLittleEndian<int16_t>(b + at + 2);
     if (std::abs(x) > kMaxAbsPointCoord || std::abs(y) > kMaxAbsPointCoord) {
       problems->Add("points-range",
                     StatusCode::kOutOfRange,
@@ -242,23 +243,23 @@ void CheckCodedView(std::span<const uint8_t> bytes,
   const RawSection& pc = layout.sections[static_cast<size_t>(layout.point_codes)];
   const RawSection& fc = layout.sections[static_cast<size_t>(layout.field_codes)];
   const std::string view = "view " + std::to_string(i) + ": ";
-  const uint64_t begin = Load<uint64_t>(rec + kViewOffPointOffset);
-  const uint64_t end =
-      i + 1 < vs.count
-          ? Load<uint64_t>(b + vs.offset + (i + 1) * layout.view_stride + kViewOffPointOffset)
-          : pc.size;
+  const uint64_t begin = LoadLittleEndian<uint64_t>(rec + kViewOffPointOffset);
+  const uint64_t end = i + 1 < vs.count
+                           ? LoadLittleEndian<uint64_t>(
+                                 b + vs.offset + (i + 1) * layout.view_stride + kViewOffPointOffset)
+                           : pc.size;
   const uint64_t code_at = pc.offset + begin;
   std::vector<PointQ> points;
-  const Status decoded = DecodeViewPoints(
-      bytes.subspan(code_at, end - begin),
-      Load<float>(rec + kViewOffScale),
-      {Load<float>(rec + kViewOffSourceCentre), Load<float>(rec + kViewOffSourceCentre + 4)},
-      &points);
+  const Status decoded = DecodeViewPoints(bytes.subspan(code_at, end - begin),
+                                          LoadLittleEndian<float>(rec + kViewOffScale),
+                                          {LoadLittleEndian<float>(rec + kViewOffSourceCentre),
+                                           LoadLittleEndian<float>(rec + kViewOffSourceCentre + 4)},
+                                          &points);
   if (!decoded.ok()) {
     problems->Add("point-code", decoded.code(), code_at, view + "point code: " + decoded.message());
     return;
   }
-  const uint32_t count = Load<uint32_t>(rec + kViewOffPointCount);
+  const uint32_t count = LoadLittleEndian<uint32_t>(rec + kViewOffPointCount);
   if (points.size() != count) {
     problems->Add("point-code",
                   StatusCode::kSizeMismatch,
@@ -279,8 +280,8 @@ void CheckCodedView(std::span<const uint8_t> bytes,
       return;
     }
   }
-  const uint64_t field_begin = Load<uint64_t>(b + fc.offset + 8 * i);
-  const uint64_t field_end = Load<uint64_t>(b + fc.offset + 8 * (i + 1));
+  const uint64_t field_begin = LoadLittleEndian<uint64_t>(b + fc.offset + 8 * i);
+  const uint64_t field_end = LoadLittleEndian<uint64_t>(b + fc.offset + 8 * (i + 1));
   std::array<uint8_t, kCoarseFieldSize> field;
   const Status field_decoded =
       DecodeCoarseField(bytes.subspan(fc.offset + field_begin, field_end - field_begin), field);
@@ -347,7 +348,7 @@ ValidationReport ValidateBytes(std::span<const uint8_t> bytes,
     for (uint64_t i = 0; i < vs.count; ++i) {
       const uint64_t at = vs.offset + i * layout.view_stride;
       CheckLabel(b + at, at, i, limits, options, &problems);
-      const auto render_id = Load<uint32_t>(b + at + kViewOffRenderId);
+      const auto render_id = LoadLittleEndian<uint32_t>(b + at + kViewOffRenderId);
       if (seen != nullptr && render_id != kInvalidRenderId) {
         const std::string here = name + " view " + std::to_string(i);
         auto [it, inserted] = seen->emplace(render_id, here);
@@ -362,8 +363,8 @@ ValidationReport ValidateBytes(std::span<const uint8_t> bytes,
       if (layout.views_ok && layout.coded) {
         CheckCodedView(bytes, layout, i, b + at, &problems);
       } else if (layout.views_ok) {
-        const uint64_t off = Load<uint64_t>(b + at + kViewOffPointOffset);
-        const uint32_t cnt = Load<uint32_t>(b + at + kViewOffPointCount);
+        const uint64_t off = LoadLittleEndian<uint64_t>(b + at + kViewOffPointOffset);
+        const uint32_t cnt = LoadLittleEndian<uint32_t>(b + at + kViewOffPointCount);
         CheckPoints(b, ps->offset, off, cnt, "view " + std::to_string(i) + ": ", &problems);
         if (layout.coarse_fields >= 0) {
           CheckCoarseField(b, ps->offset + off * kPointSize, cnt, layout, i, &problems);
@@ -503,7 +504,7 @@ ValidationReport ValidateDatabaseOnce(const fs::path& db_dir, const ValidateOpti
         }
       }
       if (bytes.size() >= kMinFileSize) {
-        const RawHeader h = ParseHeader(bytes);
+        const RawHeader h = RawHeader::DecodeFrom(bytes);
         if (h.num_views != entry->views) {
           mismatch(StatusCode::kSizeMismatch,
                    kOffNumViews,

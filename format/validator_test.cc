@@ -73,14 +73,14 @@ TEST(Validator, ReportsEveryProblemWithOffsetAndRawValues) {
   // View 1: a joint angle beyond the hand model's limit [-0.5, 1.6]; view 2: NaN keypoint;
   // view 3: a non-unit view direction; points 0 and 7 out of range.
   const uint64_t joint_at = views + 1 * shard::kViewRecordSize + shard::kViewOffJointAngles + 4 * 6;
-  shard::Store<float>(bytes.data() + joint_at, 2.5f);
-  shard::Store<float>(
+  StoreLittleEndian<float>(bytes.data() + joint_at, 2.5f);
+  StoreLittleEndian<float>(
       bytes.data() + views + 2 * shard::kViewRecordSize + shard::kViewOffKeypoints + 12 * 4 + 4,
       std::nanf(""));
-  shard::Store<float>(
+  StoreLittleEndian<float>(
       bytes.data() + views + 3 * shard::kViewRecordSize + shard::kViewOffViewDirection, 5.0f);
-  shard::Store<int16_t>(bytes.data() + points, 7000);
-  shard::Store<int16_t>(bytes.data() + points + 7 * 4 + 2, -6145);
+  StoreLittleEndian<int16_t>(bytes.data() + points, 7000);
+  StoreLittleEndian<int16_t>(bytes.data() + points + 7 * 4 + 2, -6145);
   ASSERT_TRUE(shard::RewriteChecksums(bytes));
   // The reader refuses it at the first problem (view 2's NaN: view 1's joint is inside +-2 pi,
   // the reader knows no hand model) ...
@@ -146,7 +146,7 @@ TEST(Validator, CapsListedProblemsButCountsAll) {
   auto reader = ShardReader::FromMemory(bytes, "s");
   ASSERT_TRUE(reader.ok());
   const size_t n = reader->all_points().size();
-  for (size_t k = 0; k < n; ++k) shard::Store<int16_t>(bytes.data() + points + 4 * k, 9999);
+  for (size_t k = 0; k < n; ++k) StoreLittleEndian<int16_t>(bytes.data() + points + 4 * k, 9999);
   ASSERT_TRUE(shard::RewriteChecksums(bytes));
   ValidateOptions options;
   options.max_problems_per_check = 10;

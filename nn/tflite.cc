@@ -1,8 +1,5 @@
 #include "nn/tflite.h"
 
-// One thread per Run (EIGEN_DONT_PARALLELIZE, set for this whole library in nn/CMakeLists.txt):
-// callers run photos in parallel, and Eigen's own threads would spin against them.
-#include <Eigen/Core>
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -10,6 +7,8 @@
 #include <limits>
 #include <optional>
 #include <system_error>
+
+#include "nn/tflite_ops.h"
 
 namespace handdb {
 namespace {
@@ -214,29 +213,8 @@ float HalfToFloat(uint16_t h) {
 
 }  // namespace
 
-// Named (not anonymous): TfliteModel::Graph holds a Window.
-namespace tflite_detail {
-
-enum class Padding { kSame, kValid };
-
-struct Window {
-  Padding padding = Padding::kSame;
-  int stride_w = 1, stride_h = 1;
-  int kw = 1, kh = 1;
-  int out(int in, int k, int stride) const {
-    return padding == Padding::kSame ? (in + stride - 1) / stride : (in - k + stride) / stride;
-  }
-  int pad_before(int in, int k, int stride) const {
-    if (padding == Padding::kValid) return 0;
-    const int o = out(in, k, stride);
-    return std::max((o - 1) * stride + k - in, 0) / 2;
-  }
-};
-
-}  // namespace tflite_detail
-
-using tflite_detail::Padding;
-using tflite_detail::Window;
+using tflite::Padding;
+using tflite::Window;
 
 struct TfliteModel::Graph {
   struct Tensor {
@@ -381,9 +359,10 @@ bool CheckOp(const TfliteModel::Graph& g,
   }
 }
 
-}  // namespace
+using Graph = TfliteModel::Graph;
 
-Result<TfliteModel> TfliteModel::Load(const std::filesystem::path& path) {
+// The whole file, after its size and identifier checks.
+Result<std::vector<uint8_t>> ReadModelFile(const std::filesystem::path& path) {
   const std::string what = path.string();
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) {
@@ -408,256 +387,296 @@ Result<TfliteModel> TfliteModel::Load(const std::filesystem::path& path) {
     return Status(StatusCode::kBadMagic,
                   what + ": not a TensorFlow Lite model (no TFL3 identifier)");
   }
-  const Flat f(bytes);
-  Parse p{f, what, {}};
-  auto bad = [&]() -> Result<TfliteModel> { return p.error; };
+  return bytes;
+}
 
+// The tables of the flatbuffer this runtime reads: the model's operator codes and buffers, and
+// its first subgraph's tensors and operators.
+struct ModelTables {
+  struct Buffer {
+    size_t first = 0;  // where its bytes start in the file
+    uint32_t n = 0;
+  };
+  std::vector<int> codes;  // builtin operator per operator code
+  std::vector<Buffer> buffers;
+  std::vector<size_t> tensors, ops;
+};
+
+// Parse: the model's root table down to the subgraph's tables; the graph's inputs and outputs.
+Status ParseModelTables(Parse* p, ModelTables* m, Graph* g) {
+  const Flat& f = p->f;
   const auto root = f.Deref(0);
-  if (!root) return Status(StatusCode::kTruncated, what + ": the root table lies outside the file");
+  if (!root) {
+    return Status(StatusCode::kTruncated, p->what + ": the root table lies outside the file");
+  }
   std::vector<size_t> codes_t, subgraphs, buffers_t;
-  if (!p.Tables(*root, kModelOperatorCodes, &codes_t, "operator codes") ||
-      !p.Tables(*root, kModelSubgraphs, &subgraphs, "subgraphs") ||
-      !p.Tables(*root, kModelBuffers, &buffers_t, "buffers")) {
-    return bad();
+  if (!p->Tables(*root, kModelOperatorCodes, &codes_t, "operator codes") ||
+      !p->Tables(*root, kModelSubgraphs, &subgraphs, "subgraphs") ||
+      !p->Tables(*root, kModelBuffers, &buffers_t, "buffers")) {
+    return p->error;
   }
   if (subgraphs.empty())
-    return Status(StatusCode::kBadLayout, what + ": the model has no subgraph");
-  std::vector<int> codes;
+    return Status(StatusCode::kBadLayout, p->what + ": the model has no subgraph");
   for (size_t t : codes_t) {
     int8_t deprecated = 0;
     int32_t builtin = 0;
-    if (!p.Scalar<int8_t>(t, 0, 0, &deprecated, "operator code") ||
-        !p.Scalar<int32_t>(t, 3, 0, &builtin, "operator code")) {
-      return bad();
+    if (!p->Scalar<int8_t>(t, 0, 0, &deprecated, "operator code") ||
+        !p->Scalar<int32_t>(t, 3, 0, &builtin, "operator code")) {
+      return p->error;
     }
-    codes.push_back(std::max<int>(deprecated, builtin));
+    m->codes.push_back(std::max<int>(deprecated, builtin));
   }
-  struct Buf {
-    size_t first = 0;
-    uint32_t n = 0;
-  };
-  std::vector<Buf> buffers;
   for (size_t t : buffers_t) {
-    Buf b;
+    ModelTables::Buffer b;
     uint64_t offset = 0;
-    if (!p.Vector(t, 0, 1, &b.first, &b.n, "buffer data") ||
-        !p.Scalar<uint64_t>(t, 1, 0, &offset, "buffer offset")) {
-      return bad();
+    if (!p->Vector(t, 0, 1, &b.first, &b.n, "buffer data") ||
+        !p->Scalar<uint64_t>(t, 1, 0, &offset, "buffer offset")) {
+      return p->error;
     }
     if (offset != 0) {
       return Status(StatusCode::kUnknownRequiredFeature,
-                    what + ": buffers stored outside the flatbuffer are not supported");
+                    p->what + ": buffers stored outside the flatbuffer are not supported");
     }
-    buffers.push_back(b);
+    m->buffers.push_back(b);
   }
-
-  auto g = std::make_unique<Graph>();
   const size_t sg = subgraphs[0];
-  std::vector<size_t> tensors_t, ops_t;
-  if (!p.Tables(sg, kSgTensors, &tensors_t, "tensors") ||
-      !p.Ints(sg, kSgInputs, &g->inputs, "inputs") ||
-      !p.Ints(sg, kSgOutputs, &g->outputs, "outputs") ||
-      !p.Tables(sg, kSgOperators, &ops_t, "operators")) {
-    return bad();
+  if (!p->Tables(sg, kSgTensors, &m->tensors, "tensors") ||
+      !p->Ints(sg, kSgInputs, &g->inputs, "inputs") ||
+      !p->Ints(sg, kSgOutputs, &g->outputs, "outputs") ||
+      !p->Tables(sg, kSgOperators, &m->ops, "operators")) {
+    return p->error;
   }
-  for (size_t k = 0; k < tensors_t.size(); ++k) {
-    Graph::Tensor t;
-    int8_t type = 0;
-    uint32_t buffer = 0;
-    if (!p.Ints(tensors_t[k], kTensorShape, &t.shape, "tensor shape") ||
-        !p.Scalar<int8_t>(tensors_t[k], kTensorType, 0, &type, "tensor type") ||
-        !p.Scalar<uint32_t>(tensors_t[k], kTensorBuffer, 0, &buffer, "tensor buffer")) {
-      return bad();
-    }
-    t.type = type;
-    for (int d : t.shape) {
-      if (d <= 0 || t.elements * d > kMaxTensorElements) {
-        return Status(
-            StatusCode::kOutOfRange,
-            what + ": tensor " + std::to_string(k) + " has a dimension <= 0 or too many elements");
-      }
-      t.elements *= d;
-    }
-    if (buffer >= buffers.size()) {
-      return Status(StatusCode::kBadLayout,
-                    what + ": tensor " + std::to_string(k) + " names buffer " +
-                        std::to_string(buffer) + " of " + std::to_string(buffers.size()));
-    }
-    const Buf& b = buffers[buffer];
-    if (b.n > 0) {
-      t.constant = true;
-      const size_t elem = type == kFloat16 ? 2 : 4;
-      if (type != kFloat32 && type != kFloat16 && type != kInt32) {
-        return Status(StatusCode::kUnknownRequiredFeature,
-                      what + ": tensor " + std::to_string(k) + " has type " + std::to_string(type) +
-                          " (float32, float16 and int32 constants are supported)");
-      }
-      if (b.n != static_cast<uint64_t>(t.elements) * elem) {
-        return Status(StatusCode::kSizeMismatch,
-                      what + ": tensor " + std::to_string(k) + " holds " + std::to_string(b.n) +
-                          " bytes for " + std::to_string(t.elements) + " elements");
-      }
-      const uint8_t* src = f.data() + b.first;
-      if (type == kInt32) {
-        t.ints.resize(t.elements);
-        std::memcpy(t.ints.data(), src, b.n);
-      } else if (type == kFloat16) {
-        t.values.resize(t.elements);
-        for (int64_t i = 0; i < t.elements; ++i) {
-          uint16_t h;
-          std::memcpy(&h, src + 2 * i, 2);
-          t.values[i] = HalfToFloat(h);
-        }
-      } else {
-        t.values.resize(t.elements);
-        std::memcpy(t.values.data(), src, b.n);
-      }
-    }
-    g->tensors.push_back(std::move(t));
+  return Status::Ok();
+}
+
+// Parse: tensor k's shape and type, and its constant values (float16 converted to float32).
+Status ParseTensor(Parse* p, const ModelTables& m, size_t k, Graph::Tensor* t) {
+  const std::string& what = p->what;
+  int8_t type = 0;
+  uint32_t buffer = 0;
+  if (!p->Ints(m.tensors[k], kTensorShape, &t->shape, "tensor shape") ||
+      !p->Scalar<int8_t>(m.tensors[k], kTensorType, 0, &type, "tensor type") ||
+      !p->Scalar<uint32_t>(m.tensors[k], kTensorBuffer, 0, &buffer, "tensor buffer")) {
+    return p->error;
   }
-  const int num_tensors = static_cast<int>(g->tensors.size());
-  auto valid_ids = [&](const std::vector<int>& ids, bool optional) {
-    return std::all_of(ids.begin(), ids.end(), [&](int i) {
-      return (optional && i == -1) || (i >= 0 && i < num_tensors);
-    });
+  t->type = type;
+  for (int d : t->shape) {
+    if (d <= 0 || t->elements * d > kMaxTensorElements) {
+      return Status(
+          StatusCode::kOutOfRange,
+          what + ": tensor " + std::to_string(k) + " has a dimension <= 0 or too many elements");
+    }
+    t->elements *= d;
+  }
+  if (buffer >= m.buffers.size()) {
+    return Status(StatusCode::kBadLayout,
+                  what + ": tensor " + std::to_string(k) + " names buffer " +
+                      std::to_string(buffer) + " of " + std::to_string(m.buffers.size()));
+  }
+  const ModelTables::Buffer& b = m.buffers[buffer];
+  if (b.n == 0) return Status::Ok();
+  t->constant = true;
+  const size_t elem = type == kFloat16 ? 2 : 4;
+  if (type != kFloat32 && type != kFloat16 && type != kInt32) {
+    return Status(StatusCode::kUnknownRequiredFeature,
+                  what + ": tensor " + std::to_string(k) + " has type " + std::to_string(type) +
+                      " (float32, float16 and int32 constants are supported)");
+  }
+  if (b.n != static_cast<uint64_t>(t->elements) * elem) {
+    return Status(StatusCode::kSizeMismatch,
+                  what + ": tensor " + std::to_string(k) + " holds " + std::to_string(b.n) +
+                      " bytes for " + std::to_string(t->elements) + " elements");
+  }
+  const uint8_t* src = p->f.data() + b.first;
+  if (type == kInt32) {
+    t->ints.resize(t->elements);
+    std::memcpy(t->ints.data(), src, b.n);
+  } else if (type == kFloat16) {
+    t->values.resize(t->elements);
+    for (int64_t i = 0; i < t->elements; ++i) {
+      uint16_t h;
+      std::memcpy(&h, src + 2 * i, 2);
+      t->values[i] = HalfToFloat(h);
+    }
+  } else {
+    t->values.resize(t->elements);
+    std::memcpy(t->values.data(), src, b.n);
+  }
+  return Status::Ok();
+}
+
+// Every id names a tensor of the graph (or is -1, an absent optional input, when `optional`).
+bool ValidIds(const std::vector<int>& ids, bool optional, int num_tensors) {
+  return std::all_of(ids.begin(), ids.end(), [&](int i) {
+    return (optional && i == -1) || (i >= 0 && i < num_tensors);
+  });
+}
+
+// Parse: operator k's code, tensors and options, with the options this runtime implements.
+Status ParseOperator(Parse* p, const ModelTables& m, size_t k, const Graph& g, Graph::Op* out) {
+  const std::string& what = p->what;
+  const int num_tensors = static_cast<int>(g.tensors.size());
+  Graph::Op& op = *out;
+  uint32_t opcode = 0;
+  if (!p->Scalar<uint32_t>(m.ops[k], kOpOpcode, 0, &opcode, "operator") ||
+      !p->Ints(m.ops[k], kOpInputs, &op.in, "operator inputs") ||
+      !p->Ints(m.ops[k], kOpOutputs, &op.out, "operator outputs")) {
+    return p->error;
+  }
+  if (opcode >= m.codes.size()) {
+    return Status(StatusCode::kBadLayout,
+                  what + ": operator " + std::to_string(k) + " names operator code " +
+                      std::to_string(opcode));
+  }
+  op.code = m.codes[opcode];
+  if (std::string_view(OpName(op.code)) == "?") {
+    return Status(StatusCode::kUnknownRequiredFeature,
+                  what + ": operator " + std::to_string(k) + " is builtin operator " +
+                      std::to_string(op.code) + ", which this interpreter does not implement");
+  }
+  if (!ValidIds(op.in, true, num_tensors) || !ValidIds(op.out, false, num_tensors)) {
+    return Status(StatusCode::kBadLayout,
+                  what + ": operator " + std::to_string(k) + " names a tensor that does not exist");
+  }
+  if (op.out.size() != 1 || op.in.empty() || op.in[0] < 0) {
+    return Status(StatusCode::kBadLayout,
+                  what + ": operator " + std::to_string(k) + " has " +
+                      std::to_string(op.in.size()) + " inputs and " +
+                      std::to_string(op.out.size()) +
+                      " outputs (every operator here reads a first input and writes one output)");
+  }
+  if (std::find(op.in.begin(), op.in.end(), op.out[0]) != op.in.end()) {
+    return Status(StatusCode::kBadLayout,
+                  what + ": operator " + std::to_string(k) + " writes one of its own inputs");
+  }
+  size_t opt = 0;
+  if (!p->Table(m.ops[k], kOpOptions, &opt, "operator options")) return p->error;
+  int8_t padding = 0, act = 0, keep = 0;
+  int32_t dil_w = 1, dil_h = 1, mult = 1;
+  bool ok = true;
+  // Conv2DOptions, DepthwiseConv2DOptions and Pool2DOptions all start with padding, stride_w,
+  // stride_h (fields 0-2).
+  auto window = [&] {
+    return p->Scalar<int8_t>(opt, 0, 0, &padding, "padding") &&
+           p->Scalar<int32_t>(opt, 1, 1, &op.win.stride_w, "stride") &&
+           p->Scalar<int32_t>(opt, 2, 1, &op.win.stride_h, "stride");
   };
-  if (g->inputs.size() != 1 || g->outputs.empty() || !valid_ids(g->inputs, false) ||
-      !valid_ids(g->outputs, false) || g->tensors[g->inputs[0]].constant) {
+  switch (op.code) {
+    case kConv2d:
+      ok = window() && p->Scalar<int8_t>(opt, 3, 0, &act, "activation") &&
+           p->Scalar<int32_t>(opt, 4, 1, &dil_w, "dilation") &&
+           p->Scalar<int32_t>(opt, 5, 1, &dil_h, "dilation");
+      break;
+    case kDepthwiseConv2d:
+      ok = window() && p->Scalar<int32_t>(opt, 3, 1, &mult, "depth multiplier") &&
+           p->Scalar<int8_t>(opt, 4, 0, &act, "activation") &&
+           p->Scalar<int32_t>(opt, 5, 1, &dil_w, "dilation") &&
+           p->Scalar<int32_t>(opt, 6, 1, &dil_h, "dilation");
+      break;
+    case kMaxPool2d:
+      ok = window() && p->Scalar<int32_t>(opt, 3, 1, &op.win.kw, "filter width") &&
+           p->Scalar<int32_t>(opt, 4, 1, &op.win.kh, "filter height") &&
+           p->Scalar<int8_t>(opt, 5, 0, &act, "activation");
+      break;
+    case kAdd:
+    case kFullyConnected:
+      ok = p->Scalar<int8_t>(opt, 0, 0, &act, "activation");
+      break;
+    case kMean:
+      ok = p->Scalar<int8_t>(opt, 0, 0, &keep, "keep_dims");
+      break;
+    default:
+      break;
+  }
+  if (!ok) return p->error;
+  if (op.code == kConv2d || op.code == kDepthwiseConv2d) {
+    const auto& w =
+        op.in.size() > 1 && op.in[1] >= 0 ? g.tensors[op.in[1]].shape : std::vector<int>{};
+    if (w.size() == 4) {
+      op.win.kh = w[1];
+      op.win.kw = w[2];
+    }
+  }
+  op.win.padding = padding == 1 ? Padding::kValid : Padding::kSame;
+  op.activation = act;
+  op.keep_dims = keep != 0;
+  if (padding < 0 || padding > 1 || act < 0 || act > 4 || dil_w != 1 || dil_h != 1 || mult != 1 ||
+      op.win.stride_w < 1 || op.win.stride_h < 1 || op.win.kw < 1 || op.win.kh < 1 ||
+      op.win.stride_w > 64 || op.win.stride_h > 64) {
+    return Status(StatusCode::kUnknownRequiredFeature,
+                  what + ": operator " + std::to_string(k) + " (" + OpName(op.code) +
+                      ") has options this interpreter does not implement (padding " +
+                      std::to_string(padding) + ", activation " + std::to_string(act) +
+                      ", dilation " + std::to_string(dil_w) + "x" + std::to_string(dil_h) +
+                      ", depth multiplier " + std::to_string(mult) + ")");
+  }
+  return Status::Ok();
+}
+
+// Check: one non-constant input and at least one output, all of them tensors of the graph.
+Status CheckGraphIo(const std::string& what, const Graph& g) {
+  const int num_tensors = static_cast<int>(g.tensors.size());
+  if (g.inputs.size() != 1 || g.outputs.empty() || !ValidIds(g.inputs, false, num_tensors) ||
+      !ValidIds(g.outputs, false, num_tensors) || g.tensors[g.inputs[0]].constant) {
     return Status(StatusCode::kBadLayout,
                   what + ": the graph must have one non-constant input and at least one output");
   }
-  // Tensors computed so far: an operator may only read these (the file's order is the order of
-  // execution), so Run() never reads a buffer it has not filled.
-  std::vector<bool> ready(num_tensors, false);
-  for (int t = 0; t < num_tensors; ++t) ready[t] = g->tensors[t].constant;
-  ready[g->inputs[0]] = true;
-  for (size_t k = 0; k < ops_t.size(); ++k) {
-    Graph::Op op;
-    uint32_t opcode = 0;
-    if (!p.Scalar<uint32_t>(ops_t[k], kOpOpcode, 0, &opcode, "operator") ||
-        !p.Ints(ops_t[k], kOpInputs, &op.in, "operator inputs") ||
-        !p.Ints(ops_t[k], kOpOutputs, &op.out, "operator outputs")) {
-      return bad();
-    }
-    if (opcode >= codes.size()) {
-      return Status(StatusCode::kBadLayout,
-                    what + ": operator " + std::to_string(k) + " names operator code " +
-                        std::to_string(opcode));
-    }
-    op.code = codes[opcode];
-    if (std::string_view(OpName(op.code)) == "?") {
-      return Status(StatusCode::kUnknownRequiredFeature,
-                    what + ": operator " + std::to_string(k) + " is builtin operator " +
-                        std::to_string(op.code) + ", which this interpreter does not implement");
-    }
-    if (!valid_ids(op.in, true) || !valid_ids(op.out, false)) {
-      return Status(
-          StatusCode::kBadLayout,
-          what + ": operator " + std::to_string(k) + " names a tensor that does not exist");
-    }
-    if (op.out.size() != 1 || op.in.empty() || op.in[0] < 0) {
-      return Status(StatusCode::kBadLayout,
-                    what + ": operator " + std::to_string(k) + " has " +
-                        std::to_string(op.in.size()) + " inputs and " +
-                        std::to_string(op.out.size()) +
-                        " outputs (every operator here reads a first input and writes one output)");
-    }
-    if (std::find(op.in.begin(), op.in.end(), op.out[0]) != op.in.end()) {
-      return Status(StatusCode::kBadLayout,
-                    what + ": operator " + std::to_string(k) + " writes one of its own inputs");
-    }
-    size_t opt = 0;
-    if (!p.Table(ops_t[k], kOpOptions, &opt, "operator options")) return bad();
-    int8_t padding = 0, act = 0, keep = 0;
-    int32_t dil_w = 1, dil_h = 1, mult = 1;
-    bool ok = true;
-    // Conv2DOptions, DepthwiseConv2DOptions and Pool2DOptions all start with padding, stride_w,
-    // stride_h (fields 0-2).
-    auto window = [&] {
-      return p.Scalar<int8_t>(opt, 0, 0, &padding, "padding") &&
-             p.Scalar<int32_t>(opt, 1, 1, &op.win.stride_w, "stride") &&
-             p.Scalar<int32_t>(opt, 2, 1, &op.win.stride_h, "stride");
-    };
-    switch (op.code) {
-      case kConv2d:
-        ok = window() && p.Scalar<int8_t>(opt, 3, 0, &act, "activation") &&
-             p.Scalar<int32_t>(opt, 4, 1, &dil_w, "dilation") &&
-             p.Scalar<int32_t>(opt, 5, 1, &dil_h, "dilation");
-        break;
-      case kDepthwiseConv2d:
-        ok = window() && p.Scalar<int32_t>(opt, 3, 1, &mult, "depth multiplier") &&
-             p.Scalar<int8_t>(opt, 4, 0, &act, "activation") &&
-             p.Scalar<int32_t>(opt, 5, 1, &dil_w, "dilation") &&
-             p.Scalar<int32_t>(opt, 6, 1, &dil_h, "dilation");
-        break;
-      case kMaxPool2d:
-        ok = window() && p.Scalar<int32_t>(opt, 3, 1, &op.win.kw, "filter width") &&
-             p.Scalar<int32_t>(opt, 4, 1, &op.win.kh, "filter height") &&
-             p.Scalar<int8_t>(opt, 5, 0, &act, "activation");
-        break;
-      case kAdd:
-      case kFullyConnected:
-        ok = p.Scalar<int8_t>(opt, 0, 0, &act, "activation");
-        break;
-      case kMean:
-        ok = p.Scalar<int8_t>(opt, 0, 0, &keep, "keep_dims");
-        break;
-      default:
-        break;
-    }
-    if (!ok) return bad();
-    if (op.code == kConv2d || op.code == kDepthwiseConv2d) {
-      const auto& w =
-          op.in.size() > 1 && op.in[1] >= 0 ? g->tensors[op.in[1]].shape : std::vector<int>{};
-      if (w.size() == 4) {
-        op.win.kh = w[1];
-        op.win.kw = w[2];
-      }
-    }
-    op.win.padding = padding == 1 ? Padding::kValid : Padding::kSame;
-    op.activation = act;
-    op.keep_dims = keep != 0;
-    if (padding < 0 || padding > 1 || act < 0 || act > 4 || dil_w != 1 || dil_h != 1 || mult != 1 ||
-        op.win.stride_w < 1 || op.win.stride_h < 1 || op.win.kw < 1 || op.win.kh < 1 ||
-        op.win.stride_w > 64 || op.win.stride_h > 64) {
-      return Status(StatusCode::kUnknownRequiredFeature,
-                    what + ": operator " + std::to_string(k) + " (" + OpName(op.code) +
-                        ") has options this interpreter does not implement (padding " +
-                        std::to_string(padding) + ", activation " + std::to_string(act) +
-                        ", dilation " + std::to_string(dil_w) + "x" + std::to_string(dil_h) +
-                        ", depth multiplier " + std::to_string(mult) + ")");
-    }
-    if (ready[op.out[0]]) {
-      return Status(StatusCode::kBadLayout,
-                    what + ": operator " + std::to_string(k) + " writes tensor " +
-                        std::to_string(op.out[0]) +
-                        ", which is an input, a constant or written before");
-    }
-    for (int i : op.in) {
-      if (i >= 0 && !ready[i]) {
-        return Status(StatusCode::kBadLayout,
-                      what + ": operator " + std::to_string(k) + " reads tensor " +
-                          std::to_string(i) + " before any operator writes it");
-      }
-    }
-    if (!CheckOp(*g, k, op, &p)) return bad();
-    if (op.code == kDequantize) {
-      // Constant folding: the weights are converted once, here.
-      Graph::Tensor& out = g->tensors[op.out[0]];
-      out.values = g->tensors[op.in[0]].values;
-      out.constant = true;
-      ready[op.out[0]] = true;
-      continue;
-    }
-    ready[op.out[0]] = true;
-    g->ops.push_back(std::move(op));
+  return Status::Ok();
+}
+
+// Check: operator k reads only tensors computed before it (`ready`: the file's order is the order
+// of execution, so Run() never reads a buffer it has not filled), writes a new one, and fits its
+// tensors' shapes (CheckOp). Then adds it to the graph; a DEQUANTIZE is folded into a constant.
+Status AddOperator(Parse* p, size_t k, Graph::Op op, std::vector<bool>* ready, Graph* g) {
+  const std::string& what = p->what;
+  if ((*ready)[op.out[0]]) {
+    return Status(StatusCode::kBadLayout,
+                  what + ": operator " + std::to_string(k) + " writes tensor " +
+                      std::to_string(op.out[0]) +
+                      ", which is an input, a constant or written before");
   }
-  for (int o : g->outputs) {
-    if (!ready[o]) {
+  for (int i : op.in) {
+    if (i >= 0 && !(*ready)[i]) {
       return Status(StatusCode::kBadLayout,
-                    what + ": graph output tensor " + std::to_string(o) + " is never computed");
+                    what + ": operator " + std::to_string(k) + " reads tensor " +
+                        std::to_string(i) + " before any operator writes it");
     }
   }
+  if (!CheckOp(*g, k, op, p)) return p->error;
+  (*ready)[op.out[0]] = true;
+  if (op.code == kDequantize) {
+    // Constant folding: the weights are converted once, here.
+    Graph::Tensor& out = g->tensors[op.out[0]];
+    out.values = g->tensors[op.in[0]].values;
+    out.constant = true;
+    return Status::Ok();
+  }
+  g->ops.push_back(std::move(op));
+  return Status::Ok();
+}
+
+// Multiply-adds of one Run: convolutions and products, one per output element for the rest.
+int64_t CountMultiplyAdds(const Graph& g) {
+  double work = 0;  // double: a hostile graph's counts could overflow int64
+  for (const Graph::Op& op : g.ops) {
+    const Graph::Tensor& x = g.tensors[op.in[0]];
+    const Graph::Tensor& y = g.tensors[op.out[0]];
+    int64_t per_output = 1;
+    if (op.code == kConv2d) per_output = int64_t{op.win.kh} * op.win.kw * x.shape[3];
+    if (op.code == kDepthwiseConv2d || op.code == kMaxPool2d)
+      per_output = int64_t{op.win.kh} * op.win.kw;
+    if (op.code == kFullyConnected) per_output = g.tensors[op.in[1]].shape[1];
+    if (op.code == kMean) per_output = x.elements / std::max<int64_t>(1, y.elements);
+    work += static_cast<double>(y.elements) * static_cast<double>(per_output);
+  }
+  return work < 9e18 ? static_cast<int64_t>(work) : std::numeric_limits<int64_t>::max();
+}
+
+// Plan: each tensor's last reader, and the workspace buffers by liveness. An operator's output
+// takes a free buffer before its inputs' buffers are released, so no operator reads and writes
+// one buffer.
+void PlanBuffers(Graph* g) {
+  const int num_tensors = static_cast<int>(g->tensors.size());
   g->last_use.assign(num_tensors, -1);
   for (size_t k = 0; k < g->ops.size(); ++k) {
     for (int i : g->ops[k].in) {
@@ -665,21 +684,6 @@ Result<TfliteModel> TfliteModel::Load(const std::filesystem::path& path) {
     }
   }
   for (int o : g->outputs) g->last_use[o] = std::numeric_limits<int>::max();
-  double work = 0;  // double: a hostile graph's counts could overflow int64
-  for (const Graph::Op& op : g->ops) {
-    const Graph::Tensor& x = g->tensors[op.in[0]];
-    const Graph::Tensor& y = g->tensors[op.out[0]];
-    int64_t per_output = 1;
-    if (op.code == kConv2d) per_output = int64_t{op.win.kh} * op.win.kw * x.shape[3];
-    if (op.code == kDepthwiseConv2d || op.code == kMaxPool2d)
-      per_output = int64_t{op.win.kh} * op.win.kw;
-    if (op.code == kFullyConnected) per_output = g->tensors[op.in[1]].shape[1];
-    if (op.code == kMean) per_output = x.elements / std::max<int64_t>(1, y.elements);
-    work += static_cast<double>(y.elements) * static_cast<double>(per_output);
-  }
-  g->multiply_adds = work < 9e18 ? static_cast<int64_t>(work) : std::numeric_limits<int64_t>::max();
-  // Buffers by liveness: an operator's output takes a free buffer before its inputs' buffers
-  // are released, so no operator reads and writes one buffer.
   g->slot.assign(num_tensors, -1);
   std::vector<int> free_slots;
   auto take = [&](int t) {
@@ -701,33 +705,49 @@ Result<TfliteModel> TfliteModel::Load(const std::filesystem::path& path) {
       }
     }
   }
-  return TfliteModel(std::move(g));
-}
-
-namespace {
-
-using RowMatrix = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-
-void Activate(int act, float* v, size_t n) {
-  switch (act) {
-    case 1:
-      for (size_t i = 0; i < n; ++i) v[i] = std::max(v[i], 0.0f);
-      break;
-    case 2:
-      for (size_t i = 0; i < n; ++i) v[i] = std::clamp(v[i], -1.0f, 1.0f);
-      break;
-    case 3:
-      for (size_t i = 0; i < n; ++i) v[i] = std::clamp(v[i], 0.0f, 6.0f);
-      break;
-    case 4:
-      for (size_t i = 0; i < n; ++i) v[i] = std::tanh(v[i]);
-      break;
-    default:
-      break;
-  }
 }
 
 }  // namespace
+
+Result<TfliteModel> TfliteModel::Load(const std::filesystem::path& path) {
+  const std::string what = path.string();
+  auto bytes = ReadModelFile(path);
+  if (!bytes.ok()) return bytes.status();
+  const Flat f(*bytes);
+  Parse p{f, what, {}};
+  auto g = std::make_unique<Graph>();
+
+  // Parse the flatbuffer into tables, then the tensors.
+  ModelTables m;
+  HANDDB_RETURN_IF_ERROR(ParseModelTables(&p, &m, g.get()));
+  for (size_t k = 0; k < m.tensors.size(); ++k) {
+    Graph::Tensor t;
+    HANDDB_RETURN_IF_ERROR(ParseTensor(&p, m, k, &t));
+    g->tensors.push_back(std::move(t));
+  }
+
+  // Check the graph, operator by operator in the order of execution.
+  HANDDB_RETURN_IF_ERROR(CheckGraphIo(what, *g));
+  std::vector<bool> ready(g->tensors.size(), false);
+  for (size_t t = 0; t < g->tensors.size(); ++t) ready[t] = g->tensors[t].constant;
+  ready[g->inputs[0]] = true;
+  for (size_t k = 0; k < m.ops.size(); ++k) {
+    Graph::Op op;
+    HANDDB_RETURN_IF_ERROR(ParseOperator(&p, m, k, *g, &op));
+    HANDDB_RETURN_IF_ERROR(AddOperator(&p, k, std::move(op), &ready, g.get()));
+  }
+  for (int o : g->outputs) {
+    if (!ready[o]) {
+      return Status(StatusCode::kBadLayout,
+                    what + ": graph output tensor " + std::to_string(o) + " is never computed");
+    }
+  }
+
+  // Plan the buffers Run() uses.
+  g->multiply_adds = CountMultiplyAdds(*g);
+  PlanBuffers(g.get());
+  return TfliteModel(std::move(g));
+}
 
 std::vector<std::vector<float>> TfliteModel::Run(std::span<const float> input) const {
   Workspace ws;
@@ -747,7 +767,6 @@ std::vector<std::vector<float>> TfliteModel::Run(std::span<const float> input,
     return g.tensors[t].constant ? g.tensors[t].values.data() : ws->slots[g.slot[t]].data();
   };
   ws->slots[g.slot[g.inputs[0]]].assign(input.begin(), input.end());
-  std::vector<float>& patches = ws->patches;
   for (size_t k = 0; k < g.ops.size(); ++k) {
     const Graph::Op& op = g.ops[k];
     const Graph::Tensor& xt = g.tensors[op.in[0]];
@@ -758,133 +777,38 @@ std::vector<std::vector<float>> TfliteModel::Run(std::span<const float> input,
     const float* x = value(op.in[0]);
     const float* bias = op.in.size() > 2 && op.in[2] >= 0 ? value(op.in[2]) : nullptr;
     switch (op.code) {
-      case kConv2d: {
-        const int h = xt.shape[1], w = xt.shape[2], c = xt.shape[3];
-        const int oh = yt.shape[1], ow = yt.shape[2], o = yt.shape[3];
-        const Window& win = op.win;
-        const float* wt = value(op.in[1]);
-        const int cols = win.kh * win.kw * c;
-        Eigen::Map<const RowMatrix> weights(wt, o, cols);
-        Eigen::Map<RowMatrix> out(y.data(), static_cast<Eigen::Index>(oh) * ow, o);
-        if (win.kh == 1 && win.kw == 1 && win.stride_h == 1 && win.stride_w == 1) {
-          Eigen::Map<const RowMatrix> in(x, static_cast<Eigen::Index>(h) * w, c);
-          out.noalias() = in * weights.transpose();
-        } else {
-          const int pt = win.pad_before(h, win.kh, win.stride_h);
-          const int pl = win.pad_before(w, win.kw, win.stride_w);
-          patches.assign(static_cast<size_t>(oh) * ow * cols, 0.0f);  // padding stays 0
-          for (int r = 0; r < oh; ++r) {
-            for (int s = 0; s < ow; ++s) {
-              float* dst = patches.data() + (static_cast<size_t>(r) * ow + s) * cols;
-              for (int i = 0; i < win.kh; ++i) {
-                const int yy = r * win.stride_h + i - pt;
-                if (yy < 0 || yy >= h) continue;
-                for (int j = 0; j < win.kw; ++j) {
-                  const int xx = s * win.stride_w + j - pl;
-                  if (xx < 0 || xx >= w) continue;
-                  std::memcpy(dst + (i * win.kw + j) * c,
-                              x + (static_cast<size_t>(yy) * w + xx) * c,
-                              sizeof(float) * c);
-                }
-              }
-            }
-          }
-          Eigen::Map<const RowMatrix> in(patches.data(), static_cast<Eigen::Index>(oh) * ow, cols);
-          out.noalias() = in * weights.transpose();
-        }
-        if (bias != nullptr) out.rowwise() += Eigen::Map<const Eigen::RowVectorXf>(bias, o);
+      case kConv2d:
+        tflite::Conv2d(
+            x, xt.shape, value(op.in[1]), bias, op.win, yt.shape, y.data(), &ws->patches);
         break;
-      }
-      case kDepthwiseConv2d: {
-        const int h = xt.shape[1], w = xt.shape[2], c = xt.shape[3];
-        const int oh = yt.shape[1], ow = yt.shape[2];
-        const Window& win = op.win;
-        const float* wt = value(op.in[1]);
-        const int pt = win.pad_before(h, win.kh, win.stride_h);
-        const int pl = win.pad_before(w, win.kw, win.stride_w);
-        for (int r = 0; r < oh; ++r) {
-          for (int s = 0; s < ow; ++s) {
-            float* dst = y.data() + (static_cast<size_t>(r) * ow + s) * c;
-            if (bias != nullptr) {
-              std::memcpy(dst, bias, sizeof(float) * c);
-            } else {
-              std::fill(dst, dst + c, 0.0f);
-            }
-            for (int i = 0; i < win.kh; ++i) {
-              const int yy = r * win.stride_h + i - pt;
-              if (yy < 0 || yy >= h) continue;
-              for (int j = 0; j < win.kw; ++j) {
-                const int xx = s * win.stride_w + j - pl;
-                if (xx < 0 || xx >= w) continue;
-                const float* src = x + (static_cast<size_t>(yy) * w + xx) * c;
-                const float* kern = wt + static_cast<size_t>(i * win.kw + j) * c;
-                for (int ch = 0; ch < c; ++ch) dst[ch] += src[ch] * kern[ch];
-              }
-            }
-          }
-        }
+      case kDepthwiseConv2d:
+        tflite::DepthwiseConv2d(x, xt.shape, value(op.in[1]), bias, op.win, yt.shape, y.data());
         break;
-      }
-      case kMaxPool2d: {
-        const int h = xt.shape[1], w = xt.shape[2], c = xt.shape[3];
-        const int oh = yt.shape[1], ow = yt.shape[2];
-        const Window& win = op.win;
-        const int pt = win.pad_before(h, win.kh, win.stride_h);
-        const int pl = win.pad_before(w, win.kw, win.stride_w);
-        for (int r = 0; r < oh; ++r) {
-          for (int s = 0; s < ow; ++s) {
-            float* dst = y.data() + (static_cast<size_t>(r) * ow + s) * c;
-            std::fill(dst, dst + c, -std::numeric_limits<float>::infinity());
-            for (int i = 0; i < win.kh; ++i) {
-              const int yy = r * win.stride_h + i - pt;
-              if (yy < 0 || yy >= h) continue;
-              for (int j = 0; j < win.kw; ++j) {
-                const int xx = s * win.stride_w + j - pl;
-                if (xx < 0 || xx >= w) continue;
-                const float* src = x + (static_cast<size_t>(yy) * w + xx) * c;
-                for (int ch = 0; ch < c; ++ch) dst[ch] = std::max(dst[ch], src[ch]);
-              }
-            }
-          }
-        }
+      case kMaxPool2d:
+        tflite::MaxPool2d(x, xt.shape, op.win, yt.shape, y.data());
         break;
-      }
-      case kAdd: {
-        const float* z = value(op.in[1]);
-        for (int64_t i = 0; i < yt.elements; ++i) y[i] = x[i] + z[i];
+      case kAdd:
+        tflite::Add(x, value(op.in[1]), yt.elements, y.data());
         break;
-      }
       case kFullyConnected: {
         const Graph::Tensor& wt = g.tensors[op.in[1]];
         const int o = wt.shape[0], in = wt.shape[1];
-        const Eigen::Index batch = xt.elements / in;
-        Eigen::Map<const RowMatrix> weights(value(op.in[1]), o, in);
-        Eigen::Map<const RowMatrix> xs(x, batch, in);
-        Eigen::Map<RowMatrix> out(y.data(), batch, o);
-        out.noalias() = xs * weights.transpose();
-        if (bias != nullptr) out.rowwise() += Eigen::Map<const Eigen::RowVectorXf>(bias, o);
+        tflite::FullyConnected(x, xt.elements / in, value(op.in[1]), o, in, bias, y.data());
         break;
       }
       case kLogistic:
-        for (int64_t i = 0; i < yt.elements; ++i) y[i] = 1.0f / (1.0f + std::exp(-x[i]));
+        tflite::Logistic(x, yt.elements, y.data());
         break;
       case kReshape:
         std::copy(x, x + yt.elements, y.begin());
         break;
-      case kMean: {
-        const int64_t hw = static_cast<int64_t>(xt.shape[1]) * xt.shape[2];
-        const int c = xt.shape[3];
-        std::fill(y.begin(), y.end(), 0.0f);
-        for (int64_t i = 0; i < hw; ++i) {
-          for (int ch = 0; ch < c; ++ch) y[ch] += x[i * c + ch];
-        }
-        for (int ch = 0; ch < c; ++ch) y[ch] /= static_cast<float>(hw);
+      case kMean:
+        tflite::MeanHW(x, xt.shape, y.data());
         break;
-      }
       default:
         THROW_CHECK_MSG(false, "operator " << op.code << " passed the load checks");
     }
-    Activate(op.activation, y.data(), y.size());
+    tflite::Activate(op.activation, y.data(), y.size());
   }
   std::vector<std::vector<float>> out;
   for (int o : g.outputs) {

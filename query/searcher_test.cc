@@ -601,10 +601,10 @@ TEST(Database, ACodedViewDamagedPastItsHeaderIsAnErrorOfTheSearch) {
   const std::vector<Point2f> query = RolledView(*good, 2, 1);
 
   std::vector<uint8_t> bytes = ::handdb::testing::ReadBytes(dir / "shard-00000.hdb");
-  const shard::RawHeader h = shard::ParseHeader(bytes);
+  const shard::RawHeader h = shard::RawHeader::DecodeFrom(bytes);
   for (uint32_t i = 0; i < h.section_count; ++i) {
-    const shard::RawSection sec =
-        shard::ParseSection(bytes.data() + h.section_table_offset + i * h.section_entry_size);
+    const shard::RawSection sec = shard::RawSection::DecodeFrom(
+        bytes.data() + h.section_table_offset + i * h.section_entry_size);
     // View 0's code: mode, lengths, count and box in the first ~12 bytes, then the chains.
     if (sec.type == shard::kSectionPointCodes) {
       for (size_t k = 20; k < 40; ++k) bytes[sec.offset + k] = 0xff;
@@ -635,10 +635,10 @@ TEST(Database, ACodedViewThatDoesNotDecodeIsAnErrorOfOpen) {
   const std::filesystem::path shard = dir / "shard-00001.hdb";
   std::vector<uint8_t> bytes = ::handdb::testing::ReadBytes(shard);
   // The first view's point code begins the point_codes section: make its mode byte unknown.
-  const shard::RawHeader h = shard::ParseHeader(bytes);
+  const shard::RawHeader h = shard::RawHeader::DecodeFrom(bytes);
   for (uint32_t i = 0; i < h.section_count; ++i) {
-    const shard::RawSection sec =
-        shard::ParseSection(bytes.data() + h.section_table_offset + i * h.section_entry_size);
+    const shard::RawSection sec = shard::RawSection::DecodeFrom(
+        bytes.data() + h.section_table_offset + i * h.section_entry_size);
     if (sec.type == shard::kSectionPointCodes) bytes[sec.offset] = 0x7f;
   }
   ASSERT_TRUE(shard::RewriteChecksums(bytes));

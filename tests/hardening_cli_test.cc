@@ -390,7 +390,7 @@ TEST_F(HardeningCli, LabelsOutOfRangeAreRefusedAtOpen) {
           }
           field_at +=
               name == "nan" ? shard::kViewOffJointAngles : shard::kViewOffKeypoints + 12 * 3;
-          shard::Store<float>(b->data() + field_at, v);
+          StoreLittleEndian<float>(b->data() + field_at, v);
         });
     const std::string expected =
         db + "/shard-00000.hdb: offset " + std::to_string(field_at) +

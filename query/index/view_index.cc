@@ -15,6 +15,7 @@
 #include <random>
 
 #include "base/atomic_file.h"
+#include "base/endian.h"
 #include "base/hex.h"
 #include "base/progress.h"
 #include "base/thread_pool.h"
@@ -38,17 +39,6 @@ constexpr size_t kOffMajor = 8, kOffMinor = 10, kOffHeaderSize = 12, kOffFileSiz
                  kOffDims = 48, kOffNlist = 52, kOffWeight = 56, kOffSide = 60,
                  kOffPayloadOffset = 64, kOffPayloadSize = 72, kOffPayloadChecksum = 80,
                  kOffReserved = 88, kOffHeaderChecksum = 120;
-
-template <typename T>
-void Put(std::string* out, size_t off, T v) {
-  std::memcpy(out->data() + off, &v, sizeof(T));
-}
-template <typename T>
-T Get(std::string_view in, size_t off) {
-  T v;
-  std::memcpy(&v, in.data() + off, sizeof(T));
-  return v;
-}
 
 Status Corrupt(StatusCode code, const std::string& what, const std::string& problem) {
   return Status(code, what + ": " + problem);
@@ -326,22 +316,24 @@ std::string ViewIndex::Serialize() const {
   append(codes.data(), sizeof(float) * codes.size());
   std::string out(kHeaderSize, '\0');
   std::memcpy(out.data(), kMagic, sizeof(kMagic));
-  Put<uint16_t>(&out, kOffMajor, kMajor);
-  Put<uint16_t>(&out, kOffMinor, kMinor);
-  Put<uint32_t>(&out, kOffHeaderSize, kHeaderSize);
-  Put<uint64_t>(&out, kOffFileSize, kHeaderSize + payload.size());
-  Put<uint64_t>(&out, kOffFingerprint, fingerprint_);
-  Put<uint64_t>(&out, kOffViews, num_views_);
-  Put<uint32_t>(&out, kOffRolls, num_rolls_);
-  Put<uint32_t>(&out, kOffCellUnits, static_cast<uint32_t>(grid_.cell_units));
-  Put<uint32_t>(&out, kOffDims, static_cast<uint32_t>(dims_));
-  Put<uint32_t>(&out, kOffNlist, static_cast<uint32_t>(nlist_));
-  Put<float>(&out, kOffWeight, weight_);
-  Put<uint32_t>(&out, kOffSide, static_cast<uint32_t>(grid_.side));
-  Put<uint64_t>(&out, kOffPayloadOffset, kHeaderSize);
-  Put<uint64_t>(&out, kOffPayloadSize, payload.size());
-  Put<uint64_t>(&out, kOffPayloadChecksum, XXH3_64bits(payload.data(), payload.size()));
-  Put<uint64_t>(&out, kOffHeaderChecksum, XXH3_64bits(out.data(), kOffHeaderChecksum));
+  StoreLittleEndian<uint16_t>(out.data() + kOffMajor, kMajor);
+  StoreLittleEndian<uint16_t>(out.data() + kOffMinor, kMinor);
+  StoreLittleEndian<uint32_t>(out.data() + kOffHeaderSize, kHeaderSize);
+  StoreLittleEndian<uint64_t>(out.data() + kOffFileSize, kHeaderSize + payload.size());
+  StoreLittleEndian<uint64_t>(out.data() + kOffFingerprint, fingerprint_);
+  StoreLittleEndian<uint64_t>(out.data() + kOffViews, num_views_);
+  StoreLittleEndian<uint32_t>(out.data() + kOffRolls, num_rolls_);
+  StoreLittleEndian<uint32_t>(out.data() + kOffCellUnits, static_cast<uint32_t>(grid_.cell_units));
+  StoreLittleEndian<uint32_t>(out.data() + kOffDims, static_cast<uint32_t>(dims_));
+  StoreLittleEndian<uint32_t>(out.data() + kOffNlist, static_cast<uint32_t>(nlist_));
+  StoreLittleEndian<float>(out.data() + kOffWeight, weight_);
+  StoreLittleEndian<uint32_t>(out.data() + kOffSide, static_cast<uint32_t>(grid_.side));
+  StoreLittleEndian<uint64_t>(out.data() + kOffPayloadOffset, kHeaderSize);
+  StoreLittleEndian<uint64_t>(out.data() + kOffPayloadSize, payload.size());
+  StoreLittleEndian<uint64_t>(out.data() + kOffPayloadChecksum,
+                              XXH3_64bits(payload.data(), payload.size()));
+  StoreLittleEndian<uint64_t>(out.data() + kOffHeaderChecksum,
+                              XXH3_64bits(out.data(), kOffHeaderChecksum));
   return out + payload;
 }
 
@@ -359,15 +351,15 @@ Result<ViewIndex> ViewIndex::Parse(std::string_view bytes,
   if (std::memcmp(bytes.data(), kMagic, sizeof(kMagic)) != 0) {
     return Corrupt(StatusCode::kBadMagic, what, "not a handdb index (bad magic)");
   }
-  const uint16_t major = Get<uint16_t>(bytes, kOffMajor);
+  const uint16_t major = LoadLittleEndian<uint16_t>(bytes.data() + kOffMajor);
   if (major != kMajor) {
     return Corrupt(StatusCode::kUnsupportedVersion,
                    what,
                    "index format version " + std::to_string(major) + "." +
-                       std::to_string(Get<uint16_t>(bytes, kOffMinor)) + ", this reader knows " +
-                       std::to_string(kMajor) + ".x");
+                       std::to_string(LoadLittleEndian<uint16_t>(bytes.data() + kOffMinor)) +
+                       ", this reader knows " + std::to_string(kMajor) + ".x");
   }
-  const uint64_t stored_header_sum = Get<uint64_t>(bytes, kOffHeaderChecksum);
+  const uint64_t stored_header_sum = LoadLittleEndian<uint64_t>(bytes.data() + kOffHeaderChecksum);
   const uint64_t header_sum = XXH3_64bits(bytes.data(), kOffHeaderChecksum);
   if (stored_header_sum != header_sum) {
     return Corrupt(StatusCode::kChecksumMismatch,
@@ -377,7 +369,7 @@ Result<ViewIndex> ViewIndex::Parse(std::string_view bytes,
   }
   // As for shards (docs/format.md, "Versioning"): any minor of our major is read; reserved bytes
   // must be zero only up to the minor this reader knows, since a newer minor may give them meaning.
-  const bool know_minor = Get<uint16_t>(bytes, kOffMinor) <= kMinor;
+  const bool know_minor = LoadLittleEndian<uint16_t>(bytes.data() + kOffMinor) <= kMinor;
   for (size_t off = kOffReserved; know_minor && off < kOffHeaderChecksum; ++off) {
     if (bytes[off] != 0) {
       return Corrupt(StatusCode::kNonZeroReserved,
@@ -385,25 +377,26 @@ Result<ViewIndex> ViewIndex::Parse(std::string_view bytes,
                      "offset " + std::to_string(off) + ": reserved header byte is not zero");
     }
   }
-  const uint64_t file_size = Get<uint64_t>(bytes, kOffFileSize);
-  const uint64_t payload_offset = Get<uint64_t>(bytes, kOffPayloadOffset);
-  const uint64_t payload_size = Get<uint64_t>(bytes, kOffPayloadSize);
+  const uint64_t file_size = LoadLittleEndian<uint64_t>(bytes.data() + kOffFileSize);
+  const uint64_t payload_offset = LoadLittleEndian<uint64_t>(bytes.data() + kOffPayloadOffset);
+  const uint64_t payload_size = LoadLittleEndian<uint64_t>(bytes.data() + kOffPayloadSize);
   if (file_size != bytes.size()) {
     return Corrupt(
         file_size > bytes.size() ? StatusCode::kTruncated : StatusCode::kSizeMismatch,
         what,
         std::to_string(bytes.size()) + " bytes but the header says " + std::to_string(file_size));
   }
-  if (Get<uint32_t>(bytes, kOffHeaderSize) != kHeaderSize || payload_offset != kHeaderSize ||
-      payload_size != file_size - kHeaderSize) {
+  if (LoadLittleEndian<uint32_t>(bytes.data() + kOffHeaderSize) != kHeaderSize ||
+      payload_offset != kHeaderSize || payload_size != file_size - kHeaderSize) {
     return Corrupt(StatusCode::kBadLayout,
                    what,
-                   "header size " + std::to_string(Get<uint32_t>(bytes, kOffHeaderSize)) +
+                   "header size " +
+                       std::to_string(LoadLittleEndian<uint32_t>(bytes.data() + kOffHeaderSize)) +
                        ", payload at " + std::to_string(payload_offset) + " of " +
                        std::to_string(payload_size) + " bytes: not the layout of version 1");
   }
   const std::string_view payload = bytes.substr(payload_offset);
-  const uint64_t stored_sum = Get<uint64_t>(bytes, kOffPayloadChecksum);
+  const uint64_t stored_sum = LoadLittleEndian<uint64_t>(bytes.data() + kOffPayloadChecksum);
   const uint64_t sum = XXH3_64bits(payload.data(), payload.size());
   if (stored_sum != sum) {
     return Corrupt(StatusCode::kChecksumMismatch,
@@ -411,22 +404,24 @@ Result<ViewIndex> ViewIndex::Parse(std::string_view bytes,
                    "offset " + std::to_string(payload_offset) + ": payload checksum " +
                        Hex64(stored_sum) + ", computed " + Hex64(sum));
   }
-  if (Get<uint64_t>(bytes, kOffFingerprint) != database_fingerprint) {
+  if (LoadLittleEndian<uint64_t>(bytes.data() + kOffFingerprint) != database_fingerprint) {
     return Corrupt(StatusCode::kSizeMismatch,
                    what,
                    "built for other shards (database fingerprint " +
-                       Hex64(Get<uint64_t>(bytes, kOffFingerprint)) + ", this database " +
-                       Hex64(database_fingerprint) + "): rebuild it with `handdb index`");
+                       Hex64(LoadLittleEndian<uint64_t>(bytes.data() + kOffFingerprint)) +
+                       ", this database " + Hex64(database_fingerprint) +
+                       "): rebuild it with `handdb index`");
   }
   ViewIndex index;
   index.fingerprint_ = database_fingerprint;
-  index.num_views_ = Get<uint64_t>(bytes, kOffViews);
-  index.num_rolls_ = Get<uint32_t>(bytes, kOffRolls);
-  index.dims_ = static_cast<int>(Get<uint32_t>(bytes, kOffDims));
-  index.nlist_ = static_cast<int>(Get<uint32_t>(bytes, kOffNlist));
-  index.weight_ = Get<float>(bytes, kOffWeight);
-  index.grid_.cell_units = static_cast<int>(Get<uint32_t>(bytes, kOffCellUnits));
-  index.grid_.side = static_cast<int>(Get<uint32_t>(bytes, kOffSide));
+  index.num_views_ = LoadLittleEndian<uint64_t>(bytes.data() + kOffViews);
+  index.num_rolls_ = LoadLittleEndian<uint32_t>(bytes.data() + kOffRolls);
+  index.dims_ = static_cast<int>(LoadLittleEndian<uint32_t>(bytes.data() + kOffDims));
+  index.nlist_ = static_cast<int>(LoadLittleEndian<uint32_t>(bytes.data() + kOffNlist));
+  index.weight_ = LoadLittleEndian<float>(bytes.data() + kOffWeight);
+  index.grid_.cell_units =
+      static_cast<int>(LoadLittleEndian<uint32_t>(bytes.data() + kOffCellUnits));
+  index.grid_.side = static_cast<int>(LoadLittleEndian<uint32_t>(bytes.data() + kOffSide));
   if (index.num_views_ != num_views || index.num_rolls_ != num_rolls) {
     return Corrupt(StatusCode::kSizeMismatch,
                    what,
@@ -440,18 +435,21 @@ Result<ViewIndex> ViewIndex::Parse(std::string_view bytes,
                    std::to_string(num_views) + " views: more than 32-bit view ids can name");
   }
   std::string grid_error;
-  if (!index.grid_.Check(&grid_error) || Get<uint32_t>(bytes, kOffDims) < 1 ||
-      Get<uint32_t>(bytes, kOffDims) > static_cast<uint32_t>(index.grid_.dims()) ||
-      Get<uint32_t>(bytes, kOffNlist) < 1 || Get<uint32_t>(bytes, kOffNlist) > num_views ||
+  if (!index.grid_.Check(&grid_error) || LoadLittleEndian<uint32_t>(bytes.data() + kOffDims) < 1 ||
+      LoadLittleEndian<uint32_t>(bytes.data() + kOffDims) >
+          static_cast<uint32_t>(index.grid_.dims()) ||
+      LoadLittleEndian<uint32_t>(bytes.data() + kOffNlist) < 1 ||
+      LoadLittleEndian<uint32_t>(bytes.data() + kOffNlist) > num_views ||
       !(std::isfinite(index.weight_) && index.weight_ > 0)) {
-    return Corrupt(StatusCode::kOutOfRange,
-                   what,
-                   "embedding parameters out of range (cell " +
-                       std::to_string(Get<uint32_t>(bytes, kOffCellUnits)) + ", side " +
-                       std::to_string(Get<uint32_t>(bytes, kOffSide)) + ", dims " +
-                       std::to_string(Get<uint32_t>(bytes, kOffDims)) + ", lists " +
-                       std::to_string(Get<uint32_t>(bytes, kOffNlist)) + ", weight " +
-                       std::to_string(index.weight_) + ")");
+    return Corrupt(
+        StatusCode::kOutOfRange,
+        what,
+        "embedding parameters out of range (cell " +
+            std::to_string(LoadLittleEndian<uint32_t>(bytes.data() + kOffCellUnits)) + ", side " +
+            std::to_string(LoadLittleEndian<uint32_t>(bytes.data() + kOffSide)) + ", dims " +
+            std::to_string(LoadLittleEndian<uint32_t>(bytes.data() + kOffDims)) + ", lists " +
+            std::to_string(LoadLittleEndian<uint32_t>(bytes.data() + kOffNlist)) + ", weight " +
+            std::to_string(index.weight_) + ")");
   }
   // Every size below is small (dims <= 20,402, lists <= views < 2^32): no overflow in 64 bits.
   const uint64_t D = static_cast<uint64_t>(index.grid_.dims());
