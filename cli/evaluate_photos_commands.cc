@@ -169,8 +169,8 @@ Result<OpenedPhotoEvaluation> OpenPhotoEvaluation(const std::string& db,
   // folder of edge images or label renders is scored like one of photos.
   PhotoInputFlags picture = flags.picture;
   HANDDB_RETURN_IF_ERROR(picture.UseDatabaseConversion(database, db));
-  opened.query_fn = [options = picture.edges](const PhotoItem& item) {
-    return LoadQueryEdges(item.path, options);
+  opened.query_fn = [options = picture.picture_options()](const PhotoItem& item) {
+    return ReadPicture(item.path, options);
   };
   return opened;
 }

@@ -146,10 +146,10 @@ bool PhotoInputFlags::Finish(const std::string& cmd) {
   }
   // Edge images and label EXRs have no photo to find landmarks in.
   if (edges.kind != QueryInputKind::kEdges && edges.kind != QueryInputKind::kLabels &&
-      !ResolveLandmarker(landmarks, cmd, &edges.landmarker)) {
+      !ResolveLandmarker(landmarks, cmd, &landmarker)) {
     return false;
   }
-  landmark_rank.enabled = edges.landmarker != nullptr;
+  landmark_rank.enabled = landmarker != nullptr;
   if (!landmark_rank.Check()) {
     std::fprintf(stderr, "handdb %s: invalid landmark options (see above)\n", c);
     return false;
@@ -179,7 +179,7 @@ std::vector<std::string> PhotoInputFlags::Args() const {
   // The model this process resolved, so every task uses the same one (or none).
   args.insert(args.end(),
               {"--landmarks",
-               edges.landmarker ? edges.landmarker->path().string() : std::string("off"),
+               landmarker ? landmarker->path().string() : std::string("off"),
                "--landmark-weight",
                std::to_string(landmark_rank.weight)});
   return args;
@@ -198,8 +198,7 @@ nlohmann::json PhotoInputFlags::ToJson() const {
       {"work_diameter_px", edges.work_diameter_px},
       {"cut_forearm", edges.cut_forearm},
       {"landmarks",
-       edges.landmarker ? nlohmann::json(edges.landmarker->path().string())
-                        : nlohmann::json(nullptr)},
+       landmarker ? nlohmann::json(landmarker->path().string()) : nlohmann::json(nullptr)},
       {"landmark_weight", landmark_rank.weight}};
 }
 

@@ -10,9 +10,9 @@
 #include <vector>
 
 #include "base/status.h"
-#include "query/database.h"
 #include "photo/image_edges.h"
 #include "pose/landmark_rank.h"
+#include "query/database.h"
 #include "query/searcher.h"
 
 namespace handdb::cli {
@@ -27,7 +27,9 @@ struct PhotoInputFlags {
   // when it is not installed; off; or a model file.
   std::string landmarks = "auto";
   ImageEdgeOptions edges;
+  std::shared_ptr<const HandLandmarker> landmarker;  // loaded once by Finish; null: none
   LandmarkRankOptions landmark_rank;
+  PictureOptions picture_options() const { return {edges, landmarker}; }
 
   // Which flags a command takes: --input (the kind of picture) only where no other --input
   // exists, --mask only where there is one picture (a mask belongs to one photo).

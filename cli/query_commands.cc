@@ -16,8 +16,8 @@
 #include "format/roll.h"
 #include "handdb_version.h"
 #include "photo/image_edges.h"
-#include "pose/sheet.h"
 #include "pose/landmark_rank.h"
+#include "pose/sheet.h"
 #include "query/searcher.h"
 
 namespace handdb::cli {
@@ -72,9 +72,10 @@ json MatchJson(const Match& m, int rank, const QueryEdges& query) {
 }
 
 void PrintTable(const std::vector<Match>& matches,
-                const QueryEdges& q,
+                const PictureEvidence& picture,
                 const SearchStats& st,
                 const Database& db) {
+  const QueryEdges& q = picture.edges;
   std::printf(
       "query: %zu edge points (%s, %dx%d, hand diameter %.1f px%s)%s\n",
       q.points.size(),
@@ -84,10 +85,10 @@ void PrintTable(const std::vector<Match>& matches,
       q.diameter_px,
       q.forearm_cut ? ", forearm cut at the wrist" : "",
       q.touches_border && !q.forearm_cut ? "  [warning: the hand touches the image border]" : "");
-  if (q.landmarks) {
+  if (picture.landmarks) {
     const bool used = !matches.empty() && matches.front().score >= 0;
     std::printf("hand landmarks: presence %.3f, %s\n",
-                static_cast<double>(q.landmarks->presence),
+                static_cast<double>(picture.landmarks->presence),
                 used ? "the nearest views re-ranked by D_c / best D_c + weight x landmark error "
                        "(column lm, in hand radii)"
                      : "below the 0.9 the ranking needs: ranked by D_c alone");
@@ -246,7 +247,7 @@ bool QueryFlags::Finish() {
 
 // The contact sheet of --sheet: the input, its edges and each match's edges at its roll.
 Status WriteSheet(const QueryFlags& flags,
-                  const QueryEdges& query,
+                  const PictureEvidence& picture,
                   const std::vector<Match>& matches,
                   const Database& db) {
   std::vector<SheetTile> tiles;
@@ -282,18 +283,20 @@ Status WriteSheet(const QueryFlags& flags,
   std::vector<Point2f> skeleton;
   if (!matches.empty()) {
     for (const auto& k : matches.front().label.keypoints) {
-      skeleton.push_back(query.ImageFromNormalised({k[0], k[1]}));
+      skeleton.push_back(picture.edges.ImageFromNormalised({k[0], k[1]}));
     }
   }
-  return WriteContactSheet(flags.sheet, flags.image, query, tiles, ContactSheetOptions{}, skeleton);
+  return WriteContactSheet(
+      flags.sheet, flags.image, picture, tiles, ContactSheetOptions{}, skeleton);
 }
 
 // The --json document (schemas/query_result.schema.json).
 json ResultJson(const QueryFlags& flags,
-                const QueryEdges& query,
+                const PictureEvidence& picture,
                 const std::vector<Match>& matches,
                 const SearchStats& stats,
                 const Database& db) {
+  const QueryEdges& query = picture.edges;
   json matches_json = json::array();
   int rank = 1;
   for (const Match& m : matches) matches_json.push_back(MatchJson(m, rank++, query));
@@ -318,13 +321,13 @@ json ResultJson(const QueryFlags& flags,
                                      {query.wrist_line[2], query.wrist_line[3]}};
     }
     if (query.arm_found) query_json["arm_direction"] = {query.arm_dir_x, query.arm_dir_y};
-    if (query.landmarks) {
-      const HandLandmarks& l = *query.landmarks;
+    if (picture.landmarks) {
+      const HandLandmarks& l = *picture.landmarks;
       json px = json::array();
       for (const Point2f& p : l.image_px) px.push_back({p.x, p.y});
-      query_json["landmarks"] = {{"model", flags.picture.edges.landmarker->path().string()},
+      query_json["landmarks"] = {{"model", flags.picture.landmarker->path().string()},
                                  {"presence", l.presence},
-                                 {"used", UsesLandmarks(query, flags.picture.landmark_rank)},
+                                 {"used", UsesLandmarks(picture, flags.picture.landmark_rank)},
                                  {"weight", flags.picture.landmark_rank.weight},
                                  {"image_px", px},
                                  {"crop",
@@ -411,10 +414,11 @@ int RunQuery(int argc, char** argv) {
   // A label EXR is converted with the edge options the database was made with.
   const Status recorded = flags.picture.UseDatabaseConversion(*shared_db, db_dir);
   if (!recorded.ok()) return Fail("query", recorded);
-  auto query = LoadQueryEdges(flags.image, flags.picture.edges);
+  auto query = ReadPicture(flags.image, flags.picture.picture_options());
   if (!query.ok()) return Fail("query", query.status());
   SearchStats stats;
-  auto matches = SearchQuery(searcher, *query, flags.search, flags.picture.landmark_rank, &stats);
+  auto matches =
+      SearchEvidence(searcher, *query, flags.search, flags.picture.landmark_rank, &stats);
   if (!matches.ok()) return Fail("query", matches.status());
 
   if (!flags.sheet.empty()) {

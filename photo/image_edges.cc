@@ -403,13 +403,8 @@ HandLandmarks FindLandmarks(const HandLandmarker& landmarker,
                            static_cast<float>(angle));
 }
 
-// `source` is the picture's size in its file: larger than `any` when a huge JPEG was decoded
-// reduced (a mask then has the file's size and is reduced the same way).
-Result<QueryEdges> FromPhoto(const std::filesystem::path& path,
-                             const cv::Mat& any,
-                             cv::Size source,
-                             const ImageEdgeOptions& options) {
-  const std::string what = path.string();
+// The photo path's 8-bit BGR picture, whatever the file's depth and channels.
+cv::Mat ToBgr8(const cv::Mat& any) {
   cv::Mat bgr;
   if (any.depth() != CV_8U) {
     any.convertTo(bgr, CV_8U, any.depth() == CV_16U ? 1.0 / 257.0 : 255.0);
@@ -418,6 +413,17 @@ Result<QueryEdges> FromPhoto(const std::filesystem::path& path,
   }
   if (bgr.channels() == 1) cv::cvtColor(bgr, bgr, cv::COLOR_GRAY2BGR);
   if (bgr.channels() == 4) cv::cvtColor(bgr, bgr, cv::COLOR_BGRA2BGR);
+  return bgr;
+}
+
+// `bgr` is ToBgr8 of the decoded picture; `source` is the picture's size in its file: larger than
+// `any` when a huge JPEG was decoded reduced (a mask then has the file's size and is reduced the
+// same way).
+Result<QueryEdges> FromPhoto(const std::filesystem::path& path,
+                             const cv::Mat& bgr,
+                             cv::Size source,
+                             const ImageEdgeOptions& options) {
+  const std::string what = path.string();
   const int w = bgr.cols;
   const int h = bgr.rows;
 
@@ -679,7 +685,6 @@ Result<QueryEdges> FromPhoto(const std::filesystem::path& path,
                       crop.x + wrist.b.x / fx,
                       crop.y + wrist.b.y / fy};
   }
-  if (options.landmarker) out.landmarks = FindLandmarks(*options.landmarker, bgr, out);
   return out;
 }
 
@@ -711,13 +716,80 @@ void ScaleToSource(cv::Size source, cv::Size decoded, QueryEdges* q) {
   q->centre_y *= fy;
   q->diameter_px *= f;
   q->scale /= f;
-  if (q->landmarks) {
-    for (Point2f& p : q->landmarks->image_px)
-      p = {static_cast<float>(p.x * fx), static_cast<float>(p.y * fy)};
-    q->landmarks->crop_centre = {static_cast<float>(q->landmarks->crop_centre.x * fx),
-                                 static_cast<float>(q->landmarks->crop_centre.y * fy)};
-    q->landmarks->crop_side_px *= static_cast<float>(f);
+}
+
+// The same for the landmarks found in the reduced picture.
+void ScaleToSource(cv::Size source, cv::Size decoded, HandLandmarks* l) {
+  const double fx = double(source.width) / decoded.width;
+  const double fy = double(source.height) / decoded.height;
+  const double f = std::sqrt(fx * fy);
+  for (Point2f& p : l->image_px) p = {static_cast<float>(p.x * fx), static_cast<float>(p.y * fy)};
+  l->crop_centre = {static_cast<float>(l->crop_centre.x * fx),
+                    static_cast<float>(l->crop_centre.y * fy)};
+  l->crop_side_px *= static_cast<float>(f);
+}
+
+// The picture decoded once: its edges, then (a photo, with a landmarker) the landmark network
+// on the same pixels and the hand the segmentation found, both in the decoded picture's pixels
+// until the last step maps them to the file's.
+Result<PictureEvidence> Read(const std::filesystem::path& image,
+                             const ImageEdgeOptions& options,
+                             const HandLandmarker* landmarker) {
+  if (!options.Check()) {
+    return Status(StatusCode::kInvalidArgument, "invalid image edge options (see the line above)");
   }
+  // A JPEG above kMaxImagePixels is decoded at 1/2, 1/4 or 1/8 of its size (libjpeg scales
+  // while it decodes, so the full image is never in memory).
+  if (Status s = CheckImageFileComplete(image, kMaxImagePixels, kMaxJpegPixels); !s.ok()) return s;
+  QueryInputKind kind = options.kind;
+  if (kind == QueryInputKind::kAuto && Lower(image.extension().string()) == ".exr") {
+    kind = QueryInputKind::kLabels;
+  }
+  PictureEvidence out;
+  if (kind == QueryInputKind::kLabels) {
+    auto edges = FromLabels(image, options);
+    if (!edges.ok()) return edges.status();
+    out.edges = std::move(edges).value();
+    return out;
+  }
+
+  int flags = cv::IMREAD_UNCHANGED;
+  const std::optional<ImageSize> size = ReadImageSize(image);
+  if (size && std::string_view(size->format) == "JPEG" &&
+      size->width * size->height > kMaxImagePixels) {
+    const uint64_t pixels = size->width * size->height;
+    flags = pixels <= 4 * kMaxImagePixels    ? cv::IMREAD_REDUCED_COLOR_2
+            : pixels <= 16 * kMaxImagePixels ? cv::IMREAD_REDUCED_COLOR_4
+                                             : cv::IMREAD_REDUCED_COLOR_8;
+  }
+  const cv::Mat any = cv::imread(image.string(), flags);
+  if (any.empty()) {
+    return Status(StatusCode::kBadImage,
+                  image.string() + ": cannot read the image (not a PNG/JPEG/... or corrupt)");
+  }
+  const cv::Size source =
+      flags == cv::IMREAD_UNCHANGED || !size
+          ? any.size()
+          : cv::Size(static_cast<int>(size->width), static_cast<int>(size->height));
+  if (kind == QueryInputKind::kAuto) {
+    kind = LooksLikeEdgeImage(any) ? QueryInputKind::kEdges : QueryInputKind::kPhoto;
+  }
+  if (kind == QueryInputKind::kEdges) {
+    auto edges = FromEdgeImage(image, any);
+    if (!edges.ok()) return edges.status();
+    out.edges = std::move(edges).value();
+  } else {
+    const cv::Mat bgr = ToBgr8(any);
+    auto edges = FromPhoto(image, bgr, source, options);
+    if (!edges.ok()) return edges.status();
+    out.edges = std::move(edges).value();
+    if (landmarker != nullptr) out.landmarks = FindLandmarks(*landmarker, bgr, out.edges);
+  }
+  if (source != any.size()) {
+    ScaleToSource(source, any.size(), &out.edges);
+    if (out.landmarks) ScaleToSource(source, any.size(), &*out.landmarks);
+  }
+  return out;
 }
 
 }  // namespace
@@ -801,43 +873,14 @@ std::vector<Point2f> QueryEdges::points_px() const {
 
 Result<QueryEdges> LoadQueryEdges(const std::filesystem::path& image,
                                   const ImageEdgeOptions& options) {
-  if (!options.Check()) {
-    return Status(StatusCode::kInvalidArgument, "invalid image edge options (see the line above)");
-  }
-  // Issue 14 items 6, 7, 8; a JPEG above kMaxImagePixels is decoded at 1/2, 1/4 or 1/8 of its
-  // size (libjpeg scales while it decodes, so the full image is never in memory).
-  if (Status s = CheckImageFileComplete(image, kMaxImagePixels, kMaxJpegPixels); !s.ok()) return s;
-  QueryInputKind kind = options.kind;
-  if (kind == QueryInputKind::kAuto && Lower(image.extension().string()) == ".exr") {
-    kind = QueryInputKind::kLabels;
-  }
-  if (kind == QueryInputKind::kLabels) return FromLabels(image, options);
+  auto read = Read(image, options, nullptr);
+  if (!read.ok()) return read.status();
+  return std::move(read->edges);
+}
 
-  int flags = cv::IMREAD_UNCHANGED;
-  const std::optional<ImageSize> size = ReadImageSize(image);
-  if (size && std::string_view(size->format) == "JPEG" &&
-      size->width * size->height > kMaxImagePixels) {
-    const uint64_t pixels = size->width * size->height;
-    flags = pixels <= 4 * kMaxImagePixels    ? cv::IMREAD_REDUCED_COLOR_2
-            : pixels <= 16 * kMaxImagePixels ? cv::IMREAD_REDUCED_COLOR_4
-                                             : cv::IMREAD_REDUCED_COLOR_8;
-  }
-  const cv::Mat any = cv::imread(image.string(), flags);
-  if (any.empty()) {
-    return Status(StatusCode::kBadImage,
-                  image.string() + ": cannot read the image (not a PNG/JPEG/... or corrupt)");
-  }
-  const cv::Size source =
-      flags == cv::IMREAD_UNCHANGED || !size
-          ? any.size()
-          : cv::Size(static_cast<int>(size->width), static_cast<int>(size->height));
-  if (kind == QueryInputKind::kAuto) {
-    kind = LooksLikeEdgeImage(any) ? QueryInputKind::kEdges : QueryInputKind::kPhoto;
-  }
-  Result<QueryEdges> out = kind == QueryInputKind::kEdges ? FromEdgeImage(image, any)
-                                                          : FromPhoto(image, any, source, options);
-  if (out.ok() && source != any.size()) ScaleToSource(source, any.size(), &*out);
-  return out;
+Result<PictureEvidence> ReadPicture(const std::filesystem::path& image,
+                                    const PictureOptions& options) {
+  return Read(image, options.edges, options.landmarker.get());
 }
 
 }  // namespace handdb

@@ -127,8 +127,11 @@ TEST_F(ImageEdgesTest, PhotoOfADatabaseViewFindsIt) {
     for (const PointQ& p : db->points(m.view_id)) t.points.push_back(p);
     tiles.push_back(t);
   }
+  PictureEvidence evidence;
+  evidence.edges = *photo;
   const fs::path sheet = dir_ / "sheet.png";
-  ASSERT_TRUE(WriteContactSheet(sheet, dir_ / "q.png", *photo, tiles, ContactSheetOptions{}).ok());
+  ASSERT_TRUE(
+      WriteContactSheet(sheet, dir_ / "q.png", evidence, tiles, ContactSheetOptions{}).ok());
   const cv::Mat img = cv::imread(sheet.string());
   ASSERT_FALSE(img.empty());
   EXPECT_EQ(img.cols, 4 * 240 + 5 * 4);  // 5 tiles in 4 columns -> 2 rows
@@ -141,7 +144,8 @@ TEST_F(ImageEdgesTest, PhotoOfADatabaseViewFindsIt) {
   }
   const fs::path with = dir_ / "sheet-skeleton.png";
   ASSERT_TRUE(
-      WriteContactSheet(with, dir_ / "q.png", *photo, tiles, ContactSheetOptions{}, skeleton).ok());
+      WriteContactSheet(with, dir_ / "q.png", evidence, tiles, ContactSheetOptions{}, skeleton)
+          .ok());
   const auto amber_pixels = [](const cv::Mat& sheet_img) {
     const cv::Mat input_tile = sheet_img(cv::Rect(4, 4 + 22, 240, 240));
     int n = 0;

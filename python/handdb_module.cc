@@ -35,9 +35,9 @@
 #include "format/validator.h"
 #include "format/view.h"
 #include "handdb_version.h"
-#include "query/database.h"
 #include "photo/image_edges.h"
 #include "pose/landmark_rank.h"
+#include "query/database.h"
 #include "query/searcher.h"
 
 namespace handdb::python {
@@ -138,7 +138,7 @@ double Deg0To360(double rad) {
 // Query edges.
 
 struct PyQueryEdges {
-  QueryEdges edges;
+  PictureEvidence picture;
 };
 
 py::array_t<int32_t> PixelArray(const std::vector<EdgePixelXY>& px) {
@@ -219,8 +219,9 @@ std::shared_ptr<const HandLandmarker> Landmarker(const std::string& spec) {
 }
 
 // The keyword options of query_edges() and search(), named like `handdb query`'s flags.
-ImageEdgeOptions EdgeOptionsFromKwargs(const py::kwargs& kw) {
-  ImageEdgeOptions o;
+PictureOptions PictureOptionsFromKwargs(const py::kwargs& kw) {
+  PictureOptions picture;
+  ImageEdgeOptions& o = picture.edges;
   std::string landmarks = "auto";
   for (const auto& [key_handle, value] : kw) {
     const std::string key = py::cast<std::string>(key_handle);
@@ -269,13 +270,13 @@ ImageEdgeOptions EdgeOptionsFromKwargs(const py::kwargs& kw) {
   }
   // Edge images and label EXRs have no photo to find landmarks in.
   if (o.kind != QueryInputKind::kEdges && o.kind != QueryInputKind::kLabels) {
-    o.landmarker = Landmarker(landmarks);
+    picture.landmarker = Landmarker(landmarks);
   }
-  return o;
+  return picture;
 }
 
 PyQueryEdges LoadEdges(const fs::path& image,
-                       ImageEdgeOptions options,
+                       PictureOptions options,
                        const std::optional<fs::path>& db_dir) {
   py::gil_scoped_release release;
   if (db_dir) {
@@ -283,10 +284,10 @@ PyQueryEdges LoadEdges(const fs::path& image,
     // query` does).
     auto recorded = ReadDatabaseViewConversion(*db_dir);
     if (!recorded.ok()) throw StatusError(recorded.status());
-    options.label_edges = recorded->edges;
-    options.label_joint_pairs = recorded->joint_pairs;
+    options.edges.label_edges = recorded->edges;
+    options.edges.label_joint_pairs = recorded->joint_pairs;
   }
-  return PyQueryEdges{Unwrap(LoadQueryEdges(image, options))};
+  return PyQueryEdges{Unwrap(ReadPicture(image, options))};
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -616,27 +617,28 @@ py::object Search(const PyDatabase& self,
   landmark_rank.weight = landmark_weight;
   if (!landmark_rank.Check()) throw py::value_error("landmark_weight must be >= 0");
 
-  std::optional<QueryEdges> edges;
+  std::optional<PictureEvidence> picture;
   std::vector<Point2f> points;
   if (py::isinstance<PyQueryEdges>(query)) {
     if (edge_kwargs.size()) throw py::type_error("image options given with a QueryEdges query");
-    edges = py::cast<const PyQueryEdges&>(query).edges;
+    picture = py::cast<const PyQueryEdges&>(query).picture;
   } else if (py::isinstance<py::str>(query) || py::hasattr(query, "__fspath__")) {
-    edges =
-        LoadEdges(py::cast<fs::path>(query), EdgeOptionsFromKwargs(edge_kwargs), self.path()).edges;
+    picture =
+        LoadEdges(py::cast<fs::path>(query), PictureOptionsFromKwargs(edge_kwargs), self.path())
+            .picture;
   } else {
     if (edge_kwargs.size()) throw py::type_error("image options given with a points query");
     points = QueryPoints(py::array::ensure(query));
   }
-  if (edges) points = edges->points_px();
+  if (picture) points = picture->edges.points_px();
 
   const Searcher& searcher = self.searcher();
   SearchStats stats;
   std::optional<Result<std::vector<Match>>> matches;
   {
     py::gil_scoped_release release;
-    matches.emplace(edges ? SearchQuery(searcher, *edges, options, landmark_rank, &stats)
-                          : searcher.Search(points, options, &stats));
+    matches.emplace(picture ? SearchEvidence(searcher, *picture, options, landmark_rank, &stats)
+                            : searcher.Search(points, options, &stats));
   }
   if (!matches->ok()) throw StatusError(matches->status());
   py::list out;
@@ -644,10 +646,10 @@ py::object Search(const PyDatabase& self,
   for (Match& m : **matches) {
     PyMatch pm;
     pm.rank = rank++;
-    if (edges) {
+    if (picture) {
       pm.keypoints_image.emplace();
       for (const auto& kp : m.label.keypoints) {
-        pm.keypoints_image->push_back(edges->ImageFromNormalised({kp[0], kp[1]}));
+        pm.keypoints_image->push_back(picture->edges.ImageFromNormalised({kp[0], kp[1]}));
       }
     }
     pm.match = std::move(m);
@@ -726,71 +728,76 @@ PYBIND11_MODULE(_handdb, m) {
                            "(handdb.query_edges(); docs/query.md 'From a picture to edges').")
       .def_property_readonly(
           "kind",
-          [](const PyQueryEdges& q) { return std::string(QueryInputKindName(q.edges.kind)); },
+          [](const PyQueryEdges& q) {
+            return std::string(QueryInputKindName(q.picture.edges.kind));
+          },
           "the input kind used: 'photo', 'edges' or 'labels'")
       .def_property_readonly(
           "points",
           [](py::object self) {
-            const auto& q = py::cast<const PyQueryEdges&>(self).edges;
+            const auto& q = py::cast<const PyQueryEdges&>(self).picture.edges;
             return PointsView(q.points, self);
           },
           "(n, 2) int16, read-only: normalised points in 1/16 px (sorted by y, x; unique)")
       .def_property_readonly(
           "points_px",
-          [](const PyQueryEdges& q) { return Point2fArray(q.edges.points_px()); },
+          [](const PyQueryEdges& q) { return Point2fArray(q.picture.edges.points_px()); },
           "(n, 2) float32: the same in px (what the search uses)")
       .def_property_readonly(
           "edge_pixels",
-          [](const PyQueryEdges& q) { return PixelArray(q.edges.edge_pixels); },
+          [](const PyQueryEdges& q) { return PixelArray(q.picture.edges.edge_pixels); },
           "(n, 2) int32: edge pixels (column, row) of the input image")
       .def_property_readonly(
           "contour_pixels",
-          [](const PyQueryEdges& q) { return PixelArray(q.edges.contour_pixels); },
+          [](const PyQueryEdges& q) { return PixelArray(q.picture.edges.contour_pixels); },
           "(n, 2) int32: the silhouette contour used for the normalisation")
-      .def_property_readonly("width", [](const PyQueryEdges& q) { return q.edges.width; })
-      .def_property_readonly("height", [](const PyQueryEdges& q) { return q.edges.height; })
+      .def_property_readonly("width", [](const PyQueryEdges& q) { return q.picture.edges.width; })
+      .def_property_readonly("height", [](const PyQueryEdges& q) { return q.picture.edges.height; })
       .def_property_readonly("hand_pixels",
-                             [](const PyQueryEdges& q) { return q.edges.hand_pixels; })
+                             [](const PyQueryEdges& q) { return q.picture.edges.hand_pixels; })
       .def_property_readonly(
           "touches_border",
-          [](const PyQueryEdges& q) { return q.edges.touches_border; },
+          [](const PyQueryEdges& q) { return q.picture.edges.touches_border; },
           "the hand region reaches the image border")
       .def_property_readonly("diameter_px",
-                             [](const PyQueryEdges& q) { return q.edges.diameter_px; })
+                             [](const PyQueryEdges& q) { return q.picture.edges.diameter_px; })
       .def_property_readonly(
           "centre_px",
-          [](const PyQueryEdges& q) { return py::make_tuple(q.edges.centre_x, q.edges.centre_y); },
+          [](const PyQueryEdges& q) {
+            return py::make_tuple(q.picture.edges.centre_x, q.picture.edges.centre_y);
+          },
           "normalisation centre in image px: normalised = (pixel centre - centre) * scale")
-      .def_property_readonly("scale", [](const PyQueryEdges& q) { return q.edges.scale; })
+      .def_property_readonly("scale", [](const PyQueryEdges& q) { return q.picture.edges.scale; })
       .def_property_readonly(
           "palm",
           [](const PyQueryEdges& q) -> py::object {
-            if (q.edges.palm_radius_px <= 0) return py::none();
-            return py::make_tuple(
-                q.edges.palm_centre_x, q.edges.palm_centre_y, q.edges.palm_radius_px);
+            if (q.picture.edges.palm_radius_px <= 0) return py::none();
+            return py::make_tuple(q.picture.edges.palm_centre_x,
+                                  q.picture.edges.palm_centre_y,
+                                  q.picture.edges.palm_radius_px);
           },
           "photo: the palm's largest inscribed circle (x, y, radius) in image px, or None")
       .def_property_readonly(
           "arm_direction",
           [](const PyQueryEdges& q) -> py::object {
-            if (!q.edges.arm_found) return py::none();
-            return py::make_tuple(q.edges.arm_dir_x, q.edges.arm_dir_y);
+            if (!q.picture.edges.arm_found) return py::none();
+            return py::make_tuple(q.picture.edges.arm_dir_x, q.picture.edges.arm_dir_y);
           },
           "photo: unit vector (x right, y down, image px) from the palm centre towards where "
           "the arm leaves the picture, or None when no arm was found")
       .def_property_readonly(
           "wrist_line",
           [](const PyQueryEdges& q) -> py::object {
-            if (!q.edges.forearm_cut) return py::none();
-            const auto& w = q.edges.wrist_line;
+            if (!q.picture.edges.forearm_cut) return py::none();
+            const auto& w = q.picture.edges.wrist_line;
             return py::make_tuple(w[0], w[1], w[2], w[3]);
           },
           "photo: the wrist cut (x0, y0, x1, y1) in image px, or None when no forearm was cut")
       .def_property_readonly(
           "landmarks",
           [](const PyQueryEdges& q) -> py::object {
-            if (!q.edges.landmarks) return py::none();
-            const HandLandmarks& l = *q.edges.landmarks;
+            if (!q.picture.landmarks) return py::none();
+            const HandLandmarks& l = *q.picture.landmarks;
             py::dict d;
             d["presence"] = l.presence;
             d["image_px"] =
@@ -810,17 +817,18 @@ PYBIND11_MODULE(_handdb, m) {
               throw py::value_error("expected an (n, 2) array");
             std::vector<Point2f> out;
             for (py::ssize_t i = 0; i < xy.shape(0); ++i) {
-              out.push_back(q.edges.ImageFromNormalised({xy.at(i, 0), xy.at(i, 1)}));
+              out.push_back(q.picture.edges.ImageFromNormalised({xy.at(i, 0), xy.at(i, 1)}));
             }
             return Point2fArray(out);
           },
           py::arg("xy"),
           "Normalised px (n, 2) -> input image px (pixel centres at integer + 0.5).")
-      .def("__len__", [](const PyQueryEdges& q) { return q.edges.points.size(); })
+      .def("__len__", [](const PyQueryEdges& q) { return q.picture.edges.points.size(); })
       .def("__repr__", [](const PyQueryEdges& q) {
-        return "<handdb.QueryEdges " + std::string(QueryInputKindName(q.edges.kind)) + " " +
-               std::to_string(q.edges.width) + "x" + std::to_string(q.edges.height) + ", " +
-               std::to_string(q.edges.points.size()) + " points>";
+        return "<handdb.QueryEdges " + std::string(QueryInputKindName(q.picture.edges.kind)) + " " +
+               std::to_string(q.picture.edges.width) + "x" +
+               std::to_string(q.picture.edges.height) + ", " +
+               std::to_string(q.picture.edges.points.size()) + " points>";
       });
 
   py::class_<PyView>(m,
@@ -1143,7 +1151,7 @@ PYBIND11_MODULE(_handdb, m) {
         } else if (!database.is_none()) {
           db_dir = py::cast<fs::path>(database);
         }
-        return LoadEdges(image, EdgeOptionsFromKwargs(kw), db_dir);
+        return LoadEdges(image, PictureOptionsFromKwargs(kw), db_dir);
       },
       py::arg("image"),
       py::arg("database") = py::none(),
