@@ -17,6 +17,7 @@
 #include "handdb_version.h"
 #include "photo/image_edges.h"
 #include "pose/landmark_rank.h"
+#include "pose/picture_search.h"
 #include "pose/sheet.h"
 #include "query/searcher.h"
 
@@ -155,14 +156,16 @@ struct QueryFlags {
   std::string search_mode = "auto";  // auto: indexed when the manifest lists an index
   std::string kdtree = std::string(KdTreeBackendName(SearchOptions{}.kdtree));
   bool as_json = false, verify = false, quiet = false;
-  SearchOptions search;
+  // The search flags are bound to picture.options.search: one options struct for the picture,
+  // its search and the landmark re-ranking (pose/picture_search.h).
   PhotoInputFlags picture;
   void Add(CLI::App& app);
-  // Completes `edges` and `search` from the text flags; false (message printed) on bad usage.
+  // Completes picture.options from the text flags; false (message printed) on bad usage.
   bool Finish();
 };
 
 void QueryFlags::Add(CLI::App& app) {
+  SearchOptions& search = picture.options.search;
   app.add_option("DB", db_dir, "database directory (manifest.json + shards)")->required();
   app.add_option("IMAGE", image, "query image: photo, edge image or label EXR")->required();
   app.add_option("--top", search.top_k, "number of matches")
@@ -190,7 +193,7 @@ void QueryFlags::Add(CLI::App& app) {
       ->capture_default_str();
   app.add_flag_callback(
       "--no-coarse-bound",
-      [this] { search.coarse_bound = false; },
+      [&search] { search.coarse_bound = false; },
       "prune with the view -> query bound alone, without the coarse query -> view bound (for "
       "comparison: the results are identical)");
   picture.Add(app, PhotoInputFlags::Which{});
@@ -220,6 +223,7 @@ void QueryFlags::Add(CLI::App& app) {
 }
 
 bool QueryFlags::Finish() {
+  SearchOptions& search = picture.options.search;
   search.progress = !quiet;
   if (search.num_threads == 0 || search.num_threads < -1) {
     std::fprintf(stderr, "handdb query: --threads must be -1 or >= 1\n");
@@ -300,7 +304,7 @@ json ResultJson(const QueryFlags& flags,
   json matches_json = json::array();
   int rank = 1;
   for (const Match& m : matches) matches_json.push_back(MatchJson(m, rank++, query));
-  const SearchOptions& search = flags.search;
+  const SearchOptions& search = flags.picture.options.search;
   json query_json = {{"edge_points", query.points.size()},
                      {"width", query.width},
                      {"height", query.height},
@@ -325,15 +329,16 @@ json ResultJson(const QueryFlags& flags,
       const HandLandmarks& l = *picture.landmarks;
       json px = json::array();
       for (const Point2f& p : l.image_px) px.push_back({p.x, p.y});
-      query_json["landmarks"] = {{"model", flags.picture.landmarker->path().string()},
-                                 {"presence", l.presence},
-                                 {"used", UsesLandmarks(picture, flags.picture.landmark_rank)},
-                                 {"weight", flags.picture.landmark_rank.weight},
-                                 {"image_px", px},
-                                 {"crop",
-                                  {{"centre_px", {l.crop_centre.x, l.crop_centre.y}},
-                                   {"side_px", l.crop_side_px},
-                                   {"angle_deg", l.crop_angle_deg}}}};
+      query_json["landmarks"] = {
+          {"model", flags.picture.options.picture.landmarker->path().string()},
+          {"presence", l.presence},
+          {"used", UsesLandmarks(picture, flags.picture.options.landmark_rank)},
+          {"weight", flags.picture.options.landmark_rank.weight},
+          {"image_px", px},
+          {"crop",
+           {{"centre_px", {l.crop_centre.x, l.crop_centre.y}},
+            {"side_px", l.crop_side_px},
+            {"angle_deg", l.crop_angle_deg}}}};
     }
   }
   return {{"format", "handdb-query-result"},
@@ -386,7 +391,7 @@ int RunQuery(int argc, char** argv) {
   QueryFlags flags;
   // A long query shows progress counted from here: opening the database and loading the image
   // count towards the few seconds after which a progress line appears.
-  flags.search.progress_since = std::chrono::steady_clock::now();
+  flags.picture.options.search.progress_since = std::chrono::steady_clock::now();
   flags.Add(app);
   if (int rc = ParseArgs(app, argc, argv); rc >= 0) return rc;
   if (!flags.Finish()) return kExitUsage;
@@ -403,37 +408,36 @@ int RunQuery(int argc, char** argv) {
   // take to compute (pca-large: ~0.1 s against ~0.7 s), which is more than one query gains.
   if (shared_db->has_coarse_fields()) searcher.SetExactFieldKind(FieldKind::kBox);
   // Indexed search when asked, or by default when the manifest lists an index.
-  if (flags.search_mode != "exact" && !flags.search.brute_force &&
+  if (flags.search_mode != "exact" && !flags.picture.options.search.brute_force &&
       (flags.search_mode == "indexed" || shared_db->manifest().index)) {
     auto index = ViewIndex::Open(db_dir, shared_db->manifest());
     if (!index.ok()) return Fail("query", index.status());
     searcher.SetIndex(std::make_shared<const ViewIndex>(std::move(index).value()));
-    flags.search.mode = SearchMode::kIndexed;
+    flags.picture.options.search.mode = SearchMode::kIndexed;
   }
 
   // A label EXR is converted with the edge options the database was made with.
   const Status recorded = flags.picture.UseDatabaseConversion(*shared_db, db_dir);
   if (!recorded.ok()) return Fail("query", recorded);
-  auto query = ReadPicture(flags.image, flags.picture.picture_options());
-  if (!query.ok()) return Fail("query", query.status());
   SearchStats stats;
-  auto matches =
-      SearchEvidence(searcher, *query, flags.search, flags.picture.landmark_rank, &stats);
-  if (!matches.ok()) return Fail("query", matches.status());
+  auto result = SearchPicture(searcher, flags.image, flags.picture.options, &stats);
+  if (!result.ok()) return Fail("query", result.status());
+  const PictureEvidence& query = result->evidence;
+  const std::vector<Match>& matches = result->matches;
 
   if (!flags.sheet.empty()) {
-    const Status st = WriteSheet(flags, *query, *matches, *shared_db);
+    const Status st = WriteSheet(flags, query, matches, *shared_db);
     if (!st.ok()) return Fail("query", st);
   }
 
   if (flags.as_json) {
-    const json doc = ResultJson(flags, *query, *matches, stats, *shared_db);
+    const json doc = ResultJson(flags, query, matches, stats, *shared_db);
     const Status valid = ValidateJson(doc, "query_result.schema.json", "query result");
     // A bug, but never print JSON that breaks the schema.
     if (!valid.ok()) return Fail("query", valid);
     std::printf("%s\n", doc.dump(2).c_str());
   } else {
-    PrintTable(*matches, *query, stats, *shared_db);
+    PrintTable(matches, query, stats, *shared_db);
     if (!flags.sheet.empty()) std::printf("\ncontact sheet: %s\n", flags.sheet.c_str());
   }
   return kExitOk;

@@ -37,6 +37,7 @@
 #include "handdb_version.h"
 #include "photo/image_edges.h"
 #include "pose/landmark_rank.h"
+#include "pose/picture_search.h"
 #include "query/database.h"
 #include "query/searcher.h"
 
@@ -275,18 +276,20 @@ PictureOptions PictureOptionsFromKwargs(const py::kwargs& kw) {
   return picture;
 }
 
+// A label EXR is converted with the edge options the database was made with (as `handdb query`
+// does).
+void UseDatabaseConversion(const fs::path& db_dir, PictureOptions* options) {
+  auto recorded = ReadDatabaseViewConversion(db_dir);
+  if (!recorded.ok()) throw StatusError(recorded.status());
+  options->edges.label_edges = recorded->edges;
+  options->edges.label_joint_pairs = recorded->joint_pairs;
+}
+
 PyQueryEdges LoadEdges(const fs::path& image,
                        PictureOptions options,
                        const std::optional<fs::path>& db_dir) {
   py::gil_scoped_release release;
-  if (db_dir) {
-    // A label EXR is converted with the edge options the database was made with (as `handdb
-    // query` does).
-    auto recorded = ReadDatabaseViewConversion(*db_dir);
-    if (!recorded.ok()) throw StatusError(recorded.status());
-    options.edges.label_edges = recorded->edges;
-    options.edges.label_joint_pairs = recorded->joint_pairs;
-  }
+  if (db_dir) UseDatabaseConversion(*db_dir, &options);
   return PyQueryEdges{Unwrap(ReadPicture(image, options))};
 }
 
@@ -619,37 +622,52 @@ py::object Search(const PyDatabase& self,
 
   std::optional<PictureEvidence> picture;
   std::vector<Point2f> points;
+  // A picture file is read and searched in one call (pose/picture_search.h), as `handdb query`
+  // does.
+  std::optional<fs::path> picture_file;
+  PictureSearchOptions picture_search;
   if (py::isinstance<PyQueryEdges>(query)) {
     if (edge_kwargs.size()) throw py::type_error("image options given with a QueryEdges query");
     picture = py::cast<const PyQueryEdges&>(query).picture;
   } else if (py::isinstance<py::str>(query) || py::hasattr(query, "__fspath__")) {
-    picture =
-        LoadEdges(py::cast<fs::path>(query), PictureOptionsFromKwargs(edge_kwargs), self.path())
-            .picture;
+    picture_file = py::cast<fs::path>(query);
+    picture_search.picture = PictureOptionsFromKwargs(edge_kwargs);
+    picture_search.search = options;
+    picture_search.landmark_rank = landmark_rank;
   } else {
     if (edge_kwargs.size()) throw py::type_error("image options given with a points query");
     points = QueryPoints(py::array::ensure(query));
   }
-  if (picture) points = picture->edges.points_px();
 
   const Searcher& searcher = self.searcher();
   SearchStats stats;
   std::optional<Result<std::vector<Match>>> matches;
   {
     py::gil_scoped_release release;
-    matches.emplace(picture ? SearchEvidence(searcher, *picture, options, landmark_rank, &stats)
-                            : searcher.Search(points, options, &stats));
+    if (picture_file) {
+      UseDatabaseConversion(self.path(), &picture_search.picture);
+      auto found = SearchPicture(searcher, *picture_file, picture_search, &stats);
+      if (!found.ok()) throw StatusError(found.status());
+      picture = std::move(found->evidence);
+      matches.emplace(std::move(found->matches));
+    } else if (picture) {
+      matches.emplace(SearchEvidence(searcher, *picture, options, landmark_rank, &stats));
+    } else {
+      matches.emplace(searcher.Search(points, options, &stats));
+    }
   }
   if (!matches->ok()) throw StatusError(matches->status());
+  const std::shared_ptr<const QueryEdges> query_edges =
+      picture ? std::make_shared<const QueryEdges>(std::move(picture->edges)) : nullptr;
   py::list out;
   int rank = 1;
   for (Match& m : **matches) {
     PyMatch pm;
     pm.rank = rank++;
-    if (picture) {
+    if (query_edges) {
       pm.keypoints_image.emplace();
       for (const auto& kp : m.label.keypoints) {
-        pm.keypoints_image->push_back(picture->edges.ImageFromNormalised({kp[0], kp[1]}));
+        pm.keypoints_image->push_back(query_edges->ImageFromNormalised({kp[0], kp[1]}));
       }
     }
     pm.match = std::move(m);
