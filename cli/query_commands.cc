@@ -17,6 +17,7 @@
 #include "handdb_version.h"
 #include "photo/image_edges.h"
 #include "pose/landmark_rank.h"
+#include "pose/match_json.h"
 #include "pose/picture_search.h"
 #include "pose/sheet.h"
 #include "query/searcher.h"
@@ -28,49 +29,6 @@ namespace fs = std::filesystem;
 using json = nlohmann::json;
 
 constexpr double kDeg = 180.0 / M_PI;
-
-double Deg0To360(double rad) {
-  double d = std::fmod(rad * kDeg, 360.0);
-  if (d < 0) d += 360.0;
-  return d >= 360.0 ? 0.0 : d;
-}
-
-json MatchJson(const Match& m, int rank, const QueryEdges& query) {
-  const ViewLabel& l = m.label;
-  json kps = json::array();
-  json kps_image = json::array();
-  for (const auto& k : l.keypoints) {
-    kps.push_back({k[0], k[1], k[2]});
-    const Point2f p = query.ImageFromNormalised({k[0], k[1]});
-    kps_image.push_back({p.x, p.y});
-  }
-  json j = {{"rank", rank},
-            {"view_id", m.view_id},
-            {"roll", m.roll},
-            {"roll_deg", Deg0To360(m.roll_angle)},
-            {"distance", m.distance},
-            {"a", m.a},
-            {"b", m.b},
-            {"render_id", l.render_id},
-            {"shape_id", l.shape_id},
-            {"shape_name", m.shape_name},
-            {"dir_id", l.dir_id},
-            {"joint_angles", l.joint_angles},
-            {"view_direction", l.view_direction},
-            {"view_theta", l.view_theta},
-            {"view_phi", l.view_phi},
-            {"view_theta_deg", l.view_theta * kDeg},
-            {"view_phi_deg", l.view_phi * kDeg},
-            {"camera_roll", l.camera_roll},
-            {"hand", std::string(HandName(m.hand))},
-            {"keypoints", kps},
-            {"keypoints_image_px", kps_image}};
-  if (m.score >= 0) {
-    j["score"] = m.score;
-    j["landmark_error"] = m.landmark_error;
-  }
-  return j;
-}
 
 void PrintTable(const std::vector<Match>& matches,
                 const PictureEvidence& picture,
@@ -140,7 +98,7 @@ void PrintTable(const std::vector<Match>& matches,
         std::string(HandName(m.hand)).c_str(),
         l.view_theta * kDeg,
         l.view_phi * kDeg,
-        Deg0To360(m.roll_angle),
+        RollDegrees0To360(m.roll_angle),
         l.joint_angles[0] * kDeg,
         l.joint_angles[4] * kDeg,
         l.joint_angles[8] * kDeg,
@@ -270,7 +228,7 @@ Status WriteSheet(const QueryFlags& flags,
                   m.distance,
                   m.shape_name.empty() ? ("shape " + std::to_string(m.label.shape_id)).c_str()
                                        : m.shape_name.c_str(),
-                  Deg0To360(m.roll_angle),
+                  RollDegrees0To360(m.roll_angle),
                   m.hand == Hand::kLeft ? "  left" : "");
     t.caption = caption;
     std::vector<Point2f> rolled;
@@ -303,7 +261,7 @@ json ResultJson(const QueryFlags& flags,
   const QueryEdges& query = picture.edges;
   json matches_json = json::array();
   int rank = 1;
-  for (const Match& m : matches) matches_json.push_back(MatchJson(m, rank++, query));
+  for (const Match& m : matches) matches_json.push_back(MatchToJson(m, rank++, &query));
   const SearchOptions& search = flags.picture.options.search;
   json query_json = {{"edge_points", query.points.size()},
                      {"width", query.width},

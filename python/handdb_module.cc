@@ -37,6 +37,7 @@
 #include "handdb_version.h"
 #include "photo/image_edges.h"
 #include "pose/landmark_rank.h"
+#include "pose/match_json.h"
 #include "pose/picture_search.h"
 #include "query/database.h"
 #include "query/searcher.h"
@@ -51,8 +52,6 @@ using json = nlohmann::json;
 static_assert(std::endian::native == std::endian::little,
               "points are handed out as views of the little-endian shard bytes");
 static_assert(sizeof(PointQ) == 2 * sizeof(int16_t) && offsetof(PointQ, y) == sizeof(int16_t));
-
-constexpr double kDeg = 180.0 / M_PI;
 
 // A library error on its way to Python: handdb.Error(message) with .code = "kChecksumMismatch".
 struct StatusError : std::exception {
@@ -126,13 +125,6 @@ py::dict LabelDict(const ViewLabel& l) {
 py::object JsonToPython(const json& doc) {
   static py::object* loads = new py::object(py::module_::import("json").attr("loads"));
   return (*loads)(doc.dump());
-}
-
-// `handdb query`'s roll_deg: the roll angle in degrees in [0, 360).
-double Deg0To360(double rad) {
-  double d = std::fmod(rad * kDeg, 360.0);
-  if (d < 0) d += 360.0;
-  return d >= 360.0 ? 0.0 : d;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -486,6 +478,7 @@ struct PyMatch {
   int rank = 0;
   Match match;
   std::optional<std::vector<Point2f>> keypoints_image;  // only for an image query
+  std::shared_ptr<const QueryEdges> query;              // only for an image query
 };
 
 py::object KeypointsImage(const PyMatch& m) {
@@ -493,56 +486,10 @@ py::object KeypointsImage(const PyMatch& m) {
   return Point2fArray(*m.keypoints_image);
 }
 
-// The match as `handdb query --json` prints it (schemas/query_result.schema.json, matches[]).
+// The match as `handdb query --json` prints it (schemas/query_result.schema.json, matches[]):
+// the one JSON writer of a match (pose/match_json.h), as plain dicts and lists.
 py::dict MatchDict(const PyMatch& pm) {
-  const Match& m = pm.match;
-  const ViewLabel& l = m.label;
-  // Lists, as json.loads of the CLI's output gives.
-  auto as_list = [](const auto& a) {
-    py::list out;
-    for (const auto& x : a) out.append(x);
-    return out;
-  };
-  py::list kps_lists;
-  for (const auto& k : l.keypoints) kps_lists.append(as_list(k));
-  py::object kps_image_lists = py::none();
-  if (pm.keypoints_image) {
-    py::list list;
-    for (const Point2f& p : *pm.keypoints_image) {
-      py::list xy;
-      xy.append(p.x);
-      xy.append(p.y);
-      list.append(xy);
-    }
-    kps_image_lists = list;
-  }
-  py::dict d;
-  d["rank"] = pm.rank;
-  d["view_id"] = m.view_id;
-  d["roll"] = m.roll;
-  d["roll_deg"] = Deg0To360(m.roll_angle);
-  d["distance"] = m.distance;
-  d["a"] = m.a;
-  d["b"] = m.b;
-  d["render_id"] = l.render_id;
-  d["shape_id"] = l.shape_id;
-  d["shape_name"] = m.shape_name;
-  d["dir_id"] = l.dir_id;
-  d["joint_angles"] = as_list(l.joint_angles);
-  d["view_direction"] = as_list(l.view_direction);
-  d["view_theta"] = l.view_theta;
-  d["view_phi"] = l.view_phi;
-  d["view_theta_deg"] = l.view_theta * kDeg;
-  d["view_phi_deg"] = l.view_phi * kDeg;
-  d["camera_roll"] = l.camera_roll;
-  d["hand"] = std::string(HandName(m.hand));
-  if (m.score >= 0) {
-    d["score"] = m.score;
-    d["landmark_error"] = m.landmark_error;
-  }
-  d["keypoints"] = kps_lists;
-  if (pm.keypoints_image) d["keypoints_image_px"] = kps_image_lists;
-  return d;
+  return JsonToPython(MatchToJson(pm.match, pm.rank, pm.query.get()));
 }
 
 py::dict StatsDict(const SearchStats& st, const Database& db) {
@@ -665,6 +612,7 @@ py::object Search(const PyDatabase& self,
     PyMatch pm;
     pm.rank = rank++;
     if (query_edges) {
+      pm.query = query_edges;
       pm.keypoints_image.emplace();
       for (const auto& kp : m.label.keypoints) {
         pm.keypoints_image->push_back(query_edges->ImageFromNormalised({kp[0], kp[1]}));
@@ -939,7 +887,7 @@ PYBIND11_MODULE(_handdb, m) {
       .def_property_readonly(
           "roll_angle", [](const PyMatch& p) { return p.match.roll_angle; }, "radians")
       .def_property_readonly("roll_deg",
-                             [](const PyMatch& p) { return Deg0To360(p.match.roll_angle); })
+                             [](const PyMatch& p) { return RollDegrees0To360(p.match.roll_angle); })
       .def_property_readonly(
           "distance", [](const PyMatch& p) { return p.match.distance; }, "D_c = a + b, px")
       .def_property_readonly(
