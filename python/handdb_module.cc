@@ -658,21 +658,8 @@ py::list Validate(const fs::path& path, bool verify_checksums, size_t max_proble
   return problems;
 }
 
-}  // namespace
-
-PYBIND11_MODULE(_handdb, m) {
-  m.doc() =
-      "handdb: read and search databases of synthetic hand views (docs/python.md).\n\n"
-      "  db = handdb.Database('db')        # manifest + every shard, memory-mapped read-only\n"
-      "  v = db[0]                         # a View: points (zero-copy int16, 1/16 px), labels\n"
-      "  cols = db.read()                  # every view as numpy columns\n"
-      "  matches = db.search('hand.jpg')   # top-k (view, roll) by chamfer distance\n"
-      "  problems = handdb.validate('db')  # [] when the database is valid\n";
-  m.attr("__version__") = HANDDB_VERSION;
-  m.attr("POINT_SCALE") = kPointScale;
-  m.attr("NUM_JOINT_ANGLES") = kNumJointAngles;
-  m.attr("NUM_KEYPOINTS") = kNumKeypoints;
-
+// handdb.Error and the translation of a library error (Status) into it.
+void BindError(py::module_& m) {
   error_type = new py::object(py::exception<StatusError>(m, "Error", PyExc_RuntimeError));
   error_type->attr("__doc__") =
       "A handdb library error: str(e) is the one-line message `handdb` prints after "
@@ -687,7 +674,10 @@ PYBIND11_MODULE(_handdb, m) {
       PyErr_SetObject(error_type->ptr(), exc.ptr());
     }
   });
+}
 
+// QueryEdges and query_edges(): a picture's evidence.
+void BindQueryEdges(py::module_& m) {
   py::class_<PyQueryEdges>(m,
                            "QueryEdges",
                            "A query image's edge points in the database's normalised frame "
@@ -797,6 +787,30 @@ PYBIND11_MODULE(_handdb, m) {
                std::to_string(q.picture.edges.points.size()) + " points>";
       });
 
+  m.def(
+      "query_edges",
+      [](const fs::path& image, py::object database, const py::kwargs& kw) {
+        std::optional<fs::path> db_dir;
+        if (py::isinstance<PyDatabase>(database)) {
+          db_dir = py::cast<const PyDatabase&>(database).path();
+        } else if (!database.is_none()) {
+          db_dir = py::cast<fs::path>(database);
+        }
+        return LoadEdges(image, PictureOptionsFromKwargs(kw), db_dir);
+      },
+      py::arg("image"),
+      py::arg("database") = py::none(),
+      "A query image -> QueryEdges (normalised points), exactly as `handdb query` converts it.\n\n"
+      "Options, named like the command's flags: input='auto'|'photo'|'edges'|'labels', "
+      "mask=path, roi=(x, y, w, h), skin=(Ymin, Ymax, Crmin, Crmax, Cbmin, Cbmax), "
+      "canny=(low, high), contour_clearance=2, edges_outside=False, work_diameter=128, "
+      "wrist_cut=True, landmarks='auto' (the installed hand landmark model; 'off' or None: "
+      "none; or a .tflite file). database (a Database or "
+      "its path): label EXRs use the edge options it was converted with.");
+}
+
+// View: one canonical view of a database.
+void BindView(py::module_& m) {
   py::class_<PyView>(m,
                      "View",
                      "One canonical (roll 0) view: its edge points and pose label, read from the "
@@ -875,7 +889,10 @@ PYBIND11_MODULE(_handdb, m) {
                (v.shape_name.empty() ? "" : " '" + v.shape_name + "'") + ", " +
                std::to_string(v.points.size()) + " points>";
       });
+}
 
+// Match: one (view, roll, hand) of a search's answer.
+void BindMatch(py::module_& m) {
   py::class_<PyMatch>(m,
                       "Match",
                       "One search result: virtual view (view_id, roll), its chamfer distance "
@@ -952,7 +969,10 @@ PYBIND11_MODULE(_handdb, m) {
                       p.match.shape_name.c_str());
         return std::string(buf);
       });
+}
 
+// Database: open, read and search a database.
+void BindDatabase(py::module_& m) {
   py::class_<PyDatabase>(
       m,
       "Database",
@@ -1107,28 +1127,10 @@ PYBIND11_MODULE(_handdb, m) {
             if (t.size() != 2) throw py::value_error("bad handdb.Database pickle");
             return PyDatabase(py::cast<fs::path>(t[0]), py::cast<bool>(t[1]));
           }));
+}
 
-  m.def(
-      "query_edges",
-      [](const fs::path& image, py::object database, const py::kwargs& kw) {
-        std::optional<fs::path> db_dir;
-        if (py::isinstance<PyDatabase>(database)) {
-          db_dir = py::cast<const PyDatabase&>(database).path();
-        } else if (!database.is_none()) {
-          db_dir = py::cast<fs::path>(database);
-        }
-        return LoadEdges(image, PictureOptionsFromKwargs(kw), db_dir);
-      },
-      py::arg("image"),
-      py::arg("database") = py::none(),
-      "A query image -> QueryEdges (normalised points), exactly as `handdb query` converts it.\n\n"
-      "Options, named like the command's flags: input='auto'|'photo'|'edges'|'labels', "
-      "mask=path, roi=(x, y, w, h), skin=(Ymin, Ymax, Crmin, Crmax, Cbmin, Cbmax), "
-      "canny=(low, high), contour_clearance=2, edges_outside=False, work_diameter=128, "
-      "wrist_cut=True, landmarks='auto' (the installed hand landmark model; 'off' or None: "
-      "none; or a .tflite file). database (a Database or "
-      "its path): label EXRs use the edge options it was converted with.");
-
+// validate(): `handdb validate` as a list of problems.
+void BindValidate(py::module_& m) {
   m.def("validate",
         &Validate,
         py::arg("path"),
@@ -1138,6 +1140,29 @@ PYBIND11_MODULE(_handdb, m) {
         "the problems as dicts {code, file, offset, message} (the --json report's); [] when it "
         "is valid. max_problems per file and kind of check, 0 = all (if more were found, a last "
         "entry with code 'kSuppressed' counts them).");
+}
+
+}  // namespace
+
+PYBIND11_MODULE(_handdb, m) {
+  m.doc() =
+      "handdb: read and search databases of synthetic hand views (docs/python.md).\n\n"
+      "  db = handdb.Database('db')        # manifest + every shard, memory-mapped read-only\n"
+      "  v = db[0]                         # a View: points (zero-copy int16, 1/16 px), labels\n"
+      "  cols = db.read()                  # every view as numpy columns\n"
+      "  matches = db.search('hand.jpg')   # top-k (view, roll) by chamfer distance\n"
+      "  problems = handdb.validate('db')  # [] when the database is valid\n";
+  m.attr("__version__") = HANDDB_VERSION;
+  m.attr("POINT_SCALE") = kPointScale;
+  m.attr("NUM_JOINT_ANGLES") = kNumJointAngles;
+  m.attr("NUM_KEYPOINTS") = kNumKeypoints;
+
+  BindError(m);
+  BindQueryEdges(m);
+  BindView(m);
+  BindMatch(m);
+  BindDatabase(m);
+  BindValidate(m);
 }
 
 }  // namespace handdb::python
