@@ -38,7 +38,8 @@ TEST(MatchJsonTest, WritesTheMatchAndItsKeypointsInThePicture) {
   EXPECT_EQ(j.at("rank"), 4);
   EXPECT_EQ(j.at("view_id"), 7);
   EXPECT_EQ(j.at("roll"), 3);
-  EXPECT_DOUBLE_EQ(j.at("roll_deg").get<double>(), 270.0);
+  EXPECT_EQ(j.at("roll_deg").get<double>(), RollDegrees0To360(m.roll_angle));
+  EXPECT_NEAR(j.at("roll_deg").get<double>(), 270.0, 1e-4);  // a float angle
   EXPECT_EQ(j.at("distance").get<double>(), 1.25);
   EXPECT_EQ(j.at("shape_name"), "asl-5");
   EXPECT_EQ(j.at("hand"), "left");
