@@ -318,12 +318,12 @@ Result<QueryPointsFn> MakeQueryPointsFn(QueryInput input,
                     "test view " + std::to_string(view.id) +
                         ": no photo (the test set was made with --no-photos)");
     }
-    ImageEdgeOptions image_options;
-    image_options.kind = QueryInputKind::kPhoto;
-    image_options.landmarker = landmarker;
-    auto edges = LoadQueryEdges(view.photo, image_options);
-    if (!edges.ok()) return edges.status();
-    return TestQuery(std::move(edges).value());
+    PictureOptions picture_options;
+    picture_options.edges.kind = QueryInputKind::kPhoto;
+    picture_options.landmarker = landmarker;
+    auto picture = ReadPicture(view.photo, picture_options);
+    if (!picture.ok()) return picture.status();
+    return TestQuery(std::move(picture).value());
   });
 }
 

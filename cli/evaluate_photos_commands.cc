@@ -116,7 +116,7 @@ bool PhotoEvaluateFlags::Finish(const std::string& cmd, int threads, bool quiet)
   if (!picture.Finish(cmd)) return false;
   options.hand = hand.Get();
   options.max_per_shape = rank == "shapes" ? 1 : 0;
-  options.landmark_rank = picture.landmark_rank;
+  options.landmark_rank = picture.options.landmark_rank;
   options.num_threads = threads;
   options.progress = !quiet;
   return options.Check();
@@ -163,8 +163,8 @@ Result<OpenedPhotoEvaluation> OpenPhotoEvaluation(const std::string& db,
   // folder of edge images or label renders is scored like one of photos.
   PhotoInputFlags picture = flags.picture;
   HANDDB_RETURN_IF_ERROR(picture.UseDatabaseConversion(database, db));
-  opened.query_fn = [options = picture.edges](const PhotoItem& item) {
-    return LoadQueryEdges(item.path, options);
+  opened.query_fn = [options = picture.options.picture](const PhotoItem& item) {
+    return ReadPicture(item.path, options);
   };
   return opened;
 }

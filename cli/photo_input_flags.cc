@@ -51,23 +51,23 @@ void PhotoInputFlags::Add(CLI::App& app, Which which) {
                  "40,255,133,173,77,127)");
   app.add_option("--canny", canny, "photo: Canny thresholds low,high (default 40,120)");
   app.add_option("--contour-clearance",
-                 edges.contour_clearance_px,
+                 options.picture.edges.contour_clearance_px,
                  "photo: drop Canny edges within this many px of the silhouette contour (0: keep)")
       ->check(CLI::Range(0, 20))
       ->capture_default_str();
   app.add_flag_callback(
       "--edges-outside",
-      [this] { edges.interior_edges_only = false; },
+      [this] { options.picture.edges.interior_edges_only = false; },
       "photo: also keep Canny edges up to 4 px outside the hand region (before issue 16)");
   app.add_option("--work-diameter",
-                 edges.work_diameter_px,
+                 options.picture.edges.work_diameter_px,
                  "photo: resample the hand to this diameter in px before the mask clean-up and "
                  "Canny (0: the picture's own pixels)")
       ->check(CLI::Range(0.0, 4096.0))
       ->capture_default_str();
   app.add_flag_callback(
       "--no-wrist-cut",
-      [this] { edges.cut_forearm = false; },
+      [this] { options.picture.edges.cut_forearm = false; },
       "photo: keep a forearm that leaves the picture (by default it is cut off at the wrist, "
       "docs/query.md)");
   app.add_option("--landmarks",
@@ -77,7 +77,7 @@ void PhotoInputFlags::Add(CLI::App& app, Which which) {
                  "with a warning if it is missing), off, or a .tflite model file")
       ->capture_default_str();
   app.add_option("--landmark-weight",
-                 landmark_rank.weight,
+                 options.landmark_rank.weight,
                  "photo: weight of the landmark fit against D_c / best D_c in the ranking")
       ->check(CLI::Range(0.0, 100.0))
       ->capture_default_str();
@@ -93,15 +93,15 @@ bool PhotoInputFlags::Finish(const std::string& cmd) {
                  input.c_str());
     return false;
   }
-  edges.kind = *kind;
-  edges.mask = mask;
+  options.picture.edges.kind = *kind;
+  options.picture.edges.mask = mask;
   if (!roi.empty()) {
     auto r = ParsePixelRect(roi);
     if (!r.ok()) {
       std::fprintf(stderr, "handdb %s: --roi: %s\n", c, r.status().message().c_str());
       return false;
     }
-    edges.roi = *r;
+    options.picture.edges.roi = *r;
   }
   std::vector<int> v;
   if (!skin.empty()) {
@@ -119,7 +119,7 @@ bool PhotoInputFlags::Finish(const std::string& cmd) {
         return false;
       }
     }
-    edges.skin = {v[0], v[1], v[2], v[3], v[4], v[5]};
+    options.picture.edges.skin = {v[0], v[1], v[2], v[3], v[4], v[5]};
   }
   if (!canny.empty()) {
     if (!ParseInts(canny, 2, &v)) {
@@ -130,27 +130,28 @@ bool PhotoInputFlags::Finish(const std::string& cmd) {
       std::fprintf(stderr, "handdb %s: --canny %s: needs 0 <= low <= high\n", c, canny.c_str());
       return false;
     }
-    edges.canny_low = v[0];
-    edges.canny_high = v[1];
+    options.picture.edges.canny_low = v[0];
+    options.picture.edges.canny_high = v[1];
   }
-  if (edges.work_diameter_px != 0 && edges.work_diameter_px < 16) {
+  if (options.picture.edges.work_diameter_px != 0 && options.picture.edges.work_diameter_px < 16) {
     std::fprintf(stderr,
                  "handdb %s: --work-diameter %g: 0 (the picture's own pixels) or 16..4096 px\n",
                  c,
-                 edges.work_diameter_px);
+                 options.picture.edges.work_diameter_px);
     return false;
   }
-  if (!edges.Check()) {
+  if (!options.picture.edges.Check()) {
     std::fprintf(stderr, "handdb %s: invalid photo options (see above)\n", c);
     return false;
   }
   // Edge images and label EXRs have no photo to find landmarks in.
-  if (edges.kind != QueryInputKind::kEdges && edges.kind != QueryInputKind::kLabels &&
-      !ResolveLandmarker(landmarks, cmd, &edges.landmarker)) {
+  if (options.picture.edges.kind != QueryInputKind::kEdges &&
+      options.picture.edges.kind != QueryInputKind::kLabels &&
+      !ResolveLandmarker(landmarks, cmd, &options.picture.landmarker)) {
     return false;
   }
-  landmark_rank.enabled = edges.landmarker != nullptr;
-  if (!landmark_rank.Check()) {
+  options.landmark_rank.enabled = options.picture.landmarker != nullptr;
+  if (!options.landmark_rank.Check()) {
     std::fprintf(stderr, "handdb %s: invalid landmark options (see above)\n", c);
     return false;
   }
@@ -162,45 +163,49 @@ Status PhotoInputFlags::UseDatabaseConversion(const Database& db,
   auto recorded = DatabaseViewConversionFromMetadata(
       nlohmann::json::parse(db.manifest_metadata_json()), (db_dir / kManifestFileName).string());
   if (!recorded.ok()) return recorded.status();
-  edges.label_edges = recorded->edges;
-  edges.label_joint_pairs = recorded->joint_pairs;
+  options.picture.edges.label_edges = recorded->edges;
+  options.picture.edges.label_joint_pairs = recorded->joint_pairs;
   return Status::Ok();
 }
 
 std::vector<std::string> PhotoInputFlags::Args() const {
-  std::vector<std::string> args = {
-      "--input", input, "--contour-clearance", std::to_string(edges.contour_clearance_px)};
+  std::vector<std::string> args = {"--input",
+                                   input,
+                                   "--contour-clearance",
+                                   std::to_string(options.picture.edges.contour_clearance_px)};
   if (!roi.empty()) args.insert(args.end(), {"--roi", roi});
   if (!skin.empty()) args.insert(args.end(), {"--skin", skin});
   if (!canny.empty()) args.insert(args.end(), {"--canny", canny});
-  if (!edges.interior_edges_only) args.push_back("--edges-outside");
-  args.insert(args.end(), {"--work-diameter", std::to_string(edges.work_diameter_px)});
-  if (!edges.cut_forearm) args.push_back("--no-wrist-cut");
+  if (!options.picture.edges.interior_edges_only) args.push_back("--edges-outside");
+  args.insert(args.end(),
+              {"--work-diameter", std::to_string(options.picture.edges.work_diameter_px)});
+  if (!options.picture.edges.cut_forearm) args.push_back("--no-wrist-cut");
   // The model this process resolved, so every task uses the same one (or none).
   args.insert(args.end(),
               {"--landmarks",
-               edges.landmarker ? edges.landmarker->path().string() : std::string("off"),
+               options.picture.landmarker ? options.picture.landmarker->path().string()
+                                          : std::string("off"),
                "--landmark-weight",
-               std::to_string(landmark_rank.weight)});
+               std::to_string(options.landmark_rank.weight)});
   return args;
 }
 
 nlohmann::json PhotoInputFlags::ToJson() const {
-  const SkinModel& s = edges.skin;
-  const PixelRect& r = edges.roi;
+  const SkinModel& s = options.picture.edges.skin;
+  const PixelRect& r = options.picture.edges.roi;
   return {
-      {"input", std::string(QueryInputKindName(edges.kind))},
+      {"input", std::string(QueryInputKindName(options.picture.edges.kind))},
       {"roi", r.empty() ? nlohmann::json(nullptr) : nlohmann::json{r.x, r.y, r.width, r.height}},
       {"skin", {s.y_min, s.y_max, s.cr_min, s.cr_max, s.cb_min, s.cb_max}},
-      {"canny", {edges.canny_low, edges.canny_high}},
-      {"contour_clearance_px", edges.contour_clearance_px},
-      {"interior_edges_only", edges.interior_edges_only},
-      {"work_diameter_px", edges.work_diameter_px},
-      {"cut_forearm", edges.cut_forearm},
+      {"canny", {options.picture.edges.canny_low, options.picture.edges.canny_high}},
+      {"contour_clearance_px", options.picture.edges.contour_clearance_px},
+      {"interior_edges_only", options.picture.edges.interior_edges_only},
+      {"work_diameter_px", options.picture.edges.work_diameter_px},
+      {"cut_forearm", options.picture.edges.cut_forearm},
       {"landmarks",
-       edges.landmarker ? nlohmann::json(edges.landmarker->path().string())
-                        : nlohmann::json(nullptr)},
-      {"landmark_weight", landmark_rank.weight}};
+       options.picture.landmarker ? nlohmann::json(options.picture.landmarker->path().string())
+                                  : nlohmann::json(nullptr)},
+      {"landmark_weight", options.landmark_rank.weight}};
 }
 
 bool ResolveLandmarker(const std::string& spec,

@@ -10,24 +10,26 @@
 #include <vector>
 
 #include "base/status.h"
-#include "query/database.h"
 #include "photo/image_edges.h"
 #include "pose/landmark_rank.h"
+#include "pose/picture_search.h"
+#include "query/database.h"
 #include "query/searcher.h"
 
 namespace handdb::cli {
 
 // --input, --mask, --roi, --skin, --canny, --contour-clearance, --edges-outside,
-// --work-diameter, --no-wrist-cut, bound to ImageEdgeOptions; --landmarks,
-// --landmark-weight, bound to the landmark re-ranking (pose/landmark_rank.h).
+// --work-diameter, --no-wrist-cut, bound to options.picture.edges; --landmarks, the model
+// Finish loads once into options.picture.landmarker; --landmark-weight, bound to
+// options.landmark_rank (pose/landmark_rank.h). A command binds its search flags to
+// options.search.
 struct PhotoInputFlags {
   std::string input = std::string(QueryInputKindName(QueryInputKind::kAuto));
   std::string mask, roi, skin, canny;
   // auto: the installed model (HandLandmarker::DefaultModelPath), or D_c alone with a warning
   // when it is not installed; off; or a model file.
   std::string landmarks = "auto";
-  ImageEdgeOptions edges;
-  LandmarkRankOptions landmark_rank;
+  PictureSearchOptions options;
 
   // Which flags a command takes: --input (the kind of picture) only where no other --input
   // exists, --mask only where there is one picture (a mask belongs to one photo).
@@ -36,13 +38,14 @@ struct PhotoInputFlags {
     bool mask = true;
   };
   void Add(CLI::App& app, Which which);
-  // Completes `edges` from the text flags and opens the landmark model; false (one line
+  // Completes `options.picture` from the text flags and opens the landmark model; false (one line
   // "handdb <cmd>: ..." on stderr) on bad usage or a model that cannot be loaded.
   bool Finish(const std::string& cmd);
   // Label EXRs become queries exactly like the database's views: the edge options its manifest
   // records (from the manifest `db` was opened with; a convert may have replaced the file since).
   Status UseDatabaseConversion(const Database& db, const std::filesystem::path& db_dir);
-  // The flags that reproduce `edges` in another process (a Slurm task), without --mask.
+  // The flags that reproduce `options.picture` and the landmark weight in another process (a
+  // Slurm task), without --mask.
   std::vector<std::string> Args() const;
   // The resolved options that change a query (not the mask), for fingerprints and reports.
   nlohmann::json ToJson() const;

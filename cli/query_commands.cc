@@ -17,6 +17,8 @@
 #include "handdb_version.h"
 #include "photo/image_edges.h"
 #include "pose/landmark_rank.h"
+#include "pose/match_json.h"
+#include "pose/picture_search.h"
 #include "pose/sheet.h"
 #include "query/searcher.h"
 
@@ -28,53 +30,11 @@ using json = nlohmann::json;
 
 constexpr double kDeg = 180.0 / M_PI;
 
-double Deg0To360(double rad) {
-  double d = std::fmod(rad * kDeg, 360.0);
-  if (d < 0) d += 360.0;
-  return d >= 360.0 ? 0.0 : d;
-}
-
-json MatchJson(const Match& m, int rank, const QueryEdges& query) {
-  const ViewLabel& l = m.label;
-  json kps = json::array();
-  json kps_image = json::array();
-  for (const auto& k : l.keypoints) {
-    kps.push_back({k[0], k[1], k[2]});
-    const Point2f p = query.ImageFromNormalised({k[0], k[1]});
-    kps_image.push_back({p.x, p.y});
-  }
-  json j = {{"rank", rank},
-            {"view_id", m.view_id},
-            {"roll", m.roll},
-            {"roll_deg", Deg0To360(m.roll_angle)},
-            {"distance", m.distance},
-            {"a", m.a},
-            {"b", m.b},
-            {"render_id", l.render_id},
-            {"shape_id", l.shape_id},
-            {"shape_name", m.shape_name},
-            {"dir_id", l.dir_id},
-            {"joint_angles", l.joint_angles},
-            {"view_direction", l.view_direction},
-            {"view_theta", l.view_theta},
-            {"view_phi", l.view_phi},
-            {"view_theta_deg", l.view_theta * kDeg},
-            {"view_phi_deg", l.view_phi * kDeg},
-            {"camera_roll", l.camera_roll},
-            {"hand", std::string(HandName(m.hand))},
-            {"keypoints", kps},
-            {"keypoints_image_px", kps_image}};
-  if (m.score >= 0) {
-    j["score"] = m.score;
-    j["landmark_error"] = m.landmark_error;
-  }
-  return j;
-}
-
 void PrintTable(const std::vector<Match>& matches,
-                const QueryEdges& q,
+                const PictureEvidence& picture,
                 const SearchStats& st,
                 const Database& db) {
+  const QueryEdges& q = picture.edges;
   std::printf(
       "query: %zu edge points (%s, %dx%d, hand diameter %.1f px%s)%s\n",
       q.points.size(),
@@ -84,10 +44,10 @@ void PrintTable(const std::vector<Match>& matches,
       q.diameter_px,
       q.forearm_cut ? ", forearm cut at the wrist" : "",
       q.touches_border && !q.forearm_cut ? "  [warning: the hand touches the image border]" : "");
-  if (q.landmarks) {
+  if (picture.landmarks) {
     const bool used = !matches.empty() && matches.front().score >= 0;
     std::printf("hand landmarks: presence %.3f, %s\n",
-                static_cast<double>(q.landmarks->presence),
+                static_cast<double>(picture.landmarks->presence),
                 used ? "the nearest views re-ranked by D_c / best D_c + weight x landmark error "
                        "(column lm, in hand radii)"
                      : "below the 0.9 the ranking needs: ranked by D_c alone");
@@ -138,7 +98,7 @@ void PrintTable(const std::vector<Match>& matches,
         std::string(HandName(m.hand)).c_str(),
         l.view_theta * kDeg,
         l.view_phi * kDeg,
-        Deg0To360(m.roll_angle),
+        RollDegrees0To360(m.roll_angle),
         l.joint_angles[0] * kDeg,
         l.joint_angles[4] * kDeg,
         l.joint_angles[8] * kDeg,
@@ -154,14 +114,16 @@ struct QueryFlags {
   std::string search_mode = "auto";  // IndexUse: auto attaches the index the manifest lists
   std::string kdtree = std::string(KdTreeBackendName(SearchOptions{}.kdtree));
   bool as_json = false, verify = false, quiet = false;
-  SearchOptions search;
+  // The search flags are bound to picture.options.search: one options struct for the picture,
+  // its search and the landmark re-ranking (pose/picture_search.h).
   PhotoInputFlags picture;
   void Add(CLI::App& app);
-  // Completes `edges` and `search` from the text flags; false (message printed) on bad usage.
+  // Completes picture.options from the text flags; false (message printed) on bad usage.
   bool Finish();
 };
 
 void QueryFlags::Add(CLI::App& app) {
+  SearchOptions& search = picture.options.search;
   app.add_option("DB", db_dir, "database directory (manifest.json + shards)")->required();
   app.add_option("IMAGE", image, "query image: photo, edge image or label EXR")->required();
   app.add_option("--top", search.top_k, "number of matches")
@@ -189,7 +151,7 @@ void QueryFlags::Add(CLI::App& app) {
       ->capture_default_str();
   app.add_flag_callback(
       "--no-coarse-bound",
-      [this] { search.coarse_bound = false; },
+      [&search] { search.coarse_bound = false; },
       "prune with the view -> query bound alone, without the coarse query -> view bound (for "
       "comparison: the results are identical)");
   picture.Add(app, PhotoInputFlags::Which{});
@@ -219,6 +181,7 @@ void QueryFlags::Add(CLI::App& app) {
 }
 
 bool QueryFlags::Finish() {
+  SearchOptions& search = picture.options.search;
   search.progress = !quiet;
   if (search.num_threads == 0 || search.num_threads < -1 || search.num_threads > MaxNumThreads()) {
     std::fprintf(stderr,
@@ -249,7 +212,7 @@ bool QueryFlags::Finish() {
 
 // The contact sheet of --sheet: the input, its edges and each match's edges at its roll.
 Status WriteSheet(const QueryFlags& flags,
-                  const QueryEdges& query,
+                  const PictureEvidence& picture,
                   const std::vector<Match>& matches,
                   const Database& db) {
   std::vector<SheetTile> tiles;
@@ -268,7 +231,7 @@ Status WriteSheet(const QueryFlags& flags,
                   m.distance,
                   m.shape_name.empty() ? ("shape " + std::to_string(m.label.shape_id)).c_str()
                                        : m.shape_name.c_str(),
-                  Deg0To360(m.roll_angle),
+                  RollDegrees0To360(m.roll_angle),
                   m.hand == Hand::kLeft ? "  left" : "");
     t.caption = caption;
     std::vector<Point2f> rolled;
@@ -285,22 +248,24 @@ Status WriteSheet(const QueryFlags& flags,
   std::vector<Point2f> skeleton;
   if (!matches.empty()) {
     for (const auto& k : matches.front().label.keypoints) {
-      skeleton.push_back(query.ImageFromNormalised({k[0], k[1]}));
+      skeleton.push_back(picture.edges.ImageFromNormalised({k[0], k[1]}));
     }
   }
-  return WriteContactSheet(flags.sheet, flags.image, query, tiles, ContactSheetOptions{}, skeleton);
+  return WriteContactSheet(
+      flags.sheet, flags.image, picture, tiles, ContactSheetOptions{}, skeleton);
 }
 
 // The --json document (schemas/query_result.schema.json).
 json ResultJson(const QueryFlags& flags,
-                const QueryEdges& query,
+                const PictureEvidence& picture,
                 const std::vector<Match>& matches,
                 const SearchStats& stats,
                 const Database& db) {
+  const QueryEdges& query = picture.edges;
   json matches_json = json::array();
   int rank = 1;
-  for (const Match& m : matches) matches_json.push_back(MatchJson(m, rank++, query));
-  const SearchOptions& search = flags.search;
+  for (const Match& m : matches) matches_json.push_back(MatchToJson(m, rank++, &query));
+  const SearchOptions& search = flags.picture.options.search;
   json query_json = {{"edge_points", query.points.size()},
                      {"width", query.width},
                      {"height", query.height},
@@ -321,19 +286,20 @@ json ResultJson(const QueryFlags& flags,
                                      {query.wrist_line[2], query.wrist_line[3]}};
     }
     if (query.arm_found) query_json["arm_direction"] = {query.arm_dir_x, query.arm_dir_y};
-    if (query.landmarks) {
-      const HandLandmarks& l = *query.landmarks;
+    if (picture.landmarks) {
+      const HandLandmarks& l = *picture.landmarks;
       json px = json::array();
       for (const Point2f& p : l.image_px) px.push_back({p.x, p.y});
-      query_json["landmarks"] = {{"model", flags.picture.edges.landmarker->path().string()},
-                                 {"presence", l.presence},
-                                 {"used", UsesLandmarks(query, flags.picture.landmark_rank)},
-                                 {"weight", flags.picture.landmark_rank.weight},
-                                 {"image_px", px},
-                                 {"crop",
-                                  {{"centre_px", {l.crop_centre.x, l.crop_centre.y}},
-                                   {"side_px", l.crop_side_px},
-                                   {"angle_deg", l.crop_angle_deg}}}};
+      query_json["landmarks"] = {
+          {"model", flags.picture.options.picture.landmarker->path().string()},
+          {"presence", l.presence},
+          {"used", UsesLandmarks(picture, flags.picture.options.landmark_rank)},
+          {"weight", flags.picture.options.landmark_rank.weight},
+          {"image_px", px},
+          {"crop",
+           {{"centre_px", {l.crop_centre.x, l.crop_centre.y}},
+            {"side_px", l.crop_side_px},
+            {"angle_deg", l.crop_angle_deg}}}};
     }
   }
   return {{"format", "handdb-query-result"},
@@ -386,7 +352,7 @@ int RunQuery(int argc, char** argv) {
   QueryFlags flags;
   // A long query shows progress counted from here: opening the database and loading the image
   // count towards the few seconds after which a progress line appears.
-  flags.search.progress_since = std::chrono::steady_clock::now();
+  flags.picture.options.search.progress_since = std::chrono::steady_clock::now();
   flags.Add(app);
   if (int rc = ParseArgs(app, argc, argv); rc >= 0) return rc;
   if (!flags.Finish()) return kExitUsage;
@@ -395,10 +361,10 @@ int RunQuery(int argc, char** argv) {
   // Open the database first: a broken database is reported before any image work. Its index is
   // attached when the manifest lists one (--search auto), and searched (SearchMode::kAuto).
   SearcherOptions open;
-  open.num_threads = flags.search.num_threads;
+  open.num_threads = flags.picture.options.search.num_threads;
   open.verify = flags.verify;
   open.use_index =
-      flags.search.brute_force ? IndexUse::kExact : ParseIndexUse(flags.search_mode).value();
+      flags.picture.options.search.brute_force ? IndexUse::kExact : ParseIndexUse(flags.search_mode).value();
   open.few_queries = true;
   auto searcher = Searcher::Open(db_dir, open);
   if (!searcher.ok()) return Fail("query", searcher.status());
@@ -409,25 +375,25 @@ int RunQuery(int argc, char** argv) {
   // A label EXR is converted with the edge options the database was made with.
   const Status recorded = flags.picture.UseDatabaseConversion(db, db_dir);
   if (!recorded.ok()) return Fail("query", recorded);
-  auto query = LoadQueryEdges(flags.image, flags.picture.edges);
-  if (!query.ok()) return Fail("query", query.status());
   SearchStats stats;
-  auto matches = SearchQuery(**searcher, *query, flags.search, flags.picture.landmark_rank, &stats);
-  if (!matches.ok()) return Fail("query", matches.status());
+  auto result = SearchPicture(**searcher, flags.image, flags.picture.options, &stats);
+  if (!result.ok()) return Fail("query", result.status());
+  const PictureEvidence& query = result->evidence;
+  const std::vector<Match>& matches = result->matches;
 
   if (!flags.sheet.empty()) {
-    const Status st = WriteSheet(flags, *query, *matches, db);
+    const Status st = WriteSheet(flags, query, matches, db);
     if (!st.ok()) return Fail("query", st);
   }
 
   if (flags.as_json) {
-    const json doc = ResultJson(flags, *query, *matches, stats, db);
+    const json doc = ResultJson(flags, query, matches, stats, db);
     const Status valid = ValidateJson(doc, "query_result.schema.json", "query result");
     // A bug, but never print JSON that breaks the schema.
     if (!valid.ok()) return Fail("query", valid);
     std::printf("%s\n", doc.dump(2).c_str());
   } else {
-    PrintTable(*matches, *query, stats, db);
+    PrintTable(matches, query, stats, db);
     if (!flags.sheet.empty()) std::printf("\ncontact sheet: %s\n", flags.sheet.c_str());
   }
   return kExitOk;

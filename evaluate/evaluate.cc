@@ -363,7 +363,7 @@ Result<std::vector<ViewOutcome>> EvaluateViews(const Searcher& searcher,
       continue;
     }
     auto search = [&](const SearchOptions& o) {
-      return query->picture ? SearchQuery(searcher, *query->picture, o, options.landmark_rank)
+      return query->picture ? SearchEvidence(searcher, *query->picture, o, options.landmark_rank)
                             : searcher.Search(query->points, o);
     };
     out.num_query_points = query->points.size();

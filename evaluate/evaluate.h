@@ -70,12 +70,12 @@ Status CheckTestSetInputs(const TestSet& testset,
                           std::span<const uint32_t> positions);
 
 // A test view's query: edge points in the normalised frame (px) and, for a photo, the photo
-// path's whole result, whose hand landmarks (if any) re-rank the search (pose/landmark_rank.h).
+// path's whole evidence, whose hand landmarks (if any) re-rank the search (pose/landmark_rank.h).
 struct TestQuery {
   std::vector<Point2f> points;
-  std::optional<QueryEdges> picture;
+  std::optional<PictureEvidence> picture;
   explicit TestQuery(std::vector<Point2f> p) : points(std::move(p)) {}
-  explicit TestQuery(QueryEdges q) : points(q.points_px()), picture(std::move(q)) {}
+  explicit TestQuery(PictureEvidence q) : points(q.edges.points_px()), picture(std::move(q)) {}
 };
 
 // Turns a test view into its query. An error (e.g. no hand found in a photo) is recorded for

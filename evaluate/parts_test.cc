@@ -275,12 +275,12 @@ struct PhotoCase {
       set.photos[i].keypoints = kp;
     }
     set.keypoints_file = "kp.json";
-    query_fn = [this](const PhotoItem& item) -> Result<QueryEdges> {
+    query_fn = [this](const PhotoItem& item) -> Result<PictureEvidence> {
       if (item.relative == "shape2/nohand") {
         return Status(StatusCode::kNoHand, "/photos/shape2/nohand: no hand found");
       }
       const Shown& s = shown.at(item.relative);
-      return testing::PhotoQueryOf(*db, s.view, s.roll, s.mirrored, 250, 180, 0.8);
+      return PictureEvidence(testing::PhotoQueryOf(*db, s.view, s.roll, s.mirrored, 250, 180, 0.8));
     };
   }
 };

@@ -498,9 +498,9 @@ Result<std::vector<PhotoOutcome>> ScorePhotos(const Searcher& searcher,
       progress.Add();
       return true;
     }
-    std::vector<Point2f> points = query->points_px();
+    std::vector<Point2f> points = query->edges.points_px();
     t = std::chrono::steady_clock::now();
-    auto matches = SearchQuery(searcher, *query, search, options.landmark_rank);
+    auto matches = SearchEvidence(searcher, *query, search, options.landmark_rank);
     o.search_seconds = SecondsSince(t);
     if (!matches.ok()) {
       // A query that the search rejects (e.g. empty) is a failed input like "no hand".
@@ -517,7 +517,7 @@ Result<std::vector<PhotoOutcome>> ScorePhotos(const Searcher& searcher,
       const Match& best = matches->front();
       o.top1_view = best.view_id;
       o.top1_roll = best.roll;
-      o.top1_keypoints_px = ImageKeypoints(*query, best.label);
+      o.top1_keypoints_px = ImageKeypoints(query->edges, best.label);
       if (item.keypoints) {
         PhotoKeypointResult r;
         r.hand_size_px = item.keypoints->hand_size_px;
@@ -525,8 +525,8 @@ Result<std::vector<PhotoOutcome>> ScorePhotos(const Searcher& searcher,
         double best_error = std::numeric_limits<double>::infinity();
         const size_t n_best = std::min<size_t>(kPhotoMatches, matches->size());
         for (size_t k = 0; k < n_best; ++k) {
-          const auto d =
-              KeypointDistancesPx(*item.keypoints, ImageKeypoints(*query, (*matches)[k].label));
+          const auto d = KeypointDistancesPx(*item.keypoints,
+                                             ImageKeypoints(query->edges, (*matches)[k].label));
           const double e = MeanKeypointError(d, r.hand_size_px);
           if (e < best_error) {  // ties keep the better-ranked match
             best_error = e;
@@ -803,7 +803,7 @@ Status WritePhotoReportImages(const PhotoReport& report,
         if (t.query_points.empty() && query_fn && item != item_of.end()) {
           // A report merged from Slurm parts: the query again (deterministic).
           auto query = query_fn(*item->second);
-          if (query.ok()) t.query_points = query->points_px();
+          if (query.ok()) t.query_points = query->edges.points_px();
         }
         if (o->top1_view != kInvalidViewId) {
           RollPoints(

@@ -197,9 +197,9 @@ struct PhotoReport {
 // Sorts the outcomes and computes every derived field. THROW_CHECKs that ks are in 1..top_k.
 void FinishPhotoReport(PhotoReport* report);
 
-// Image -> query (edge points in the normalised frame and the map back to the image's pixels);
-// the CLI reads the photo as `handdb query` does.
-using PhotoQueryFn = std::function<Result<QueryEdges>(const PhotoItem&)>;
+// Image -> its evidence (edge points in the normalised frame, the map back to the image's
+// pixels, the hand landmarks); the CLI reads the photo as `handdb query` does.
+using PhotoQueryFn = std::function<Result<PictureEvidence>(const PhotoItem&)>;
 
 struct PhotoEvaluationOptions {
   // The search's setting, as SearchOptions::hand (whose default it shares); `handdb evaluate`
@@ -210,7 +210,7 @@ struct PhotoEvaluationOptions {
   int max_per_shape = 1;
   int num_threads = -1;  // photos searched in parallel, one search thread each
   bool progress = true;
-  // A query with hand landmarks (ImageEdgeOptions::landmarker) is re-ranked by them
+  // A photo with hand landmarks (PictureOptions::landmarker) is re-ranked by them
   // (pose/landmark_rank.h), as `handdb query` does.
   LandmarkRankOptions landmark_rank;
   bool Check() const;

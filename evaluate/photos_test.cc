@@ -365,9 +365,10 @@ class ScorePhotosTest : public ::testing::Test {
   }
 
   PhotoQueryFn QueryFn() {
-    return [this](const PhotoItem& item) -> Result<QueryEdges> {
+    return [this](const PhotoItem& item) -> Result<PictureEvidence> {
       const Shown& s = shown_.at(item.relative);
-      return testing::PhotoQueryOf(*db_, s.view, s.roll, s.mirrored, kCentreX, kCentreY, kScale);
+      return PictureEvidence(
+          testing::PhotoQueryOf(*db_, s.view, s.roll, s.mirrored, kCentreX, kCentreY, kScale));
     };
   }
 

@@ -14,13 +14,22 @@
 #include <vector>
 
 #include "base/testing.h"
-#include "photo/image_edges.h"
 #include "nn/tflite.h"
+#include "photo/image_edges.h"
 
 namespace handdb {
 namespace {
 
 namespace fs = std::filesystem;
+
+// PointQ has no ==: the same points, in the same order.
+bool SamePoints(const std::vector<PointQ>& a, const std::vector<PointQ>& b) {
+  if (a.size() != b.size()) return false;
+  for (size_t i = 0; i < a.size(); ++i) {
+    if (a[i].x != b[i].x || a[i].y != b[i].y) return false;
+  }
+  return true;
+}
 
 fs::path SourceDir() {
   const char* env = std::getenv("HANDDB_SOURCE_DIR");
@@ -123,16 +132,24 @@ TEST(HandLandmarkerTest, RefusesAModelThatIsNotALandmarkModel) {
 TEST(HandLandmarkerTest, FindsTheJointsOfRealPhotos) {
   auto landmarker = HandLandmarker::Open(Model());
   ASSERT_TRUE(landmarker.ok()) << landmarker.status().ToString();
-  ImageEdgeOptions options;
+  PictureOptions options;
   options.landmarker = *landmarker;
   // asl-1: the index finger points up, the others are folded; asl-5: an open hand.
   for (const auto& [shape, file] : std::vector<std::pair<std::string, std::string>>{
            {"asl-1", "IMG_1170.JPG"}, {"asl-5", "IMG_1174.JPG"}}) {
     SCOPED_TRACE(shape);
-    auto q = LoadQueryEdges(Photo(shape, file), options);
-    ASSERT_TRUE(q.ok()) << q.status().ToString();
-    ASSERT_TRUE(q->landmarks.has_value());
-    const HandLandmarks& l = *q->landmarks;
+    auto picture = ReadPicture(Photo(shape, file), options);
+    ASSERT_TRUE(picture.ok()) << picture.status().ToString();
+    ASSERT_TRUE(picture->landmarks.has_value());
+    const HandLandmarks& l = *picture->landmarks;
+    const QueryEdges* q = &picture->edges;
+    // The network runs beside the edge extraction: the edges are those of LoadQueryEdges.
+    auto edges = LoadQueryEdges(Photo(shape, file), options.edges);
+    ASSERT_TRUE(edges.ok());
+    EXPECT_TRUE(SamePoints(edges->points, q->points));
+    EXPECT_EQ(edges->centre_x, q->centre_x);
+    EXPECT_EQ(edges->centre_y, q->centre_y);
+    EXPECT_EQ(edges->scale, q->scale);
     EXPECT_GT(l.presence, 0.9f);
     EXPECT_NEAR(l.crop_side_px, 1.5 * q->diameter_px, 1e-3);
     // Every joint in the picture (the wrist may lie a little past the border the arm leaves
@@ -170,7 +187,7 @@ TEST(HandLandmarkerTest, FindsTheJointsOfRealPhotos) {
 
 // No landmarker: no landmarks (edge images and label EXRs never get any).
 TEST(HandLandmarkerTest, OnlyPhotosWithALandmarkerGetLandmarks) {
-  auto q = LoadQueryEdges(Photo("asl-1", "IMG_1170.JPG"), ImageEdgeOptions{});
+  auto q = ReadPicture(Photo("asl-1", "IMG_1170.JPG"), PictureOptions{});
   ASSERT_TRUE(q.ok()) << q.status().ToString();
   EXPECT_FALSE(q->landmarks.has_value());
 }

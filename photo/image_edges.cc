@@ -404,13 +404,8 @@ HandLandmarks FindLandmarks(const HandLandmarker& landmarker,
                            static_cast<float>(angle));
 }
 
-// `source` is the picture's size in its file: larger than `any` when a huge JPEG was decoded
-// reduced (a mask then has the file's size and is reduced the same way).
-Result<QueryEdges> FromPhoto(const std::filesystem::path& path,
-                             const cv::Mat& any,
-                             cv::Size source,
-                             const ImageEdgeOptions& options) {
-  const std::string what = path.string();
+// The photo path's 8-bit BGR picture, whatever the file's depth and channels.
+cv::Mat ToBgr8(const cv::Mat& any) {
   cv::Mat bgr;
   if (any.depth() != CV_8U) {
     any.convertTo(bgr, CV_8U, any.depth() == CV_16U ? 1.0 / 257.0 : 255.0);
@@ -419,114 +414,158 @@ Result<QueryEdges> FromPhoto(const std::filesystem::path& path,
   }
   if (bgr.channels() == 1) cv::cvtColor(bgr, bgr, cv::COLOR_GRAY2BGR);
   if (bgr.channels() == 4) cv::cvtColor(bgr, bgr, cv::COLOR_BGRA2BGR);
-  const int w = bgr.cols;
-  const int h = bgr.rows;
+  return bgr;
+}
 
-  // 1. Hand candidates at the picture's resolution: the mask, or skin colour.
-  cv::Mat cand;
-  const bool use_mask = !options.mask.empty();
-  if (use_mask) {
-    std::error_code ec;
-    if (!std::filesystem::exists(options.mask, ec)) {
-      return Status(StatusCode::kNotFound, options.mask.string() + ": no such mask file");
-    }
-    cv::Mat m = ReadImage(options.mask, cv::IMREAD_GRAYSCALE).value_or(cv::Mat());
-    if (!m.empty() && m.size() == source && source != bgr.size()) {
-      cv::resize(m, m, bgr.size(), 0, 0, cv::INTER_AREA);
-    }
-    if (m.empty()) {
-      return Status(StatusCode::kBadImage, options.mask.string() + ": cannot read the mask image");
-    }
-    if (m.cols != w || m.rows != h) {
-      return Status(StatusCode::kBadImage,
-                    options.mask.string() + ": mask is " + std::to_string(m.cols) + "x" +
-                        std::to_string(m.rows) + ", the image " + std::to_string(source.width) +
-                        "x" + std::to_string(source.height));
-    }
-    cand = m != 0;
-  } else {
+// Step 1: hand candidates at the picture's resolution: the mask (non-zero = hand) or skin colour.
+// `source` is the picture's size in its file (a mask has that size and is reduced like the
+// picture when a huge JPEG was decoded reduced).
+Result<cv::Mat> HandCandidates(const std::string& what,
+                               const cv::Mat& bgr,
+                               cv::Size source,
+                               const ImageEdgeOptions& options) {
+  if (options.mask.empty()) {
     if (IsGrey(bgr)) {
       return Status(StatusCode::kNoHand,
                     what + ": a grey image (" + std::to_string(source.width) + "x" +
                         std::to_string(source.height) +
                         ") has no skin colour to find the hand by; give its region with --mask");
     }
-    cand = SkinMask(bgr, options.skin);
+    return SkinMask(bgr, options.skin);
   }
-  cv::Mat keep;  // the ROI: where the hand may be
-  if (!options.roi.empty()) {
-    const PixelRect& r = options.roi;
-    if (r.x < 0 || r.y < 0 || r.x + r.width > w || r.y + r.height > h) {
-      return Status(StatusCode::kInvalidArgument,
-                    what + ": ROI " + std::to_string(r.x) + "," + std::to_string(r.y) + "," +
-                        std::to_string(r.width) + "," + std::to_string(r.height) +
-                        " is not inside the " + std::to_string(w) + "x" + std::to_string(h) +
-                        " image");
-    }
-    keep = cv::Mat::zeros(h, w, CV_8U);
-    keep(cv::Rect(r.x, r.y, r.width, r.height)).setTo(255);
+  std::error_code ec;
+  if (!std::filesystem::exists(options.mask, ec)) {
+    return Status(StatusCode::kNotFound, options.mask.string() + ": no such mask file");
   }
+  cv::Mat m = ReadImage(options.mask, cv::IMREAD_GRAYSCALE).value_or(cv::Mat());
+  if (!m.empty() && m.size() == source && source != bgr.size()) {
+    cv::resize(m, m, bgr.size(), 0, 0, cv::INTER_AREA);
+  }
+  if (m.empty()) {
+    return Status(StatusCode::kBadImage, options.mask.string() + ": cannot read the mask image");
+  }
+  if (m.cols != bgr.cols || m.rows != bgr.rows) {
+    return Status(StatusCode::kBadImage,
+                  options.mask.string() + ": mask is " + std::to_string(m.cols) + "x" +
+                      std::to_string(m.rows) + ", the image " + std::to_string(source.width) + "x" +
+                      std::to_string(source.height));
+  }
+  return cv::Mat(m != 0);
+}
 
-  // 2. Find the hand: the largest 8-connected region, on a copy at most kFindSide px across (a
-  // 12 Mpx photo needs no more to be found, and the clean-up costs little there).
+// Where the hand may be: the ROI as a mask (empty: anywhere).
+Result<cv::Mat> RoiMask(const std::string& what, const PixelRect& r, int w, int h) {
+  if (r.empty()) return cv::Mat();
+  if (r.x < 0 || r.y < 0 || r.x + r.width > w || r.y + r.height > h) {
+    return Status(StatusCode::kInvalidArgument,
+                  what + ": ROI " + std::to_string(r.x) + "," + std::to_string(r.y) + "," +
+                      std::to_string(r.width) + "," + std::to_string(r.height) +
+                      " is not inside the " + std::to_string(w) + "x" + std::to_string(h) +
+                      " image");
+  }
+  cv::Mat keep = cv::Mat::zeros(h, w, CV_8U);
+  keep(cv::Rect(r.x, r.y, r.width, r.height)).setTo(255);
+  return keep;
+}
+
+struct FoundHand {
+  Regions regions;         // of the copy the hand was found on
+  double find_scale = 1;   // that copy's px per picture px
+  double diameter_px = 0;  // the hand's diameter, picture px
+};
+
+// Step 2: the hand is the largest 8-connected region, found on a copy at most kFindSide px
+// across (a 12 Mpx photo needs no more to be found, and the clean-up costs little there).
+// Refused: too small a region, or a second one nearly as large (two hands, a hand and a face).
+Result<FoundHand> FindHand(const std::string& what,
+                           const cv::Mat& cand,
+                           const cv::Mat& keep,
+                           bool use_mask,
+                           const ImageEdgeOptions& options) {
   constexpr int kFindSide = 512;
-  const double find_scale = std::min(1.0, double(kFindSide) / std::max(w, h));
+  FoundHand out;
+  out.find_scale = std::min(1.0, double(kFindSide) / std::max(cand.cols, cand.rows));
   cv::Mat small = cand;
   if (!keep.empty()) small = cand & keep;
-  if (find_scale < 1) {
-    cv::resize(small, small, cv::Size(), find_scale, find_scale, cv::INTER_AREA);
+  if (out.find_scale < 1) {
+    cv::resize(small, small, cv::Size(), out.find_scale, out.find_scale, cv::INTER_AREA);
     small = small > 127;
   }
   if (!use_mask) CleanMask(&small, 1.0);
-  const Regions found = LargestRegions(small);
-  const double px_per_found = 1.0 / (find_scale * find_scale);  // picture px per found px
+  out.regions = LargestRegions(small);
+  const Regions& found = out.regions;
+  const double px_per_found = 1.0 / (out.find_scale * out.find_scale);  // picture px per found px
   const auto area_px = [&](int area) {
     return static_cast<int64_t>(std::llround(area * px_per_found));
   };
+  const std::string kind = use_mask ? "mask" : "skin-coloured";
   if (area_px(found.largest_area) < options.min_hand_pixels) {
     return Status(StatusCode::kNoHand,
-                  what + ": no hand found (largest " +
-                      std::string(use_mask ? "mask" : "skin-coloured") + " region has " +
+                  what + ": no hand found (largest " + kind + " region has " +
                       std::to_string(area_px(found.largest_area)) + " pixels, need " +
                       std::to_string(options.min_hand_pixels) + ")");
   }
   if (options.second_region_share > 0 && area_px(found.second_area) >= options.min_hand_pixels &&
       found.second_area >= options.second_region_share * found.largest_area) {
     return Status(StatusCode::kNoHand,
-                  what + ": two hand-sized " + std::string(use_mask ? "mask" : "skin-coloured") +
-                      " regions (" + std::to_string(area_px(found.largest_area)) + " and " +
+                  what + ": two hand-sized " + kind + " regions (" +
+                      std::to_string(area_px(found.largest_area)) + " and " +
                       std::to_string(area_px(found.second_area)) +
                       " pixels): crop the picture to one hand, or give --roi or --mask");
   }
-  const double found_diameter = RegionDiameter(found.labels == found.largest) / find_scale;
+  out.diameter_px = RegionDiameter(found.labels == found.largest) / out.find_scale;
+  return out;
+}
 
-  // 3. Crop around the hand (a margin of a fifth of its diameter, for the clean-up and Canny)
-  // and resample it to the working size.
-  const double work_scale = options.work_diameter_px > 0 && found_diameter > 0
-                                ? options.work_diameter_px / found_diameter
-                                : 1.0;
-  const double s =
-      options.work_diameter_px > 0 ? options.work_diameter_px / kReferenceHandDiameterPx : 1.0;
-  cv::Rect crop(0, 0, w, h);
+// The hand at the working size: a crop of the picture resampled, and the hand's region in it.
+struct WorkingHand {
+  cv::Rect crop;  // of the picture
+  double fx = 1;  // working px per picture px, the exact factors of the resize
+  double fy = 1;
+  double s = 1;      // working size / kReferenceHandDiameterPx: scales the pixel-sized options
+  double scale = 1;  // the scale asked for: working diameter / the found hand's diameter
+  cv::Mat bgr;       // the crop, resampled
+  cv::Mat hand;      // the hand's region (255) in it
+};
+
+// Step 3: crop around the hand (a margin of a fifth of its diameter, for the clean-up and
+// Canny), resample it to the working size, and take the largest region there again.
+Result<WorkingHand> CropToWorkingSize(const std::string& what,
+                                      const cv::Mat& bgr,
+                                      const cv::Mat& cand,
+                                      const cv::Mat& keep,
+                                      bool use_mask,
+                                      const FoundHand& found,
+                                      const ImageEdgeOptions& options) {
+  const int w = bgr.cols;
+  const int h = bgr.rows;
+  WorkingHand out;
+  out.scale = options.work_diameter_px > 0 && found.diameter_px > 0
+                  ? options.work_diameter_px / found.diameter_px
+                  : 1.0;
+  const double work_scale = out.scale;
+  out.s = options.work_diameter_px > 0 ? options.work_diameter_px / kReferenceHandDiameterPx : 1.0;
+  out.crop = cv::Rect(0, 0, w, h);
   if (options.work_diameter_px > 0) {
-    const double margin = 0.2 * found_diameter + 4;
-    const cv::Rect b = found.largest_box;
-    const int x0 = std::max(0, static_cast<int>(std::floor(b.x / find_scale - margin)));
-    const int y0 = std::max(0, static_cast<int>(std::floor(b.y / find_scale - margin)));
-    const int x1 = std::min(w, static_cast<int>(std::ceil((b.x + b.width) / find_scale + margin)));
-    const int y1 = std::min(h, static_cast<int>(std::ceil((b.y + b.height) / find_scale + margin)));
-    crop = cv::Rect(x0, y0, std::max(1, x1 - x0), std::max(1, y1 - y0));
+    const double margin = 0.2 * found.diameter_px + 4;
+    const cv::Rect b = found.regions.largest_box;
+    const double f = found.find_scale;
+    const int x0 = std::max(0, static_cast<int>(std::floor(b.x / f - margin)));
+    const int y0 = std::max(0, static_cast<int>(std::floor(b.y / f - margin)));
+    const int x1 = std::min(w, static_cast<int>(std::ceil((b.x + b.width) / f + margin)));
+    const int y1 = std::min(h, static_cast<int>(std::ceil((b.y + b.height) / f + margin)));
+    out.crop = cv::Rect(x0, y0, std::max(1, x1 - x0), std::max(1, y1 - y0));
   }
+  const cv::Rect& crop = out.crop;
   cv::Mat work_bgr = bgr(crop);
   cv::Mat work_cand = cand(crop);
   if (!keep.empty()) work_cand = work_cand & keep(crop);
   const cv::Size work_size(std::max(1, static_cast<int>(std::lround(crop.width * work_scale))),
                            std::max(1, static_cast<int>(std::lround(crop.height * work_scale))));
-  // The exact factors of the resize (sizes are whole pixels).
-  const double fx = double(work_size.width) / crop.width;
-  const double fy = double(work_size.height) / crop.height;
+  out.fx = double(work_size.width) / crop.width;
+  out.fy = double(work_size.height) / crop.height;
   if (work_size != crop.size()) {
-    cv::resize(work_bgr, work_bgr, work_size, 0, 0, fx > 1 ? cv::INTER_CUBIC : cv::INTER_AREA);
+    cv::resize(work_bgr, work_bgr, work_size, 0, 0, out.fx > 1 ? cv::INTER_CUBIC : cv::INTER_AREA);
     if (use_mask) {
       cv::resize(work_cand, work_cand, work_size, 0, 0, cv::INTER_AREA);
       work_cand = work_cand > 127;
@@ -540,73 +579,95 @@ Result<QueryEdges> FromPhoto(const std::filesystem::path& path,
       }
     }
   }
-  const int ww = work_bgr.cols;
-  const int wh = work_bgr.rows;
-  if (!use_mask) CleanMask(&work_cand, s);
+  if (!use_mask) CleanMask(&work_cand, out.s);
   const Regions work_regions = LargestRegions(work_cand);
   if (work_regions.largest == 0) {
     return Status(StatusCode::kNoHand, what + ": no hand found after resampling it");
   }
-  cv::Mat hand = work_regions.labels == work_regions.largest;
+  out.bgr = work_bgr;
+  out.hand = work_regions.labels == work_regions.largest;
+  return out;
+}
 
-  // 4. The hand, not the arm.
-  QueryEdges out;
+// Step 4a: the hand, not the arm (CutForearm), keeping the largest piece left.
+WristCut CutArm(const ImageEdgeOptions& options, cv::Mat* hand) {
   WristCut wrist;
-  if (options.cut_forearm) {
-    wrist = CutForearm(&hand, options.wrist_cut_radii);
-    if (wrist.cut) {
-      const Regions kept = LargestRegions(hand);
-      hand = kept.labels == kept.largest;
-    }
+  if (!options.cut_forearm) return wrist;
+  wrist = CutForearm(hand, options.wrist_cut_radii);
+  if (wrist.cut) {
+    const Regions kept = LargestRegions(*hand);
+    *hand = kept.labels == kept.largest;
   }
-  // A hand that touches the border away from the arm has lost part of itself there (with no arm
-  // found, every run counts: fingers leave the picture).
-  {
-    cv::Mat on_picture_border = cv::Mat::zeros(wh, ww, CV_8U);
-    // Only crop sides that are the picture's own sides count.
-    if (crop.y == 0) hand.row(0).copyTo(on_picture_border.row(0));
-    if (crop.y + crop.height == h) hand.row(wh - 1).copyTo(on_picture_border.row(wh - 1));
-    if (crop.x == 0) hand.col(0).copyTo(on_picture_border.col(0));
-    if (crop.x + crop.width == w) hand.col(ww - 1).copyTo(on_picture_border.col(ww - 1));
-    const double diameter = RegionDiameter(hand);
-    std::vector<BorderRun> runs =
-        BorderRuns(on_picture_border, std::max(2, static_cast<int>(0.1 * diameter)));
-    std::sort(runs.begin(), runs.end(), [](const BorderRun& a, const BorderRun& b) {
-      return a.length < b.length;
-    });
-    const bool arm_at_border = !options.cut_forearm || wrist.arm;
-    double cut_px = 0;
-    if (arm_at_border && !runs.empty()) {
-      // The arm's run. Longer than an arm is wide, it carries hand along the border with it: a
-      // hand cut by a side next to the one the arm leaves by makes one run round the corner.
-      if (wrist.arm) cut_px += std::max(0.0, runs.back().length - kArmRunRadii * wrist.palm_radius);
-      runs.pop_back();
-    }
-    for (const BorderRun& r : runs) cut_px += r.length;
-    if (diameter > 0 && cut_px > options.max_cut_share * diameter) {
-      return Status(
-          StatusCode::kNoHand,
-          what + ": the hand is cut by the picture's border (" +
-              std::to_string(static_cast<int>(std::lround(cut_px / work_scale))) +
-              " px of it lie on the border" + (arm_at_border ? " away from the arm" : "") +
-              "); the search needs the whole hand: use a picture with a margin around it");
-    }
-  }
+  return wrist;
+}
 
-  // 5. Silhouette contour with the converter's rule (a one-link label image).
+// Step 4b: a hand that touches the picture's border away from the arm has lost part of itself
+// there (with no arm found, every run counts: fingers leave the picture). `picture` is the
+// picture's size.
+Status CheckNotCutByBorder(const std::string& what,
+                           const WorkingHand& work,
+                           cv::Size picture,
+                           const WristCut& wrist,
+                           const ImageEdgeOptions& options) {
+  const cv::Mat& hand = work.hand;
+  const cv::Rect& crop = work.crop;
+  const int ww = hand.cols;
+  const int wh = hand.rows;
+  cv::Mat on_picture_border = cv::Mat::zeros(wh, ww, CV_8U);
+  // Only crop sides that are the picture's own sides count.
+  if (crop.y == 0) hand.row(0).copyTo(on_picture_border.row(0));
+  if (crop.y + crop.height == picture.height)
+    hand.row(wh - 1).copyTo(on_picture_border.row(wh - 1));
+  if (crop.x == 0) hand.col(0).copyTo(on_picture_border.col(0));
+  if (crop.x + crop.width == picture.width) hand.col(ww - 1).copyTo(on_picture_border.col(ww - 1));
+  const double diameter = RegionDiameter(hand);
+  std::vector<BorderRun> runs =
+      BorderRuns(on_picture_border, std::max(2, static_cast<int>(0.1 * diameter)));
+  std::sort(runs.begin(), runs.end(), [](const BorderRun& a, const BorderRun& b) {
+    return a.length < b.length;
+  });
+  const bool arm_at_border = !options.cut_forearm || wrist.arm;
+  double cut_px = 0;
+  if (arm_at_border && !runs.empty()) {
+    // The arm's run. Longer than an arm is wide, it carries hand along the border with it: a
+    // hand cut by a side next to the one the arm leaves by makes one run round the corner.
+    if (wrist.arm) cut_px += std::max(0.0, runs.back().length - kArmRunRadii * wrist.palm_radius);
+    runs.pop_back();
+  }
+  for (const BorderRun& r : runs) cut_px += r.length;
+  if (diameter > 0 && cut_px > options.max_cut_share * diameter) {
+    return Status(StatusCode::kNoHand,
+                  what + ": the hand is cut by the picture's border (" +
+                      std::to_string(static_cast<int>(std::lround(cut_px / work.scale))) +
+                      " px of it lie on the border" + (arm_at_border ? " away from the arm" : "") +
+                      "); the search needs the whole hand: use a picture with a margin around it");
+  }
+  return Status::Ok();
+}
+
+// Step 5: the silhouette contour with the converter's rule (a one-link label image).
+EdgeResult Silhouette(const cv::Mat& hand) {
   LabelImage li;
-  li.width = ww;
-  li.height = wh;
-  li.labels.assign(static_cast<size_t>(ww) * wh, 0);
-  for (int y = 0; y < wh; ++y) {
+  li.width = hand.cols;
+  li.height = hand.rows;
+  li.labels.assign(static_cast<size_t>(li.width) * li.height, 0);
+  for (int y = 0; y < li.height; ++y) {
     const uint8_t* row = hand.ptr<uint8_t>(y);
-    for (int x = 0; x < ww; ++x) li.labels[static_cast<size_t>(y) * ww + x] = row[x] ? 1 : 0;
+    for (int x = 0; x < li.width; ++x) {
+      li.labels[static_cast<size_t>(y) * li.width + x] = row[x] ? 1 : 0;
+    }
   }
-  const EdgeResult silhouette = ExtractEdges(li, DefaultJointPairs(), EdgeOptions{});
+  return ExtractEdges(li, DefaultJointPairs(), EdgeOptions{});
+}
 
-  // 6. Canny edges inside the hand (blur and thresholds for the working size), one outline.
+// Step 6: Canny edges inside the hand (blur and thresholds for the working size), those near
+// the contour dropped and the contour itself added: one outline.
+cv::Mat HandEdges(const WorkingHand& work,
+                  const EdgeResult& silhouette,
+                  const ImageEdgeOptions& options) {
+  const double s = work.s;
   cv::Mat grey, edges;
-  cv::cvtColor(work_bgr, grey, cv::COLOR_BGR2GRAY);
+  cv::cvtColor(work.bgr, grey, cv::COLOR_BGR2GRAY);
   if (s == 1.0) {
     cv::GaussianBlur(grey, grey, {5, 5}, 0);
   } else {
@@ -615,34 +676,47 @@ Result<QueryEdges> FromPhoto(const std::filesystem::path& path,
   }
   cv::Canny(grey, edges, options.canny_low / s, options.canny_high / s, 3, true);
   if (options.interior_edges_only) {
-    edges &= hand;
+    edges &= work.hand;
   } else {
     cv::Mat near_hand;
-    cv::dilate(hand, near_hand, Ellipse(2 * options.dilate_px * s + 1));
+    cv::dilate(work.hand, near_hand, Ellipse(2 * options.dilate_px * s + 1));
     edges &= near_hand;
   }
   if (const int c = static_cast<int>(std::lround(options.contour_clearance_px * s)); c > 0) {
-    cv::Mat near_contour = cv::Mat::zeros(wh, ww, CV_8U);
+    cv::Mat near_contour = cv::Mat::zeros(edges.rows, edges.cols, CV_8U);
     for (const EdgePixel& p : silhouette.silhouette) near_contour.at<uint8_t>(p.row, p.col) = 255;
     cv::dilate(near_contour, near_contour, Ellipse(2 * c + 1));
     edges.setTo(0, near_contour);
   }
   for (const EdgePixel& p : silhouette.silhouette) edges.at<uint8_t>(p.row, p.col) = 255;
+  return edges;
+}
 
-  out.kind = QueryInputKind::kPhoto;
-  out.width = w;
-  out.height = h;
-  out.hand_pixels = static_cast<int64_t>(std::llround(silhouette.num_hand_pixels / (fx * fy)));
-  out.touches_border =
+// Step 7: the query, normalised in working px, then every pixel quantity back in the
+// picture's px (working x, continuous = (picture x - crop.x) * fx).
+Status NormaliseToPicture(const std::string& what,
+                          const WorkingHand& work,
+                          cv::Size picture,
+                          const EdgeResult& silhouette,
+                          const cv::Mat& edges,
+                          const WristCut& wrist,
+                          QueryEdges* out) {
+  const cv::Rect& crop = work.crop;
+  const double fx = work.fx, fy = work.fy;
+  const int w = picture.width, h = picture.height;
+  out->kind = QueryInputKind::kPhoto;
+  out->width = w;
+  out->height = h;
+  out->hand_pixels = static_cast<int64_t>(std::llround(silhouette.num_hand_pixels / (fx * fy)));
+  out->touches_border =
       silhouette.touches_border &&
       (crop.x == 0 || crop.y == 0 || crop.x + crop.width == w || crop.y + crop.height == h);
-  HANDDB_RETURN_IF_ERROR(Finish(what, NonZeroPixels(edges), silhouette.silhouette, &out));
-  // Back to the picture's pixels: working x (continuous) = (source x - crop.x) * fx.
-  out.work_scale = std::sqrt(fx * fy);
-  out.centre_x = crop.x + out.centre_x / fx;
-  out.centre_y = crop.y + out.centre_y / fy;
-  out.diameter_px /= out.work_scale;
-  out.scale *= out.work_scale;
+  HANDDB_RETURN_IF_ERROR(Finish(what, NonZeroPixels(edges), silhouette.silhouette, out));
+  out->work_scale = std::sqrt(fx * fy);
+  out->centre_x = crop.x + out->centre_x / fx;
+  out->centre_y = crop.y + out->centre_y / fy;
+  out->diameter_px /= out->work_scale;
+  out->scale *= out->work_scale;
   const auto to_source = [&](std::vector<EdgePixelXY>* pixels) {
     for (EdgePixelXY& p : *pixels) {
       p.x = std::clamp(static_cast<int>(crop.x + (p.x + 0.5) / fx), 0, w - 1);
@@ -658,29 +732,55 @@ Result<QueryEdges> FromPhoto(const std::filesystem::path& path,
                               }),
                   pixels->end());
   };
-  to_source(&out.edge_pixels);
-  to_source(&out.contour_pixels);
+  to_source(&out->edge_pixels);
+  to_source(&out->contour_pixels);
   if (wrist.palm_radius > 0) {
-    out.palm_centre_x = crop.x + wrist.palm_centre.x / fx;
-    out.palm_centre_y = crop.y + wrist.palm_centre.y / fy;
-    out.palm_radius_px = wrist.palm_radius / out.work_scale;
+    out->palm_centre_x = crop.x + wrist.palm_centre.x / fx;
+    out->palm_centre_y = crop.y + wrist.palm_centre.y / fy;
+    out->palm_radius_px = wrist.palm_radius / out->work_scale;
   }
-  out.forearm_cut = wrist.cut;
+  out->forearm_cut = wrist.cut;
   if (wrist.arm && (wrist.dir.x != 0 || wrist.dir.y != 0)) {
     // Back to source px: the working image may be scaled differently in x and y.
     const double dx = wrist.dir.x / fx, dy = wrist.dir.y / fy;
     const double n = std::hypot(dx, dy);
-    out.arm_found = true;
-    out.arm_dir_x = dx / n;
-    out.arm_dir_y = dy / n;
+    out->arm_found = true;
+    out->arm_dir_x = dx / n;
+    out->arm_dir_y = dy / n;
   }
   if (wrist.cut) {
-    out.wrist_line = {crop.x + wrist.a.x / fx,
-                      crop.y + wrist.a.y / fy,
-                      crop.x + wrist.b.x / fx,
-                      crop.y + wrist.b.y / fy};
+    out->wrist_line = {crop.x + wrist.a.x / fx,
+                       crop.y + wrist.a.y / fy,
+                       crop.x + wrist.b.x / fx,
+                       crop.y + wrist.b.y / fy};
   }
-  if (options.landmarker) out.landmarks = FindLandmarks(*options.landmarker, bgr, out);
+  return Status::Ok();
+}
+
+// The photo path, step by step (image_edges.h). `bgr` is ToBgr8 of the decoded picture;
+// `source` is the picture's size in its file: larger than `bgr` when a huge JPEG was decoded
+// reduced.
+Result<QueryEdges> FromPhoto(const std::filesystem::path& path,
+                             const cv::Mat& bgr,
+                             cv::Size source,
+                             const ImageEdgeOptions& options) {
+  const std::string what = path.string();
+  const bool use_mask = !options.mask.empty();
+  auto cand = HandCandidates(what, bgr, source, options);
+  if (!cand.ok()) return cand.status();
+  auto keep = RoiMask(what, options.roi, bgr.cols, bgr.rows);
+  if (!keep.ok()) return keep.status();
+  auto found = FindHand(what, *cand, *keep, use_mask, options);
+  if (!found.ok()) return found.status();
+  auto work = CropToWorkingSize(what, bgr, *cand, *keep, use_mask, *found, options);
+  if (!work.ok()) return work.status();
+  const WristCut wrist = CutArm(options, &work->hand);
+  HANDDB_RETURN_IF_ERROR(CheckNotCutByBorder(what, *work, bgr.size(), wrist, options));
+  const EdgeResult silhouette = Silhouette(work->hand);
+  const cv::Mat edges = HandEdges(*work, silhouette, options);
+  QueryEdges out;
+  HANDDB_RETURN_IF_ERROR(
+      NormaliseToPicture(what, *work, bgr.size(), silhouette, edges, wrist, &out));
   return out;
 }
 
@@ -712,13 +812,82 @@ void ScaleToSource(cv::Size source, cv::Size decoded, QueryEdges* q) {
   q->centre_y *= fy;
   q->diameter_px *= f;
   q->scale /= f;
-  if (q->landmarks) {
-    for (Point2f& p : q->landmarks->image_px)
-      p = {static_cast<float>(p.x * fx), static_cast<float>(p.y * fy)};
-    q->landmarks->crop_centre = {static_cast<float>(q->landmarks->crop_centre.x * fx),
-                                 static_cast<float>(q->landmarks->crop_centre.y * fy)};
-    q->landmarks->crop_side_px *= static_cast<float>(f);
+}
+
+// The same for the landmarks found in the reduced picture.
+void ScaleToSource(cv::Size source, cv::Size decoded, HandLandmarks* l) {
+  const double fx = double(source.width) / decoded.width;
+  const double fy = double(source.height) / decoded.height;
+  const double f = std::sqrt(fx * fy);
+  for (Point2f& p : l->image_px) p = {static_cast<float>(p.x * fx), static_cast<float>(p.y * fy)};
+  l->crop_centre = {static_cast<float>(l->crop_centre.x * fx),
+                    static_cast<float>(l->crop_centre.y * fy)};
+  l->crop_side_px *= static_cast<float>(f);
+}
+
+// The picture decoded once: its edges, then (a photo, with a landmarker) the landmark network
+// on the same pixels and the hand the segmentation found, both in the decoded picture's pixels
+// until the last step maps them to the file's.
+Result<PictureEvidence> Read(const std::filesystem::path& image,
+                             const ImageEdgeOptions& options,
+                             const HandLandmarker* landmarker) {
+  if (!options.Check()) {
+    return Status(StatusCode::kInvalidArgument, "invalid image edge options (see the line above)");
   }
+  // A JPEG above kMaxImagePixels is decoded at 1/2, 1/4 or 1/8 of its size (libjpeg scales
+  // while it decodes, so the full image is never in memory).
+  if (Status s = CheckImageFileComplete(image, kMaxImagePixels, kMaxJpegPixels); !s.ok()) return s;
+  QueryInputKind kind = options.kind;
+  if (kind == QueryInputKind::kAuto && Lower(image.extension().string()) == ".exr") {
+    kind = QueryInputKind::kLabels;
+  }
+  PictureEvidence out;
+  if (kind == QueryInputKind::kLabels) {
+    auto edges = FromLabels(image, options);
+    if (!edges.ok()) return edges.status();
+    out.edges = std::move(edges).value();
+    return out;
+  }
+
+  int flags = cv::IMREAD_UNCHANGED;
+  const std::optional<ImageSize> size = ReadImageSize(image);
+  if (size && std::string_view(size->format) == "JPEG" &&
+      size->width * size->height > kMaxImagePixels) {
+    const uint64_t pixels = size->width * size->height;
+    flags = pixels <= 4 * kMaxImagePixels    ? cv::IMREAD_REDUCED_COLOR_2
+            : pixels <= 16 * kMaxImagePixels ? cv::IMREAD_REDUCED_COLOR_4
+                                             : cv::IMREAD_REDUCED_COLOR_8;
+  }
+  Result<cv::Mat> read = ReadImage(image, flags);
+  if (!read.ok()) return read.status();
+  const cv::Mat any = std::move(*read);
+  if (any.empty()) {
+    return Status(StatusCode::kBadImage,
+                  image.string() + ": cannot read the image (not a PNG/JPEG/... or corrupt)");
+  }
+  const cv::Size source =
+      flags == cv::IMREAD_UNCHANGED || !size
+          ? any.size()
+          : cv::Size(static_cast<int>(size->width), static_cast<int>(size->height));
+  if (kind == QueryInputKind::kAuto) {
+    kind = LooksLikeEdgeImage(any) ? QueryInputKind::kEdges : QueryInputKind::kPhoto;
+  }
+  if (kind == QueryInputKind::kEdges) {
+    auto edges = FromEdgeImage(image, any);
+    if (!edges.ok()) return edges.status();
+    out.edges = std::move(edges).value();
+  } else {
+    const cv::Mat bgr = ToBgr8(any);
+    auto edges = FromPhoto(image, bgr, source, options);
+    if (!edges.ok()) return edges.status();
+    out.edges = std::move(edges).value();
+    if (landmarker != nullptr) out.landmarks = FindLandmarks(*landmarker, bgr, out.edges);
+  }
+  if (source != any.size()) {
+    ScaleToSource(source, any.size(), &out.edges);
+    if (out.landmarks) ScaleToSource(source, any.size(), &*out.landmarks);
+  }
+  return out;
 }
 
 }  // namespace
@@ -802,45 +971,14 @@ std::vector<Point2f> QueryEdges::points_px() const {
 
 Result<QueryEdges> LoadQueryEdges(const std::filesystem::path& image,
                                   const ImageEdgeOptions& options) {
-  if (!options.Check()) {
-    return Status(StatusCode::kInvalidArgument, "invalid image edge options (see the line above)");
-  }
-  // Issue 14 items 6, 7, 8; a JPEG above kMaxImagePixels is decoded at 1/2, 1/4 or 1/8 of its
-  // size (libjpeg scales while it decodes, so the full image is never in memory).
-  if (Status s = CheckImageFileComplete(image, kMaxImagePixels, kMaxJpegPixels); !s.ok()) return s;
-  QueryInputKind kind = options.kind;
-  if (kind == QueryInputKind::kAuto && Lower(image.extension().string()) == ".exr") {
-    kind = QueryInputKind::kLabels;
-  }
-  if (kind == QueryInputKind::kLabels) return FromLabels(image, options);
-
-  int flags = cv::IMREAD_UNCHANGED;
-  const std::optional<ImageSize> size = ReadImageSize(image);
-  if (size && std::string_view(size->format) == "JPEG" &&
-      size->width * size->height > kMaxImagePixels) {
-    const uint64_t pixels = size->width * size->height;
-    flags = pixels <= 4 * kMaxImagePixels    ? cv::IMREAD_REDUCED_COLOR_2
-            : pixels <= 16 * kMaxImagePixels ? cv::IMREAD_REDUCED_COLOR_4
-                                             : cv::IMREAD_REDUCED_COLOR_8;
-  }
-  Result<cv::Mat> read = ReadImage(image, flags);
+  auto read = Read(image, options, nullptr);
   if (!read.ok()) return read.status();
-  const cv::Mat any = std::move(*read);
-  if (any.empty()) {
-    return Status(StatusCode::kBadImage,
-                  image.string() + ": cannot read the image (not a PNG/JPEG/... or corrupt)");
-  }
-  const cv::Size source =
-      flags == cv::IMREAD_UNCHANGED || !size
-          ? any.size()
-          : cv::Size(static_cast<int>(size->width), static_cast<int>(size->height));
-  if (kind == QueryInputKind::kAuto) {
-    kind = LooksLikeEdgeImage(any) ? QueryInputKind::kEdges : QueryInputKind::kPhoto;
-  }
-  Result<QueryEdges> out = kind == QueryInputKind::kEdges ? FromEdgeImage(image, any)
-                                                          : FromPhoto(image, any, source, options);
-  if (out.ok() && source != any.size()) ScaleToSource(source, any.size(), &*out);
-  return out;
+  return std::move(read->edges);
+}
+
+Result<PictureEvidence> ReadPicture(const std::filesystem::path& image,
+                                    const PictureOptions& options) {
+  return Read(image, options.edges, options.landmarker.get());
 }
 
 }  // namespace handdb

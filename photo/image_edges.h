@@ -26,6 +26,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "base/status.h"
@@ -108,9 +109,6 @@ struct ImageEdgeOptions {
   // label query is converted exactly like the database's views.
   EdgeOptions label_edges;
   JointPairs label_joint_pairs = DefaultJointPairs();
-  // Photo: the hand landmark network (photo/hand_landmarks.h) run on the segmented hand;
-  // its joints re-rank the search's nearest views (pose/landmark_rank.h). Null: none.
-  std::shared_ptr<const HandLandmarker> landmarker;
   bool Check() const;
 };
 
@@ -144,8 +142,6 @@ struct QueryEdges {
   double palm_centre_y = 0;
   double palm_radius_px = 0;
   std::array<double, 4> wrist_line{};  // the cut: x0, y0, x1, y1 in source px (when forearm_cut)
-  // Photo with ImageEdgeOptions::landmarker: the network's joints, in source px.
-  std::optional<HandLandmarks> landmarks;
   // Normalisation: normalised = (pixel centre - centre) * scale.
   double centre_x = 0, centre_y = 0, diameter_px = 0, scale = 0;
   std::vector<PointQ> points;              // normalised frame, sorted by (y, x), unique
@@ -164,5 +160,31 @@ struct QueryEdges {
 // and ReadLabelExr's errors for EXRs.
 Result<QueryEdges> LoadQueryEdges(const std::filesystem::path& image,
                                   const ImageEdgeOptions& options);
+
+// How a picture becomes evidence: its edges and, for a photo, the hand landmark network
+// (photo/hand_landmarks.h), which runs beside the edge extraction on the same decoded pixels.
+struct PictureOptions {
+  ImageEdgeOptions edges;
+  // Run on a photo's segmented hand; its joints re-rank the search's nearest views
+  // (pose/landmark_rank.h). Null: none. Edge images and label EXRs never get landmarks.
+  std::shared_ptr<const HandLandmarker> landmarker;
+  bool Check() const { return edges.Check(); }
+};
+
+// What a picture says about the hand in it.
+struct PictureEvidence {
+  PictureEvidence() = default;
+  explicit PictureEvidence(QueryEdges e) : edges(std::move(e)) {}
+  QueryEdges edges;
+  // A photo read with PictureOptions::landmarker: the network's joints, in source px, found in
+  // the crop the segmentation gave (the silhouette's centre, 1.5 diameters wide, turned so the
+  // hand points up: hand_landmarks.h).
+  std::optional<HandLandmarks> landmarks;
+};
+
+// Decodes the picture once and returns its evidence: LoadQueryEdges' edges (bit for bit the
+// same), then the landmarks. Errors as LoadQueryEdges'.
+Result<PictureEvidence> ReadPicture(const std::filesystem::path& image,
+                                    const PictureOptions& options);
 
 }  // namespace handdb

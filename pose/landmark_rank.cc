@@ -24,12 +24,13 @@ bool LandmarkRankOptions::Check() const {
   return true;
 }
 
-double LandmarkError(const QueryEdges& query, const Match& match) {
-  THROW_CHECK(query.landmarks.has_value());
+double LandmarkError(const PictureEvidence& picture, const Match& match) {
+  THROW_CHECK(picture.landmarks.has_value());
+  const QueryEdges& query = picture.edges;
   THROW_CHECK_GT(query.scale, 0.0);
   double sum = 0;
   for (int k = 0; k < kNumLandmarks; ++k) {
-    const Point2f& p = query.landmarks->image_px[k];
+    const Point2f& p = picture.landmarks->image_px[k];
     // Into the normalised frame: the inverse of QueryEdges::ImageFromNormalised.
     const double x = (p.x - query.centre_x) * query.scale;
     const double y = (p.y - query.centre_y) * query.scale;
@@ -38,20 +39,20 @@ double LandmarkError(const QueryEdges& query, const Match& match) {
   return sum / kNumLandmarks / kHandRadiusPx;
 }
 
-bool UsesLandmarks(const QueryEdges& query, const LandmarkRankOptions& options) {
-  return options.enabled && query.landmarks.has_value() &&
-         query.landmarks->presence >= options.min_presence && query.scale > 0;
+bool UsesLandmarks(const PictureEvidence& picture, const LandmarkRankOptions& options) {
+  return options.enabled && picture.landmarks.has_value() &&
+         picture.landmarks->presence >= options.min_presence && picture.edges.scale > 0;
 }
 
 std::vector<Match> RerankByLandmarks(std::vector<Match> pool,
-                                     const QueryEdges& query,
+                                     const PictureEvidence& picture,
                                      const SearchOptions& search,
                                      const LandmarkRankOptions& options) {
   if (pool.empty()) return pool;
   double best = pool.front().distance;
   for (const Match& m : pool) best = std::min(best, m.distance);
   for (Match& m : pool) {
-    m.landmark_error = LandmarkError(query, m);
+    m.landmark_error = LandmarkError(picture, m);
     // A zero best D_c (the query is a view) ranks by the distance's excess instead of a ratio.
     m.score = (best > 0 ? m.distance / best : 1.0 + m.distance) + options.weight * m.landmark_error;
   }
@@ -61,13 +62,13 @@ std::vector<Match> RerankByLandmarks(std::vector<Match> pool,
   return LimitPerShape(std::move(pool), search.top_k, search.max_per_shape);
 }
 
-Result<std::vector<Match>> SearchQuery(const Searcher& searcher,
-                                       const QueryEdges& query,
-                                       const SearchOptions& search,
-                                       const LandmarkRankOptions& options,
-                                       SearchStats* stats) {
-  const std::vector<Point2f> points = query.points_px();
-  if (!UsesLandmarks(query, options)) return searcher.Search(points, search, stats);
+Result<std::vector<Match>> SearchEvidence(const Searcher& searcher,
+                                          const PictureEvidence& picture,
+                                          const SearchOptions& search,
+                                          const LandmarkRankOptions& options,
+                                          SearchStats* stats) {
+  const std::vector<Point2f> points = picture.edges.points_px();
+  if (!UsesLandmarks(picture, options)) return searcher.Search(points, search, stats);
   SearchOptions pool = search;
   pool.top_k = std::max(search.top_k, options.pool_views);
   if (search.max_per_shape > 0) {
@@ -75,7 +76,7 @@ Result<std::vector<Match>> SearchQuery(const Searcher& searcher,
   }
   auto matches = searcher.Search(points, pool, stats);
   if (!matches.ok()) return matches;
-  return RerankByLandmarks(std::move(matches).value(), query, search, options);
+  return RerankByLandmarks(std::move(matches).value(), picture, search, options);
 }
 
 }  // namespace handdb

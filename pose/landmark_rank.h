@@ -37,26 +37,27 @@ struct LandmarkRankOptions {
   bool Check() const;
 };
 
-// E(v) of a match for the query's landmarks (see above). THROW_CHECK: the query has landmarks.
-double LandmarkError(const QueryEdges& query, const Match& match);
+// E(v) of a match for the picture's landmarks (see above). THROW_CHECK: the picture has
+// landmarks.
+double LandmarkError(const PictureEvidence& picture, const Match& match);
 
-// True when the query carries landmarks the re-ranking uses (presence >= min_presence).
-bool UsesLandmarks(const QueryEdges& query, const LandmarkRankOptions& options);
+// True when the picture has landmarks the re-ranking uses (presence >= min_presence).
+bool UsesLandmarks(const PictureEvidence& picture, const LandmarkRankOptions& options);
 
 // Re-ranks `pool` (the pool search's matches, best D_c first) by the score above, then keeps
 // the first top_k, at most max_per_shape of one shape (0: no limit). Sets landmark_error and
 // score of each match kept.
 std::vector<Match> RerankByLandmarks(std::vector<Match> pool,
-                                     const QueryEdges& query,
+                                     const PictureEvidence& picture,
                                      const SearchOptions& search,
                                      const LandmarkRankOptions& options);
 
-// The search a picture query gets: Searcher::Search on its points, and, when it carries
+// The search a picture's evidence gets: Searcher::Search on its points, and, when it has
 // landmarks the re-ranking uses, the pool search and RerankByLandmarks. Errors as Search's.
-Result<std::vector<Match>> SearchQuery(const Searcher& searcher,
-                                       const QueryEdges& query,
-                                       const SearchOptions& search,
-                                       const LandmarkRankOptions& options,
-                                       SearchStats* stats = nullptr);
+Result<std::vector<Match>> SearchEvidence(const Searcher& searcher,
+                                          const PictureEvidence& picture,
+                                          const SearchOptions& search,
+                                          const LandmarkRankOptions& options,
+                                          SearchStats* stats = nullptr);
 
 }  // namespace handdb

@@ -28,8 +28,9 @@ std::vector<Match> Pool() {
 }
 
 // A photo query whose landmarks lie exactly on `match`'s keypoints (in the picture's px).
-QueryEdges QueryOn(const Match& match, float presence) {
-  QueryEdges q;
+PictureEvidence QueryOn(const Match& match, float presence) {
+  PictureEvidence picture;
+  QueryEdges& q = picture.edges;
   q.kind = QueryInputKind::kPhoto;
   q.centre_x = 60;
   q.centre_y = 70;
@@ -40,13 +41,13 @@ QueryEdges QueryOn(const Match& match, float presence) {
         q.ImageFromNormalised({match.label.keypoints[k][0], match.label.keypoints[k][1]});
   }
   l.presence = presence;
-  q.landmarks = l;
-  return q;
+  picture.landmarks = l;
+  return picture;
 }
 
 TEST(LandmarkRankTest, TheViewTheLandmarksFitRisesByTheDocumentedScore) {
   const std::vector<Match> pool = Pool();
-  const QueryEdges q = QueryOn(pool[2], 0.99f);
+  const PictureEvidence q = QueryOn(pool[2], 0.99f);
   EXPECT_NEAR(LandmarkError(q, pool[2]), 0.0, 1e-5);
   // Random keypoints +-90 px apart: far from each other in hand radii.
   EXPECT_GT(LandmarkError(q, pool[0]), 0.3);
@@ -75,7 +76,7 @@ TEST(LandmarkRankTest, KeepsTopKAndThePerShapeLimit) {
   const std::vector<Match> pool = Pool();
   // Landmarks on view 1 (shape 0): with one match per shape, view 1 stands for shape 0 and view
   // 0 (the same shape, nearer by D_c) is dropped.
-  const QueryEdges q = QueryOn(pool[1], 1.0f);
+  const PictureEvidence q = QueryOn(pool[1], 1.0f);
   SearchOptions search;
   search.top_k = 2;
   search.max_per_shape = 1;
@@ -90,7 +91,7 @@ TEST(LandmarkRankTest, UnsureOrMissingLandmarksAreNotUsed) {
   LandmarkRankOptions options;
   EXPECT_TRUE(UsesLandmarks(QueryOn(pool[0], 0.95f), options));
   EXPECT_FALSE(UsesLandmarks(QueryOn(pool[0], 0.5f), options));
-  EXPECT_FALSE(UsesLandmarks(QueryEdges{}, options));
+  EXPECT_FALSE(UsesLandmarks(PictureEvidence{}, options));
   options.enabled = false;
   EXPECT_FALSE(UsesLandmarks(QueryOn(pool[0], 0.95f), options));
   LandmarkRankOptions bad;
@@ -101,9 +102,9 @@ TEST(LandmarkRankTest, UnsureOrMissingLandmarksAreNotUsed) {
   EXPECT_FALSE(bad.Check());
 }
 
-// Through a real search: without usable landmarks SearchQuery is Search; with them the list is
-// the pool's, re-ranked, and every match carries its score.
-TEST(LandmarkRankTest, SearchQueryReranksThePoolSearch) {
+// Through a real search: without usable landmarks SearchEvidence is Search; with them the list
+// is the pool's, re-ranked, and every match carries its score.
+TEST(LandmarkRankTest, SearchEvidenceReranksThePoolSearch) {
   auto db = std::make_shared<const Database>(testing::SyntheticDatabase(60, 80, 8, 6));
   Searcher searcher(db);
   QueryEdges q;
@@ -115,9 +116,9 @@ TEST(LandmarkRankTest, SearchQueryReranksThePoolSearch) {
   search.num_threads = 1;
   auto plain = searcher.Search(q.points_px(), search);
   ASSERT_TRUE(plain.ok());
-  QueryEdges unsure_query = QueryOn((*plain)[3], 0.2f);
-  unsure_query.points = q.points;
-  auto unsure = SearchQuery(searcher, unsure_query, search, LandmarkRankOptions{});
+  PictureEvidence unsure_query = QueryOn((*plain)[3], 0.2f);
+  unsure_query.edges.points = q.points;
+  auto unsure = SearchEvidence(searcher, unsure_query, search, LandmarkRankOptions{});
   ASSERT_TRUE(unsure.ok());
   ASSERT_EQ(unsure->size(), plain->size());
   for (size_t i = 0; i < plain->size(); ++i) {
@@ -125,9 +126,9 @@ TEST(LandmarkRankTest, SearchQueryReranksThePoolSearch) {
     EXPECT_EQ((*unsure)[i].roll, (*plain)[i].roll);
     EXPECT_EQ((*unsure)[i].score, -1.0);
   }
-  QueryEdges with = QueryOn((*plain)[3], 1.0f);
-  with.points = q.points;
-  auto ranked = SearchQuery(searcher, with, search, LandmarkRankOptions{});
+  PictureEvidence with = QueryOn((*plain)[3], 1.0f);
+  with.edges.points = q.points;
+  auto ranked = SearchEvidence(searcher, with, search, LandmarkRankOptions{});
   ASSERT_TRUE(ranked.ok());
   ASSERT_EQ(ranked->size(), 5u);
   int position = -1;

@@ -50,11 +50,12 @@ bool ContactSheetOptions::Check() const {
 
 Status WriteContactSheet(const std::filesystem::path& out_png,
                          const std::filesystem::path& input_image,
-                         const QueryEdges& query,
+                         const PictureEvidence& picture,
                          std::span<const SheetTile> matches,
                          const ContactSheetOptions& options,
                          std::span<const Point2f> skeleton_px) {
   THROW_CHECK(options.Check());
+  const QueryEdges& query = picture.edges;
   THROW_CHECK(skeleton_px.empty() || skeleton_px.size() == kNumKeypoints);
   const int t = options.tile_px;
   const int th = t + kCaptionPx;
@@ -125,8 +126,8 @@ Status WriteContactSheet(const std::filesystem::path& out_png,
     }
     // The landmark network's joints (docs/query.md, "Hand landmarks") as small magenta rings,
     // so the top match's skeleton can be read against what the network saw.
-    if (query.landmarks) {
-      for (const Point2f& k : query.landmarks->image_px) {
+    if (picture.landmarks) {
+      for (const Point2f& k : picture.landmarks->image_px) {
         cv::circle(tile, to_tile(k.x, k.y), 3, cv::Scalar(200, 0, 200), 1, cv::LINE_AA);
       }
     }

@@ -27,13 +27,14 @@ struct ContactSheetOptions {
   bool Check() const;
 };
 
-// `input_image` may be empty (no input tile); `query` gives the input's edge pixels and the
-// normalised query points. `skeleton_px`, if not empty, is the top match's 21 keypoints
-// (docs/conventions.md order) in the input picture's pixels: its skeleton is drawn over the
-// input. Written atomically. kBadImage if the input cannot be read, kIoError on write failure.
+// `input_image` may be empty (no input tile); `picture` gives the input's edge pixels, the
+// normalised query points and the landmarks drawn over the input. `skeleton_px`, if not empty, is
+// the top match's 21 keypoints (docs/conventions.md order) in the input picture's pixels: its
+// skeleton is drawn over the input. Written atomically. kBadImage if the input cannot be read,
+// kIoError on write failure.
 Status WriteContactSheet(const std::filesystem::path& out_png,
                          const std::filesystem::path& input_image,
-                         const QueryEdges& query,
+                         const PictureEvidence& picture,
                          std::span<const SheetTile> matches,
                          const ContactSheetOptions& options,
                          std::span<const Point2f> skeleton_px = {});

@@ -37,6 +37,8 @@
 #include "handdb_version.h"
 #include "photo/image_edges.h"
 #include "pose/landmark_rank.h"
+#include "pose/match_json.h"
+#include "pose/picture_search.h"
 #include "query/database.h"
 #include "query/searcher.h"
 
@@ -50,8 +52,6 @@ using json = nlohmann::json;
 static_assert(std::endian::native == std::endian::little,
               "points are handed out as views of the little-endian shard bytes");
 static_assert(sizeof(PointQ) == 2 * sizeof(int16_t) && offsetof(PointQ, y) == sizeof(int16_t));
-
-constexpr double kDeg = 180.0 / M_PI;
 
 // A library error on its way to Python: handdb.Error(message) with .code = "kChecksumMismatch".
 struct StatusError : std::exception {
@@ -127,18 +127,11 @@ py::object JsonToPython(const json& doc) {
   return (*loads)(doc.dump());
 }
 
-// `handdb query`'s roll_deg: the roll angle in degrees in [0, 360).
-double Deg0To360(double rad) {
-  double d = std::fmod(rad * kDeg, 360.0);
-  if (d < 0) d += 360.0;
-  return d >= 360.0 ? 0.0 : d;
-}
-
 // ---------------------------------------------------------------------------------------------
 // Query edges.
 
 struct PyQueryEdges {
-  QueryEdges edges;
+  PictureEvidence picture;
 };
 
 py::array_t<int32_t> PixelArray(const std::vector<EdgePixelXY>& px) {
@@ -219,8 +212,9 @@ std::shared_ptr<const HandLandmarker> Landmarker(const std::string& spec) {
 }
 
 // The keyword options of query_edges() and search(), named like `handdb query`'s flags.
-ImageEdgeOptions EdgeOptionsFromKwargs(const py::kwargs& kw) {
-  ImageEdgeOptions o;
+PictureOptions PictureOptionsFromKwargs(const py::kwargs& kw) {
+  PictureOptions picture;
+  ImageEdgeOptions& o = picture.edges;
   std::string landmarks = "auto";
   for (const auto& [key_handle, value] : kw) {
     const std::string key = py::cast<std::string>(key_handle);
@@ -269,24 +263,26 @@ ImageEdgeOptions EdgeOptionsFromKwargs(const py::kwargs& kw) {
   }
   // Edge images and label EXRs have no photo to find landmarks in.
   if (o.kind != QueryInputKind::kEdges && o.kind != QueryInputKind::kLabels) {
-    o.landmarker = Landmarker(landmarks);
+    picture.landmarker = Landmarker(landmarks);
   }
-  return o;
+  return picture;
+}
+
+// A label EXR is converted with the edge options the database was made with (as `handdb query`
+// does).
+void UseDatabaseConversion(const fs::path& db_dir, PictureOptions* options) {
+  auto recorded = ReadDatabaseViewConversion(db_dir);
+  if (!recorded.ok()) throw StatusError(recorded.status());
+  options->edges.label_edges = recorded->edges;
+  options->edges.label_joint_pairs = recorded->joint_pairs;
 }
 
 PyQueryEdges LoadEdges(const fs::path& image,
-                       ImageEdgeOptions options,
+                       PictureOptions options,
                        const std::optional<fs::path>& db_dir) {
   py::gil_scoped_release release;
-  if (db_dir) {
-    // A label EXR is converted with the edge options the database was made with (as `handdb
-    // query` does).
-    auto recorded = ReadDatabaseViewConversion(*db_dir);
-    if (!recorded.ok()) throw StatusError(recorded.status());
-    options.label_edges = recorded->edges;
-    options.label_joint_pairs = recorded->joint_pairs;
-  }
-  return PyQueryEdges{Unwrap(LoadQueryEdges(image, options))};
+  if (db_dir) UseDatabaseConversion(*db_dir, &options);
+  return PyQueryEdges{Unwrap(ReadPicture(image, options))};
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -491,6 +487,7 @@ struct PyMatch {
   int rank = 0;
   Match match;
   std::optional<std::vector<Point2f>> keypoints_image;  // only for an image query
+  std::shared_ptr<const QueryEdges> query;              // only for an image query
 };
 
 py::object KeypointsImage(const PyMatch& m) {
@@ -498,56 +495,10 @@ py::object KeypointsImage(const PyMatch& m) {
   return Point2fArray(*m.keypoints_image);
 }
 
-// The match as `handdb query --json` prints it (schemas/query_result.schema.json, matches[]).
+// The match as `handdb query --json` prints it (schemas/query_result.schema.json, matches[]):
+// the one JSON writer of a match (pose/match_json.h), as plain dicts and lists.
 py::dict MatchDict(const PyMatch& pm) {
-  const Match& m = pm.match;
-  const ViewLabel& l = m.label;
-  // Lists, as json.loads of the CLI's output gives.
-  auto as_list = [](const auto& a) {
-    py::list out;
-    for (const auto& x : a) out.append(x);
-    return out;
-  };
-  py::list kps_lists;
-  for (const auto& k : l.keypoints) kps_lists.append(as_list(k));
-  py::object kps_image_lists = py::none();
-  if (pm.keypoints_image) {
-    py::list list;
-    for (const Point2f& p : *pm.keypoints_image) {
-      py::list xy;
-      xy.append(p.x);
-      xy.append(p.y);
-      list.append(xy);
-    }
-    kps_image_lists = list;
-  }
-  py::dict d;
-  d["rank"] = pm.rank;
-  d["view_id"] = m.view_id;
-  d["roll"] = m.roll;
-  d["roll_deg"] = Deg0To360(m.roll_angle);
-  d["distance"] = m.distance;
-  d["a"] = m.a;
-  d["b"] = m.b;
-  d["render_id"] = l.render_id;
-  d["shape_id"] = l.shape_id;
-  d["shape_name"] = m.shape_name;
-  d["dir_id"] = l.dir_id;
-  d["joint_angles"] = as_list(l.joint_angles);
-  d["view_direction"] = as_list(l.view_direction);
-  d["view_theta"] = l.view_theta;
-  d["view_phi"] = l.view_phi;
-  d["view_theta_deg"] = l.view_theta * kDeg;
-  d["view_phi_deg"] = l.view_phi * kDeg;
-  d["camera_roll"] = l.camera_roll;
-  d["hand"] = std::string(HandName(m.hand));
-  if (m.score >= 0) {
-    d["score"] = m.score;
-    d["landmark_error"] = m.landmark_error;
-  }
-  d["keypoints"] = kps_lists;
-  if (pm.keypoints_image) d["keypoints_image_px"] = kps_image_lists;
-  return d;
+  return JsonToPython(MatchToJson(pm.match, pm.rank, pm.query.get()));
 }
 
 py::dict StatsDict(const SearchStats& st, const Database& db) {
@@ -628,38 +579,55 @@ py::object Search(const PyDatabase& self,
   landmark_rank.weight = landmark_weight;
   if (!landmark_rank.Check()) throw py::value_error("landmark_weight must be >= 0");
 
-  std::optional<QueryEdges> edges;
+  std::optional<PictureEvidence> picture;
   std::vector<Point2f> points;
+  // A picture file is read and searched in one call (pose/picture_search.h), as `handdb query`
+  // does.
+  std::optional<fs::path> picture_file;
+  PictureSearchOptions picture_search;
   if (py::isinstance<PyQueryEdges>(query)) {
     if (edge_kwargs.size()) throw py::type_error("image options given with a QueryEdges query");
-    edges = py::cast<const PyQueryEdges&>(query).edges;
+    picture = py::cast<const PyQueryEdges&>(query).picture;
   } else if (py::isinstance<py::str>(query) || py::hasattr(query, "__fspath__")) {
-    edges =
-        LoadEdges(py::cast<fs::path>(query), EdgeOptionsFromKwargs(edge_kwargs), self.path()).edges;
+    picture_file = py::cast<fs::path>(query);
+    picture_search.picture = PictureOptionsFromKwargs(edge_kwargs);
+    picture_search.search = options;
+    picture_search.landmark_rank = landmark_rank;
   } else {
     if (edge_kwargs.size()) throw py::type_error("image options given with a points query");
     points = QueryPoints(py::array::ensure(query));
   }
-  if (edges) points = edges->points_px();
 
   const Searcher& searcher = self.searcher();
   SearchStats stats;
   std::optional<Result<std::vector<Match>>> matches;
   {
     py::gil_scoped_release release;
-    matches.emplace(edges ? SearchQuery(searcher, *edges, options, landmark_rank, &stats)
-                          : searcher.Search(points, options, &stats));
+    if (picture_file) {
+      UseDatabaseConversion(self.path(), &picture_search.picture);
+      auto found = SearchPicture(searcher, *picture_file, picture_search, &stats);
+      if (!found.ok()) throw StatusError(found.status());
+      picture = std::move(found->evidence);
+      matches.emplace(std::move(found->matches));
+    } else if (picture) {
+      matches.emplace(SearchEvidence(searcher, *picture, options, landmark_rank, &stats));
+    } else {
+      matches.emplace(searcher.Search(points, options, &stats));
+    }
   }
   if (!matches->ok()) throw StatusError(matches->status());
+  const std::shared_ptr<const QueryEdges> query_edges =
+      picture ? std::make_shared<const QueryEdges>(std::move(picture->edges)) : nullptr;
   py::list out;
   int rank = 1;
   for (Match& m : **matches) {
     PyMatch pm;
     pm.rank = rank++;
-    if (edges) {
+    if (query_edges) {
+      pm.query = query_edges;
       pm.keypoints_image.emplace();
       for (const auto& kp : m.label.keypoints) {
-        pm.keypoints_image->push_back(edges->ImageFromNormalised({kp[0], kp[1]}));
+        pm.keypoints_image->push_back(query_edges->ImageFromNormalised({kp[0], kp[1]}));
       }
     }
     pm.match = std::move(m);
@@ -702,21 +670,8 @@ py::list Validate(const fs::path& path, bool verify_checksums, size_t max_proble
   return problems;
 }
 
-}  // namespace
-
-PYBIND11_MODULE(_handdb, m) {
-  m.doc() =
-      "handdb: read and search databases of synthetic hand views (docs/python.md).\n\n"
-      "  db = handdb.Database('db')        # manifest + every shard, memory-mapped read-only\n"
-      "  v = db[0]                         # a View: points (zero-copy int16, 1/16 px), labels\n"
-      "  cols = db.read()                  # every view as numpy columns\n"
-      "  matches = db.search('hand.jpg')   # top-k (view, roll) by chamfer distance\n"
-      "  problems = handdb.validate('db')  # [] when the database is valid\n";
-  m.attr("__version__") = HANDDB_VERSION;
-  m.attr("POINT_SCALE") = kPointScale;
-  m.attr("NUM_JOINT_ANGLES") = kNumJointAngles;
-  m.attr("NUM_KEYPOINTS") = kNumKeypoints;
-
+// handdb.Error and the translation of a library error (Status) into it.
+void BindError(py::module_& m) {
   error_type = new py::object(py::exception<StatusError>(m, "Error", PyExc_RuntimeError));
   error_type->attr("__doc__") =
       "A handdb library error: str(e) is the one-line message `handdb` prints after "
@@ -731,78 +686,86 @@ PYBIND11_MODULE(_handdb, m) {
       PyErr_SetObject(error_type->ptr(), exc.ptr());
     }
   });
+}
 
+// QueryEdges and query_edges(): a picture's evidence.
+void BindQueryEdges(py::module_& m) {
   py::class_<PyQueryEdges>(m,
                            "QueryEdges",
                            "A query image's edge points in the database's normalised frame "
                            "(handdb.query_edges(); docs/query.md 'From a picture to edges').")
       .def_property_readonly(
           "kind",
-          [](const PyQueryEdges& q) { return std::string(QueryInputKindName(q.edges.kind)); },
+          [](const PyQueryEdges& q) {
+            return std::string(QueryInputKindName(q.picture.edges.kind));
+          },
           "the input kind used: 'photo', 'edges' or 'labels'")
       .def_property_readonly(
           "points",
           [](py::object self) {
-            const auto& q = py::cast<const PyQueryEdges&>(self).edges;
+            const auto& q = py::cast<const PyQueryEdges&>(self).picture.edges;
             return PointsView(q.points, self);
           },
           "(n, 2) int16, read-only: normalised points in 1/16 px (sorted by y, x; unique)")
       .def_property_readonly(
           "points_px",
-          [](const PyQueryEdges& q) { return Point2fArray(q.edges.points_px()); },
+          [](const PyQueryEdges& q) { return Point2fArray(q.picture.edges.points_px()); },
           "(n, 2) float32: the same in px (what the search uses)")
       .def_property_readonly(
           "edge_pixels",
-          [](const PyQueryEdges& q) { return PixelArray(q.edges.edge_pixels); },
+          [](const PyQueryEdges& q) { return PixelArray(q.picture.edges.edge_pixels); },
           "(n, 2) int32: edge pixels (column, row) of the input image")
       .def_property_readonly(
           "contour_pixels",
-          [](const PyQueryEdges& q) { return PixelArray(q.edges.contour_pixels); },
+          [](const PyQueryEdges& q) { return PixelArray(q.picture.edges.contour_pixels); },
           "(n, 2) int32: the silhouette contour used for the normalisation")
-      .def_property_readonly("width", [](const PyQueryEdges& q) { return q.edges.width; })
-      .def_property_readonly("height", [](const PyQueryEdges& q) { return q.edges.height; })
+      .def_property_readonly("width", [](const PyQueryEdges& q) { return q.picture.edges.width; })
+      .def_property_readonly("height", [](const PyQueryEdges& q) { return q.picture.edges.height; })
       .def_property_readonly("hand_pixels",
-                             [](const PyQueryEdges& q) { return q.edges.hand_pixels; })
+                             [](const PyQueryEdges& q) { return q.picture.edges.hand_pixels; })
       .def_property_readonly(
           "touches_border",
-          [](const PyQueryEdges& q) { return q.edges.touches_border; },
+          [](const PyQueryEdges& q) { return q.picture.edges.touches_border; },
           "the hand region reaches the image border")
       .def_property_readonly("diameter_px",
-                             [](const PyQueryEdges& q) { return q.edges.diameter_px; })
+                             [](const PyQueryEdges& q) { return q.picture.edges.diameter_px; })
       .def_property_readonly(
           "centre_px",
-          [](const PyQueryEdges& q) { return py::make_tuple(q.edges.centre_x, q.edges.centre_y); },
+          [](const PyQueryEdges& q) {
+            return py::make_tuple(q.picture.edges.centre_x, q.picture.edges.centre_y);
+          },
           "normalisation centre in image px: normalised = (pixel centre - centre) * scale")
-      .def_property_readonly("scale", [](const PyQueryEdges& q) { return q.edges.scale; })
+      .def_property_readonly("scale", [](const PyQueryEdges& q) { return q.picture.edges.scale; })
       .def_property_readonly(
           "palm",
           [](const PyQueryEdges& q) -> py::object {
-            if (q.edges.palm_radius_px <= 0) return py::none();
-            return py::make_tuple(
-                q.edges.palm_centre_x, q.edges.palm_centre_y, q.edges.palm_radius_px);
+            if (q.picture.edges.palm_radius_px <= 0) return py::none();
+            return py::make_tuple(q.picture.edges.palm_centre_x,
+                                  q.picture.edges.palm_centre_y,
+                                  q.picture.edges.palm_radius_px);
           },
           "photo: the palm's largest inscribed circle (x, y, radius) in image px, or None")
       .def_property_readonly(
           "arm_direction",
           [](const PyQueryEdges& q) -> py::object {
-            if (!q.edges.arm_found) return py::none();
-            return py::make_tuple(q.edges.arm_dir_x, q.edges.arm_dir_y);
+            if (!q.picture.edges.arm_found) return py::none();
+            return py::make_tuple(q.picture.edges.arm_dir_x, q.picture.edges.arm_dir_y);
           },
           "photo: unit vector (x right, y down, image px) from the palm centre towards where "
           "the arm leaves the picture, or None when no arm was found")
       .def_property_readonly(
           "wrist_line",
           [](const PyQueryEdges& q) -> py::object {
-            if (!q.edges.forearm_cut) return py::none();
-            const auto& w = q.edges.wrist_line;
+            if (!q.picture.edges.forearm_cut) return py::none();
+            const auto& w = q.picture.edges.wrist_line;
             return py::make_tuple(w[0], w[1], w[2], w[3]);
           },
           "photo: the wrist cut (x0, y0, x1, y1) in image px, or None when no forearm was cut")
       .def_property_readonly(
           "landmarks",
           [](const PyQueryEdges& q) -> py::object {
-            if (!q.edges.landmarks) return py::none();
-            const HandLandmarks& l = *q.edges.landmarks;
+            if (!q.picture.landmarks) return py::none();
+            const HandLandmarks& l = *q.picture.landmarks;
             py::dict d;
             d["presence"] = l.presence;
             d["image_px"] =
@@ -822,19 +785,44 @@ PYBIND11_MODULE(_handdb, m) {
               throw py::value_error("expected an (n, 2) array");
             std::vector<Point2f> out;
             for (py::ssize_t i = 0; i < xy.shape(0); ++i) {
-              out.push_back(q.edges.ImageFromNormalised({xy.at(i, 0), xy.at(i, 1)}));
+              out.push_back(q.picture.edges.ImageFromNormalised({xy.at(i, 0), xy.at(i, 1)}));
             }
             return Point2fArray(out);
           },
           py::arg("xy"),
           "Normalised px (n, 2) -> input image px (pixel centres at integer + 0.5).")
-      .def("__len__", [](const PyQueryEdges& q) { return q.edges.points.size(); })
+      .def("__len__", [](const PyQueryEdges& q) { return q.picture.edges.points.size(); })
       .def("__repr__", [](const PyQueryEdges& q) {
-        return "<handdb.QueryEdges " + std::string(QueryInputKindName(q.edges.kind)) + " " +
-               std::to_string(q.edges.width) + "x" + std::to_string(q.edges.height) + ", " +
-               std::to_string(q.edges.points.size()) + " points>";
+        return "<handdb.QueryEdges " + std::string(QueryInputKindName(q.picture.edges.kind)) + " " +
+               std::to_string(q.picture.edges.width) + "x" +
+               std::to_string(q.picture.edges.height) + ", " +
+               std::to_string(q.picture.edges.points.size()) + " points>";
       });
 
+  m.def(
+      "query_edges",
+      [](const fs::path& image, py::object database, const py::kwargs& kw) {
+        std::optional<fs::path> db_dir;
+        if (py::isinstance<PyDatabase>(database)) {
+          db_dir = py::cast<const PyDatabase&>(database).path();
+        } else if (!database.is_none()) {
+          db_dir = py::cast<fs::path>(database);
+        }
+        return LoadEdges(image, PictureOptionsFromKwargs(kw), db_dir);
+      },
+      py::arg("image"),
+      py::arg("database") = py::none(),
+      "A query image -> QueryEdges (normalised points), exactly as `handdb query` converts it.\n\n"
+      "Options, named like the command's flags: input='auto'|'photo'|'edges'|'labels', "
+      "mask=path, roi=(x, y, w, h), skin=(Ymin, Ymax, Crmin, Crmax, Cbmin, Cbmax), "
+      "canny=(low, high), contour_clearance=2, edges_outside=False, work_diameter=128, "
+      "wrist_cut=True, landmarks='auto' (the installed hand landmark model; 'off' or None: "
+      "none; or a .tflite file). database (a Database or "
+      "its path): label EXRs use the edge options it was converted with.");
+}
+
+// View: one canonical view of a database.
+void BindView(py::module_& m) {
   py::class_<PyView>(m,
                      "View",
                      "One canonical (roll 0) view: its edge points and pose label, read from the "
@@ -913,7 +901,10 @@ PYBIND11_MODULE(_handdb, m) {
                (v.shape_name.empty() ? "" : " '" + v.shape_name + "'") + ", " +
                std::to_string(v.points.size()) + " points>";
       });
+}
 
+// Match: one (view, roll, hand) of a search's answer.
+void BindMatch(py::module_& m) {
   py::class_<PyMatch>(m,
                       "Match",
                       "One search result: virtual view (view_id, roll), its chamfer distance "
@@ -925,7 +916,7 @@ PYBIND11_MODULE(_handdb, m) {
       .def_property_readonly(
           "roll_angle", [](const PyMatch& p) { return p.match.roll_angle; }, "radians")
       .def_property_readonly("roll_deg",
-                             [](const PyMatch& p) { return Deg0To360(p.match.roll_angle); })
+                             [](const PyMatch& p) { return RollDegrees0To360(p.match.roll_angle); })
       .def_property_readonly(
           "distance", [](const PyMatch& p) { return p.match.distance; }, "D_c = a + b, px")
       .def_property_readonly(
@@ -990,7 +981,10 @@ PYBIND11_MODULE(_handdb, m) {
                       p.match.shape_name.c_str());
         return std::string(buf);
       });
+}
 
+// Database: open, read and search a database.
+void BindDatabase(py::module_& m) {
   py::class_<PyDatabase>(
       m,
       "Database",
@@ -1156,28 +1150,10 @@ PYBIND11_MODULE(_handdb, m) {
                               py::cast<bool>(t[1]),
                               t.size() == 3 ? py::cast<std::string>(t[2]) : "auto");
           }));
+}
 
-  m.def(
-      "query_edges",
-      [](const fs::path& image, py::object database, const py::kwargs& kw) {
-        std::optional<fs::path> db_dir;
-        if (py::isinstance<PyDatabase>(database)) {
-          db_dir = py::cast<const PyDatabase&>(database).path();
-        } else if (!database.is_none()) {
-          db_dir = py::cast<fs::path>(database);
-        }
-        return LoadEdges(image, EdgeOptionsFromKwargs(kw), db_dir);
-      },
-      py::arg("image"),
-      py::arg("database") = py::none(),
-      "A query image -> QueryEdges (normalised points), exactly as `handdb query` converts it.\n\n"
-      "Options, named like the command's flags: input='auto'|'photo'|'edges'|'labels', "
-      "mask=path, roi=(x, y, w, h), skin=(Ymin, Ymax, Crmin, Crmax, Cbmin, Cbmax), "
-      "canny=(low, high), contour_clearance=2, edges_outside=False, work_diameter=128, "
-      "wrist_cut=True, landmarks='auto' (the installed hand landmark model; 'off' or None: "
-      "none; or a .tflite file). database (a Database or "
-      "its path): label EXRs use the edge options it was converted with.");
-
+// validate(): `handdb validate` as a list of problems.
+void BindValidate(py::module_& m) {
   m.def("validate",
         &Validate,
         py::arg("path"),
@@ -1187,6 +1163,29 @@ PYBIND11_MODULE(_handdb, m) {
         "the problems as dicts {code, file, offset, message} (the --json report's); [] when it "
         "is valid. max_problems per file and kind of check, 0 = all (if more were found, a last "
         "entry with code 'kSuppressed' counts them).");
+}
+
+}  // namespace
+
+PYBIND11_MODULE(_handdb, m) {
+  m.doc() =
+      "handdb: read and search databases of synthetic hand views (docs/python.md).\n\n"
+      "  db = handdb.Database('db')        # manifest + every shard, memory-mapped read-only\n"
+      "  v = db[0]                         # a View: points (zero-copy int16, 1/16 px), labels\n"
+      "  cols = db.read()                  # every view as numpy columns\n"
+      "  matches = db.search('hand.jpg')   # top-k (view, roll) by chamfer distance\n"
+      "  problems = handdb.validate('db')  # [] when the database is valid\n";
+  m.attr("__version__") = HANDDB_VERSION;
+  m.attr("POINT_SCALE") = kPointScale;
+  m.attr("NUM_JOINT_ANGLES") = kNumJointAngles;
+  m.attr("NUM_KEYPOINTS") = kNumKeypoints;
+
+  BindError(m);
+  BindQueryEdges(m);
+  BindView(m);
+  BindMatch(m);
+  BindDatabase(m);
+  BindValidate(m);
 }
 
 }  // namespace handdb::python
