@@ -1,0 +1,149 @@
+// The pose fit's cost: the median time of one FitPose (pose/fit.h) on one core over synthetic
+// perturbed starts, beside the time of one HandRig::Keypoints3d, the forward kinematics a fit
+// evaluates (with derivatives) per landmark and iteration. Also how well the fits converge.
+//
+//   fit_bench [--fits N]
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <vector>
+
+#include "base/repo_root.h"
+#include "generator/sampling/random.h"
+#include "pose/fit.h"
+
+namespace handdb {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double Median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v.empty() ? 0 : v[v.size() / 2];
+}
+
+NormalisedKeypoints2d Project(const HandRig& rig,
+                              const JointVector& joints,
+                              const Mat3d& cam_from_hand,
+                              double scale) {
+  const HandKeypoints3d points = rig.Keypoints3d(joints);
+  NormalisedKeypoints2d out;
+  for (int k = 0; k < kNumKeypoints; ++k) {
+    double xy[2] = {0, 0};
+    for (int r = 0; r < 2; ++r) {
+      for (int c = 0; c < 3; ++c) xy[r] += cam_from_hand[r][c] * (points[k][c] - rig.look_at()[c]);
+    }
+    out[k] = {static_cast<float>(scale * xy[0]), static_cast<float>(scale * xy[1])};
+  }
+  return out;
+}
+
+int Run(int fits) {
+  auto model = LoadHandModel(RepoRoot() / "configs/hands/webxr_generic_right.json");
+  if (!model.ok()) {
+    std::fprintf(stderr, "fit_bench: %s\n", model.status().ToString().c_str());
+    return 1;
+  }
+  auto rig = HandRig::Create(*model);
+  if (!rig.ok()) {
+    std::fprintf(stderr, "fit_bench: %s\n", rig.status().ToString().c_str());
+    return 1;
+  }
+  const JointLimits& limits = rig->limits();
+  Rng rng(7);
+  const PoseFitOptions options;  // one thread
+  std::vector<double> fit_ms, iterations, max_px;
+  int converged = 0;
+  for (int n = 0; n < fits; ++n) {
+    // A random pose inside the limits, a random view, and a start perturbed like a near match.
+    JointVector truth, start_joints;
+    for (int i = 0; i < kNumJointAngles; ++i) {
+      truth[i] = limits.min[i] + (limits.max[i] - limits.min[i]) * (0.1 + 0.8 * rng.Uniform());
+      start_joints[i] = truth[i] + 0.4 * (rng.Uniform() - 0.5);
+    }
+    limits.Clamp(&start_joints);
+    Vec3d direction{rng.Normal(), rng.Normal(), rng.Normal()};
+    const double roll = 2 * std::acos(-1.0) * rng.Uniform();
+    auto cam = CamFromHand(*rig, direction, roll);
+    if (!cam.ok()) continue;
+    // The start's camera: the view direction and roll moved by up to ~10 degrees.
+    Vec3d start_direction = direction;
+    const double length = std::sqrt(direction[0] * direction[0] + direction[1] * direction[1] +
+                                    direction[2] * direction[2]);
+    for (double& v : start_direction) v = v / length + 0.17 * (rng.Uniform() - 0.5);
+    PoseFitStart start;
+    start.joints = start_joints;
+    start.view_direction = start_direction;
+    start.roll = roll + 0.17 * (rng.Uniform() - 0.5);
+    auto start_cam = CamFromHand(*rig, start_direction, start.roll);
+    if (!start_cam.ok()) continue;
+    start.keypoints_normalised = Project(*rig, start_joints, *start_cam, 1000 * 1.05);
+    PoseFitEvidence evidence;
+    evidence.has_landmarks = true;
+    evidence.landmarks_px = Project(*rig, truth, *cam, 1000);
+
+    const auto t0 = Clock::now();
+    auto fit = FitPose(*rig, start, evidence, options);
+    const auto t1 = Clock::now();
+    if (!fit.ok()) {
+      std::fprintf(stderr, "fit_bench: %s\n", fit.status().ToString().c_str());
+      return 1;
+    }
+    fit_ms.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
+    iterations.push_back(fit->iterations);
+    converged += fit->converged ? 1 : 0;
+    double worst = 0;
+    for (int k = 0; k < kNumKeypoints; ++k) {
+      worst =
+          std::max(worst,
+                   std::hypot(double{fit->keypoints_normalised[k].x} - evidence.landmarks_px[k].x,
+                              double{fit->keypoints_normalised[k].y} - evidence.landmarks_px[k].y));
+    }
+    max_px.push_back(worst);
+  }
+
+  // The baseline: one forward kinematics evaluation in double, as the search side calls it.
+  const int repeats = 20000;
+  JointVector joints{};
+  for (int i = 0; i < kNumJointAngles; ++i) joints[i] = 0.5 * (limits.min[i] + limits.max[i]);
+  double sink = 0;
+  const auto k0 = Clock::now();
+  for (int n = 0; n < repeats; ++n) {
+    joints[n % kNumJointAngles] += 1e-9;
+    sink += rig->Keypoints3d(joints)[20][0];
+  }
+  const auto k1 = Clock::now();
+  const double fk_us = std::chrono::duration<double, std::micro>(k1 - k0).count() / repeats;
+
+  const double ms = Median(fit_ms);
+  std::printf("fits                      %zu (converged %d)\n", fit_ms.size(), converged);
+  std::printf("fit median                %.3f ms (p90 %.3f ms)\n", ms, [&] {
+    std::vector<double> v = fit_ms;
+    std::sort(v.begin(), v.end());
+    return v[v.size() * 9 / 10];
+  }());
+  std::printf("iterations median         %.0f\n", Median(iterations));
+  std::printf("worst keypoint median     %.3f px (normalised frame, hand diameter ~192 px)\n",
+              Median(max_px));
+  std::printf("HandRig::Keypoints3d      %.3f us\n", fk_us);
+  std::printf("fit / Keypoints3d         %.0f x\n", ms * 1000 / fk_us);
+  return sink == 12345.678 ? 2 : 0;  // keeps the baseline loop from being optimised away
+}
+
+}  // namespace
+}  // namespace handdb
+
+int main(int argc, char** argv) {
+  int fits = 100;
+  for (int i = 1; i + 1 < argc; ++i) {
+    if (std::strcmp(argv[i], "--fits") == 0) fits = std::atoi(argv[i + 1]);
+  }
+  if (fits < 1) {
+    std::fprintf(stderr, "usage: fit_bench [--fits N>0]\n");
+    return 2;
+  }
+  return handdb::Run(fits);
+}

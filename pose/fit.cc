@@ -1,0 +1,415 @@
+#include "pose/fit.h"
+
+#include <ceres/ceres.h>
+#include <ceres/rotation.h>
+
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <sstream>
+#include <vector>
+
+#include "pose/fit_kinematics.h"
+
+namespace handdb {
+namespace {
+
+// Ceres' quaternion order: w, x, y, z.
+using Quaternion = std::array<double, 4>;
+
+Quaternion QuaternionOf(const Mat3d& rotation) {
+  Quaternion q;
+  ceres::RotationMatrixToQuaternion(ceres::RowMajorAdapter3x3(&rotation[0][0]), q.data());
+  const double n = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+  for (double& v : q) v /= n;
+  return q;
+}
+
+Mat3d RotationOf(const Quaternion& q) {
+  Mat3d r;
+  ceres::QuaternionToRotation(q.data(), ceres::RowMajorAdapter3x3(&r[0][0]));
+  return r;
+}
+
+// (cam_from_hand * (point_in_hand - look_at)).xy: the rig's orthographic projection, in hand
+// units, before the normalised frame's scale and shift.
+std::array<double, 2> ProjectXY(const Mat3d& cam_from_hand, const Vec3d& look_at, const Vec3d& p) {
+  const Vec3d d{p[0] - look_at[0], p[1] - look_at[1], p[2] - look_at[2]};
+  std::array<double, 2> out;
+  for (int r = 0; r < 2; ++r) {
+    out[r] = cam_from_hand[r][0] * d[0] + cam_from_hand[r][1] * d[1] + cam_from_hand[r][2] * d[2];
+  }
+  return out;
+}
+
+// One landmark: the rig's keypoint k, posed, turned into the camera and placed in the normalised
+// frame, minus the picture's landmark, over sigma. Only keypoint k's chain of bones is posed.
+class LandmarkResidual {
+ public:
+  LandmarkResidual(const FitKinematics* kinematics,
+                   int keypoint,
+                   const Vec3d& look_at,
+                   const Point2f& landmark,
+                   double inverse_sigma)
+      : kinematics_(kinematics),
+        keypoint_(keypoint),
+        look_at_(look_at),
+        landmark_{landmark.x, landmark.y},
+        inverse_sigma_(inverse_sigma) {}
+
+  template <typename T>
+  bool operator()(
+      const T* joints, const T* cam_from_hand, const T* scale, const T* shift, T* residuals) const {
+    T point[3];
+    kinematics_->Keypoint(joints, keypoint_, point);
+    for (int r = 0; r < 3; ++r) point[r] -= T(look_at_[r]);
+    T in_cam[3];
+    ceres::UnitQuaternionRotatePoint(cam_from_hand, point, in_cam);
+    for (int r = 0; r < 2; ++r) {
+      residuals[r] = (scale[0] * in_cam[r] + shift[r] - T(landmark_[r])) * inverse_sigma_;
+    }
+    return true;
+  }
+
+  static ceres::CostFunction* Create(const FitKinematics* kinematics,
+                                     int keypoint,
+                                     const Vec3d& look_at,
+                                     const Point2f& landmark,
+                                     double inverse_sigma) {
+    return new ceres::AutoDiffCostFunction<LandmarkResidual, 2, kNumJointAngles, 4, 1, 2>(
+        new LandmarkResidual(kinematics, keypoint, look_at, landmark, inverse_sigma));
+  }
+
+ private:
+  const FitKinematics* kinematics_;
+  int keypoint_;
+  Vec3d look_at_;
+  std::array<double, 2> landmark_;
+  double inverse_sigma_;
+};
+
+// The joints and the rotation near the candidate's: per joint (angle - start) / sigma, and the
+// rotation from the candidate's camera to the fitted one as 2 sin(angle / 2) * axis / sigma
+// (the angle-axis vector to first order, and smooth at zero).
+class PosePrior {
+ public:
+  PosePrior(const JointVector& joints,
+            const Quaternion& cam_from_hand,
+            double joint_sigma,
+            double rotation_sigma)
+      : joints_(joints),
+        hand_from_cam_{cam_from_hand[0], -cam_from_hand[1], -cam_from_hand[2], -cam_from_hand[3]},
+        inverse_joint_sigma_(1.0 / joint_sigma),
+        inverse_rotation_sigma_(1.0 / rotation_sigma) {}
+
+  template <typename T>
+  bool operator()(const T* joints, const T* cam_from_hand, T* residuals) const {
+    for (int i = 0; i < kNumJointAngles; ++i) {
+      residuals[i] = (joints[i] - T(joints_[i])) * inverse_joint_sigma_;
+    }
+    const T start_inverse[4] = {
+        T(hand_from_cam_[0]), T(hand_from_cam_[1]), T(hand_from_cam_[2]), T(hand_from_cam_[3])};
+    T delta[4];
+    ceres::QuaternionProduct(start_inverse, cam_from_hand, delta);
+    // q and -q are the same rotation: measure from the one nearer the identity.
+    const double sign = delta[0] < T(0.0) ? -2.0 : 2.0;
+    for (int i = 0; i < 3; ++i) {
+      residuals[kNumJointAngles + i] = delta[i + 1] * (sign * inverse_rotation_sigma_);
+    }
+    return true;
+  }
+
+  static ceres::CostFunction* Create(const JointVector& joints,
+                                     const Quaternion& cam_from_hand,
+                                     double joint_sigma,
+                                     double rotation_sigma) {
+    return new ceres::AutoDiffCostFunction<PosePrior, kNumJointAngles + 3, kNumJointAngles, 4>(
+        new PosePrior(joints, cam_from_hand, joint_sigma, rotation_sigma));
+  }
+
+ private:
+  JointVector joints_;
+  Quaternion hand_from_cam_;
+  double inverse_joint_sigma_;
+  double inverse_rotation_sigma_;
+};
+
+Status InvalidArgument(const std::string& message) {
+  return Status(StatusCode::kInvalidArgument, "pose fit: " + message);
+}
+
+bool Finite(const Point2f& p) { return std::isfinite(p.x) && std::isfinite(p.y); }
+
+std::string PointText(const Point2f& p) {
+  std::ostringstream os;
+  os << "(" << p.x << ", " << p.y << ")";
+  return os.str();
+}
+
+// Every landmark and weight finite, weights >= 0; the number of landmarks that count.
+Result<int> CheckEvidence(const PoseFitEvidence& evidence) {
+  if (!evidence.has_landmarks) return 0;
+  int used = 0;
+  for (int k = 0; k < kNumKeypoints; ++k) {
+    const float w = evidence.weights[k];
+    if (!std::isfinite(w) || w < 0) {
+      return InvalidArgument("landmark " + std::to_string(k) + ": weight " + std::to_string(w) +
+                             " is not a finite number >= 0");
+    }
+    if (!Finite(evidence.landmarks_px[k])) {
+      return InvalidArgument("landmark " + std::to_string(k) + " is " +
+                             PointText(evidence.landmarks_px[k]) + ": not finite");
+    }
+    if (w > 0) ++used;
+  }
+  return used;
+}
+
+// The start's camera and the scale and shift that carry its projection onto the candidate's
+// stored keypoints (least squares over the 21 keypoints; the rotation is the label's own).
+struct StartFrame {
+  JointVector joints{};
+  Mat3d cam_from_hand{};
+  double scale = 0;
+  std::array<double, 2> shift{};
+  double alignment_rms_px = 0;
+};
+
+Result<StartFrame> MakeStartFrame(const HandRig& rig, const PoseFitStart& start) {
+  StartFrame frame;
+  frame.joints = start.joints;
+  for (int i = 0; i < kNumJointAngles; ++i) {
+    if (!std::isfinite(frame.joints[i])) {
+      return InvalidArgument("start joint " + std::to_string(i) + " is not finite");
+    }
+  }
+  rig.limits().Clamp(&frame.joints);
+  if (!std::isfinite(start.roll)) return InvalidArgument("start roll is not finite");
+  auto cam_from_hand = CamFromHand(rig, start.view_direction, start.roll);
+  if (!cam_from_hand.ok()) return InvalidArgument("start: " + cam_from_hand.status().message());
+  frame.cam_from_hand = *cam_from_hand;
+
+  const HandKeypoints3d points = rig.Keypoints3d(frame.joints);
+  std::array<std::array<double, 2>, kNumKeypoints> projected;
+  double mean_p[2] = {0, 0}, mean_k[2] = {0, 0};
+  for (int k = 0; k < kNumKeypoints; ++k) {
+    const Point2f& kp = start.keypoints_normalised[k];
+    if (!Finite(kp)) {
+      return InvalidArgument("start keypoint " + std::to_string(k) + " is " + PointText(kp) +
+                             ": not finite");
+    }
+    projected[k] = ProjectXY(frame.cam_from_hand, rig.look_at(), points[k]);
+    mean_p[0] += projected[k][0] / kNumKeypoints;
+    mean_p[1] += projected[k][1] / kNumKeypoints;
+    mean_k[0] += kp.x / static_cast<double>(kNumKeypoints);
+    mean_k[1] += kp.y / static_cast<double>(kNumKeypoints);
+  }
+  double cross = 0, spread = 0;
+  for (int k = 0; k < kNumKeypoints; ++k) {
+    const double pk[2] = {projected[k][0] - mean_p[0], projected[k][1] - mean_p[1]};
+    const double kk[2] = {start.keypoints_normalised[k].x - mean_k[0],
+                          start.keypoints_normalised[k].y - mean_k[1]};
+    cross += pk[0] * kk[0] + pk[1] * kk[1];
+    spread += pk[0] * pk[0] + pk[1] * pk[1];
+  }
+  frame.scale = cross / spread;
+  if (!std::isfinite(frame.scale) || !(frame.scale > 0)) {
+    return InvalidArgument(
+        "the candidate's keypoints do not match the rig's projection of its "
+        "pose (least-squares scale " +
+        std::to_string(frame.scale) + ")");
+  }
+  frame.shift = {mean_k[0] - frame.scale * mean_p[0], mean_k[1] - frame.scale * mean_p[1]};
+  double squared = 0;
+  for (int k = 0; k < kNumKeypoints; ++k) {
+    const double dx =
+        frame.scale * projected[k][0] + frame.shift[0] - start.keypoints_normalised[k].x;
+    const double dy =
+        frame.scale * projected[k][1] + frame.shift[1] - start.keypoints_normalised[k].y;
+    squared += dx * dx + dy * dy;
+  }
+  frame.alignment_rms_px = std::sqrt(squared / kNumKeypoints);
+  return frame;
+}
+
+// The answer's pose-dependent fields from the parameters.
+void FillPose(const HandRig& rig,
+              const JointVector& joints,
+              const Mat3d& cam_from_hand,
+              double scale,
+              const std::array<double, 2>& shift,
+              PoseFit* fit) {
+  fit->joints = joints;
+  fit->cam_from_hand = cam_from_hand;
+  fit->scale = scale;
+  fit->shift = shift;
+  fit->keypoints_in_hand = rig.Keypoints3d(joints);
+  for (int k = 0; k < kNumKeypoints; ++k) {
+    const std::array<double, 2> p =
+        ProjectXY(cam_from_hand, rig.look_at(), fit->keypoints_in_hand[k]);
+    fit->keypoints_normalised[k] = {static_cast<float>(scale * p[0] + shift[0]),
+                                    static_cast<float>(scale * p[1] + shift[1])};
+  }
+  // A rotation from the solver is a rotation, so it always has a view direction and roll.
+  THROW_CHECK(ViewOfCamFromHand(rig, cam_from_hand, &fit->view_direction, &fit->roll).ok());
+}
+
+double CostOf(ceres::Problem* problem,
+              const std::vector<ceres::ResidualBlockId>& blocks,
+              int num_threads) {
+  if (blocks.empty()) return 0;
+  ceres::Problem::EvaluateOptions evaluate;
+  evaluate.residual_blocks = blocks;
+  evaluate.num_threads = num_threads;
+  double cost = 0;
+  if (!problem->Evaluate(evaluate, &cost, nullptr, nullptr, nullptr)) return NAN;
+  return cost;
+}
+
+}  // namespace
+
+bool PoseFitOptions::Check() const {
+  CHECK_OPTION(std::isfinite(landmark_sigma_px) && landmark_sigma_px > 0);
+  CHECK_OPTION(std::isfinite(landmark_loss_scale) && landmark_loss_scale > 0);
+  CHECK_OPTION(std::isfinite(joint_prior_sigma) && joint_prior_sigma > 0);
+  CHECK_OPTION(std::isfinite(rotation_prior_sigma) && rotation_prior_sigma > 0);
+  CHECK_OPTION_GE(max_iterations, 1);
+  CHECK_OPTION_GE(num_threads, 1);
+  return true;
+}
+
+Status ViewOfCamFromHand(const HandRig& rig,
+                         const Mat3d& cam_from_hand,
+                         Vec3d* view_direction,
+                         double* roll) {
+  // The camera's z axis points away from the camera; the view direction points towards it.
+  const Vec3d direction{-cam_from_hand[2][0], -cam_from_hand[2][1], -cam_from_hand[2][2]};
+  auto unrolled = CamFromHand(rig, direction, 0.0);
+  if (!unrolled.ok()) return unrolled.status();
+  // Roll a turns the unrolled right axis into row 0 = cos a right - sin a down and row 1 =
+  // sin a right + cos a down.
+  const Vec3d& right = (*unrolled)[0];
+  double c = 0, s = 0;
+  for (int i = 0; i < 3; ++i) {
+    c += cam_from_hand[0][i] * right[i];
+    s += cam_from_hand[1][i] * right[i];
+  }
+  *view_direction = direction;
+  *roll = std::atan2(s, c);
+  return Status::Ok();
+}
+
+Result<PoseFitStart> PoseFitStartFromLabel(const HandRig& rig,
+                                           const ViewLabel& label,
+                                           const RenderSettings& render,
+                                           double virtual_roll) {
+  auto keypoints = ViewKeypointsNormalised(rig, label, render, virtual_roll);
+  if (!keypoints.ok()) return keypoints.status();
+  PoseFitStart start;
+  for (int i = 0; i < kNumJointAngles; ++i) start.joints[i] = label.joint_angles[i];
+  start.view_direction = {
+      label.view_direction[0], label.view_direction[1], label.view_direction[2]};
+  start.roll = label.camera_roll + virtual_roll;
+  for (int k = 0; k < kNumKeypoints; ++k) {
+    start.keypoints_normalised[k] = {static_cast<float>((*keypoints)[k][0]),
+                                     static_cast<float>((*keypoints)[k][1])};
+  }
+  return start;
+}
+
+Result<PoseFit> FitPose(const HandRig& rig,
+                        const PoseFitStart& start,
+                        const PoseFitEvidence& evidence,
+                        const PoseFitOptions& options) {
+  if (!options.Check()) return InvalidArgument("options fail their checks (see above)");
+  auto used = CheckEvidence(evidence);
+  if (!used.ok()) return used.status();
+  auto frame = MakeStartFrame(rig, start);
+  if (!frame.ok()) return frame.status();
+
+  // The parameter blocks, which the problem refers to by address.
+  JointVector joints = frame->joints;
+  Quaternion cam_from_hand = QuaternionOf(frame->cam_from_hand);
+  double scale = frame->scale;
+  std::array<double, 2> shift = frame->shift;
+  const FitKinematics kinematics(rig);
+
+  ceres::Problem problem;  // owns the cost, loss and manifold objects given to it
+  std::vector<ceres::ResidualBlockId> landmark_blocks;
+  if (*used > 0) {
+    for (int k = 0; k < kNumKeypoints; ++k) {
+      const double w = evidence.weights[k];
+      if (!(w > 0)) continue;
+      // The weight scales the loss, not the residual, so a landmark becomes an outlier at the
+      // same error whatever its confidence.
+      ceres::LossFunction* loss = new ceres::ScaledLoss(
+          new ceres::HuberLoss(options.landmark_loss_scale), w, ceres::TAKE_OWNERSHIP);
+      landmark_blocks.push_back(
+          problem.AddResidualBlock(LandmarkResidual::Create(&kinematics,
+                                                            k,
+                                                            rig.look_at(),
+                                                            evidence.landmarks_px[k],
+                                                            1.0 / options.landmark_sigma_px),
+                                   loss,
+                                   joints.data(),
+                                   cam_from_hand.data(),
+                                   &scale,
+                                   shift.data()));
+    }
+  }
+  const std::vector<ceres::ResidualBlockId> prior_blocks = {problem.AddResidualBlock(
+      PosePrior::Create(
+          frame->joints, cam_from_hand, options.joint_prior_sigma, options.rotation_prior_sigma),
+      nullptr,
+      joints.data(),
+      cam_from_hand.data())};
+  problem.SetManifold(cam_from_hand.data(), new ceres::QuaternionManifold);
+  for (int i = 0; i < kNumJointAngles; ++i) {
+    problem.SetParameterLowerBound(joints.data(), i, rig.limits().min[i]);
+    problem.SetParameterUpperBound(joints.data(), i, rig.limits().max[i]);
+  }
+  if (*used > 0) {
+    // The scale cannot flip the hand or collapse it; a factor 4 either way is far beyond any
+    // candidate the search returns.
+    problem.SetParameterLowerBound(&scale, 0, frame->scale / 4);
+    problem.SetParameterUpperBound(&scale, 0, frame->scale * 4);
+  }
+
+  ceres::Solver::Options solver;
+  solver.linear_solver_type = ceres::DENSE_QR;
+  solver.max_num_iterations = options.max_iterations;
+  solver.num_threads = options.num_threads;
+  solver.logging_type = ceres::SILENT;
+  solver.minimizer_progress_to_stdout = false;
+  ceres::Solver::Summary summary;
+  ceres::Solve(solver, &problem, &summary);
+
+  PoseFit fit;
+  fit.start_alignment_rms_px = frame->alignment_rms_px;
+  fit.initial_cost = summary.initial_cost;
+  fit.final_cost = summary.final_cost;
+  fit.iterations = static_cast<int>(summary.iterations.size());
+  fit.termination = ceres::TerminationTypeToString(summary.termination_type);
+  fit.message = summary.message;
+  fit.converged = summary.termination_type == ceres::CONVERGENCE;
+
+  bool finite = std::isfinite(scale) && std::isfinite(shift[0]) && std::isfinite(shift[1]);
+  for (const double v : joints) finite = finite && std::isfinite(v);
+  for (const double v : cam_from_hand) finite = finite && std::isfinite(v);
+  if (!summary.IsSolutionUsable() || !finite) {
+    // The answer is the start, so a caller may still use it; the flags say what happened.
+    fit.converged = false;
+    fit.termination = "FAILURE";
+    if (!finite) fit.message = "non-finite parameters; " + summary.message;
+    joints = frame->joints;
+    cam_from_hand = QuaternionOf(frame->cam_from_hand);
+    scale = frame->scale;
+    shift = frame->shift;
+  }
+  fit.landmark_cost = CostOf(&problem, landmark_blocks, options.num_threads);
+  fit.prior_cost = CostOf(&problem, prior_blocks, options.num_threads);
+  FillPose(rig, joints, RotationOf(cam_from_hand), scale, shift, &fit);
+  return fit;
+}
+
+}  // namespace handdb

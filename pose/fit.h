@@ -1,0 +1,113 @@
+// The pose fit: from a candidate match (a stored view: joint angles, view direction, roll), a
+// bounded nonlinear least-squares fit of the hand rig to a picture's 2D evidence. The retrieval
+// answers with the nearest stored view, a lookup among the database's shapes, directions and
+// rolls; the fit moves the 20 joint angles (within the hand model's limits), the 3D rotation and
+// the image-plane scale and shift until the rig's projected keypoints meet the picture's hand
+// landmarks, while a prior holds the joints and rotation near the candidate where the evidence
+// is weak (docs/decisions/0012-pose-fit-with-ceres.md).
+//
+// The model of the picture: the orthographic render camera of generator/hand/camera.h followed by
+// the normalisation of the query (docs/conventions.md "Normalised frame"), i.e.
+//   keypoint_normalised = scale * (cam_from_hand * (point_in_hand - look_at)).xy + shift
+// in the query's normalised frame (px), with the roll (camera and virtual) inside cam_from_hand.
+#pragma once
+
+#include <array>
+#include <string>
+
+#include "base/status.h"
+#include "format/roll.h"
+#include "format/view.h"
+#include "generator/hand/camera.h"
+#include "generator/hand/kinematics.h"
+
+namespace handdb {
+
+using NormalisedKeypoints2d = std::array<Point2f, kNumKeypoints>;
+
+struct PoseFitOptions {
+  // A landmark's residual is its error (normalised px) over this; 192 px is the hand's diameter.
+  double landmark_sigma_px = 2.0;
+  // Huber loss on each landmark's whitened error: beyond this many sigmas an error counts
+  // linearly, so one wrong landmark does not drag the whole hand.
+  double landmark_loss_scale = 3.0;
+  // The prior: each joint angle (radians) and the rotation (radians, the angle between the fitted
+  // and the candidate's camera) cost (change / sigma)^2 / 2.
+  double joint_prior_sigma = 0.5;
+  double rotation_prior_sigma = 0.35;
+  // Caps the work of one fit (each iteration is a few dozen microseconds).
+  int max_iterations = 50;
+  int num_threads = 1;
+  bool Check() const;
+};
+
+// A picture's evidence in the query's normalised frame (the frame of its edge points).
+struct PoseFitEvidence {
+  bool has_landmarks = false;
+  NormalisedKeypoints2d landmarks_px{};  // docs/conventions.md keypoint order
+  // Per landmark, >= 0 (e.g. the network's presence times a per-joint confidence); 0 ignores it.
+  std::array<float, kNumKeypoints> weights{};
+
+  PoseFitEvidence() { weights.fill(1.0f); }
+};
+
+// Where a fit starts: a candidate match's pose and its stored keypoints.
+struct PoseFitStart {
+  JointVector joints{};  // clamped into the rig's limits before the fit
+  Vec3d view_direction{};
+  double roll = 0;  // the view's camera roll plus its virtual roll (radians)
+  // The candidate's 21 keypoints in the normalised frame (what ViewKeypointsNormalised gives):
+  // the start's scale and shift are the least-squares fit of the rig's projection onto them.
+  NormalisedKeypoints2d keypoints_normalised{};
+};
+
+// The start of a stored view (v, r): its label's pose with the virtual roll added, and its
+// keypoints recomputed by the rig in the normalised frame.
+Result<PoseFitStart> PoseFitStartFromLabel(const HandRig& rig,
+                                           const ViewLabel& label,
+                                           const RenderSettings& render,
+                                           double virtual_roll);
+
+struct PoseFit {
+  JointVector joints{};
+  Mat3d cam_from_hand{};  // rows: the camera's x, y, z axes in the hand frame
+  Vec3d view_direction{};
+  double roll = 0;   // of cam_from_hand, as CamFromHand(rig, view_direction, roll) defines it
+  double scale = 0;  // normalised px per hand-frame unit
+  std::array<double, 2> shift{};  // normalised px
+  HandKeypoints3d keypoints_in_hand{};
+  NormalisedKeypoints2d keypoints_normalised{};
+
+  // RMS distance (px) of the start's projection from the candidate's own keypoints after the
+  // scale and shift fit: ~0 when the candidate's label and the rig agree.
+  double start_alignment_rms_px = 0;
+  // Ceres' costs (1/2 sum of the loss of the squared residuals): of the whole problem before and
+  // after, and the final cost per residual kind.
+  double initial_cost = 0;
+  double final_cost = 0;
+  double landmark_cost = 0;
+  double prior_cost = 0;
+  int iterations = 0;
+  std::string termination;  // Ceres' termination type: CONVERGENCE, NO_CONVERGENCE, FAILURE, ...
+  std::string message;      // Ceres' own words about why it stopped
+  // The solver met a tolerance. False on hitting max_iterations (the answer is still the best
+  // iterate) and on a failure (the answer is then the start).
+  bool converged = false;
+};
+
+// Fits the rig to the evidence from `start`. kInvalidArgument for options that fail Check(),
+// non-finite or negative evidence, or a start whose pose or keypoints are unusable; a solver that
+// fails or does not converge is reported in the answer, never thrown. Without landmarks (or with
+// every weight 0) nothing pulls away from the start and the answer is the start.
+Result<PoseFit> FitPose(const HandRig& rig,
+                        const PoseFitStart& start,
+                        const PoseFitEvidence& evidence,
+                        const PoseFitOptions& options);
+
+// The view direction and roll of a camera rotation, the inverse of CamFromHand.
+Status ViewOfCamFromHand(const HandRig& rig,
+                         const Mat3d& cam_from_hand,
+                         Vec3d* view_direction,
+                         double* roll);
+
+}  // namespace handdb

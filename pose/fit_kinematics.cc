@@ -1,0 +1,70 @@
+#include "pose/fit_kinematics.h"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <map>
+#include <string>
+
+namespace handdb {
+namespace {
+
+Eigen::Matrix4d RestTransform(const HandBone& bone) {
+  Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) m(r, c) = bone.rest_matrix[r][c];
+    m(r, 3) = bone.head[r];
+  }
+  return m;
+}
+
+}  // namespace
+
+FitKinematics::FitKinematics(const HandRig& rig) {
+  const HandModel& model = rig.model();
+  std::map<std::string, int> index_of;
+  for (size_t i = 0; i < model.bones.size(); ++i) {
+    index_of.emplace(model.bones[i].name, static_cast<int>(i));
+  }
+  std::vector<int> parent(model.bones.size(), -1);
+  bones_.resize(model.bones.size());
+  for (size_t i = 0; i < model.bones.size(); ++i) {
+    const HandBone& bone = model.bones[i];
+    Eigen::Matrix4d local = RestTransform(bone);
+    if (!bone.parent.empty()) {
+      parent[i] = index_of.at(bone.parent);
+      local = RestTransform(model.bones[parent[i]]).inverse() * local;
+    }
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) bones_[i].local_rotation[r][c] = local(r, c);
+      bones_[i].local_translation[r] = local(r, 3);
+    }
+  }
+  // Abductions before flexions, each group in DOF order, as HandRig::PoseBones multiplies them.
+  for (const bool abduction : {true, false}) {
+    for (size_t d = 0; d < model.dofs.size(); ++d) {
+      const HandDof& dof = model.dofs[d];
+      if ((dof.kind == "abduction") != abduction) continue;
+      const double norm = std::sqrt(dof.axis[0] * dof.axis[0] + dof.axis[1] * dof.axis[1] +
+                                    dof.axis[2] * dof.axis[2]);
+      Dof out;
+      out.index = static_cast<int>(d);
+      for (int r = 0; r < 3; ++r) out.axis[r] = dof.axis[r] / norm;
+      bones_[index_of.at(dof.bone)].dofs.push_back(out);
+    }
+  }
+  for (const HandKeypoint& kp : model.keypoints) {
+    Chain& chain = chains_[kp.index];
+    for (int b = index_of.at(kp.bone); b >= 0; b = parent[b]) chain.bones.push_back(b);
+    std::reverse(chain.bones.begin(), chain.bones.end());
+    chain.at_tail = kp.at_tail;
+    chain.length = kp.length;
+  }
+}
+
+HandKeypoints3d FitKinematics::Keypoints3d(const JointVector& joints) const {
+  HandKeypoints3d out{};
+  for (int k = 0; k < kNumKeypoints; ++k) Keypoint(joints.data(), k, out[k].data());
+  return out;
+}
+
+}  // namespace handdb

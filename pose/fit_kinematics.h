@@ -1,0 +1,130 @@
+// The hand rig's forward kinematics templated on the scalar, so a solver can differentiate the 21
+// keypoints with respect to the joint angles automatically (a Ceres Jet is a scalar here). It is
+// the computation of HandRig::Keypoints3d (generator/hand/kinematics.cc) rewritten per keypoint:
+// a keypoint only depends on the bones from its root down to its own bone, so a residual per
+// keypoint poses that chain and nothing else. pose/fit_kinematics_test.cc holds the two to 1e-9.
+#pragma once
+
+#include <array>
+#include <cmath>
+#include <vector>
+
+#include "format/view.h"
+#include "generator/hand/kinematics.h"
+
+namespace handdb {
+
+class FitKinematics {
+ public:
+  // The rig has been checked by HandRig::Create, so this cannot fail.
+  explicit FitKinematics(const HandRig& rig);
+
+  // Keypoint k (docs/conventions.md order) in the hand frame, for `joints` (20, DOF order).
+  template <typename T>
+  void Keypoint(const T* joints, int k, T* point_in_hand) const;
+
+  // All 21 keypoints in double, for tests and for the answer of a fit.
+  HandKeypoints3d Keypoints3d(const JointVector& joints) const;
+
+ private:
+  struct Dof {
+    int index = 0;     // in the joint vector
+    double axis[3]{};  // unit, bone rest frame
+  };
+  struct Bone {
+    // parent_rest^-1 * rest (the rest transform itself for a root), as rotation and translation.
+    double local_rotation[3][3]{};
+    double local_translation[3]{};
+    std::vector<Dof> dofs;  // abductions then flexions, each in DOF order: R = R(abd) R(flex)
+  };
+  struct Chain {
+    std::vector<int> bones;  // root first, ending at the keypoint's bone
+    bool at_tail = false;
+    double length = 0;
+  };
+
+  std::vector<Bone> bones_;
+  std::array<Chain, kNumKeypoints> chains_;
+};
+
+namespace fit_internal {
+
+// out = a * b for 3x3 row-major matrices of possibly different scalars.
+template <typename T, typename A, typename B>
+void MatMul3(const A (&a)[3][3], const B (&b)[3][3], T (&out)[3][3]) {
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) {
+      out[r][c] = a[r][0] * b[0][c] + a[r][1] * b[1][c] + a[r][2] * b[2][c];
+    }
+  }
+}
+
+// Rotation by `angle` about the unit `axis` (Rodrigues), as Eigen::AngleAxis builds it.
+template <typename T>
+void AxisAngleRotation(const double (&axis)[3], const T& angle, T (&r)[3][3]) {
+  using std::cos;
+  using std::sin;
+  const T c = cos(angle);
+  const T s = sin(angle);
+  const T one_c = T(1.0) - c;
+  const double x = axis[0], y = axis[1], z = axis[2];
+  r[0][0] = c + one_c * (x * x);
+  r[0][1] = one_c * (x * y) - s * z;
+  r[0][2] = one_c * (x * z) + s * y;
+  r[1][0] = one_c * (x * y) + s * z;
+  r[1][1] = c + one_c * (y * y);
+  r[1][2] = one_c * (y * z) - s * x;
+  r[2][0] = one_c * (x * z) - s * y;
+  r[2][1] = one_c * (y * z) + s * x;
+  r[2][2] = c + one_c * (z * z);
+}
+
+}  // namespace fit_internal
+
+template <typename T>
+void FitKinematics::Keypoint(const T* joints, int k, T* point_in_hand) const {
+  const Chain& chain = chains_[k];
+  // The posed transform of the chain so far (bone frame -> hand frame).
+  T rotation[3][3];
+  T translation[3];
+  bool first = true;
+  for (const int b : chain.bones) {
+    const Bone& bone = bones_[b];
+    // posed = parent_posed * local * R(dofs)
+    T with_local[3][3];
+    if (first) {
+      for (int r = 0; r < 3; ++r) {
+        for (int c = 0; c < 3; ++c) with_local[r][c] = T(bone.local_rotation[r][c]);
+        translation[r] = T(bone.local_translation[r]);
+      }
+      first = false;
+    } else {
+      T moved[3];
+      for (int r = 0; r < 3; ++r) {
+        moved[r] = translation[r] + rotation[r][0] * bone.local_translation[0] +
+                   rotation[r][1] * bone.local_translation[1] +
+                   rotation[r][2] * bone.local_translation[2];
+      }
+      for (int r = 0; r < 3; ++r) translation[r] = moved[r];
+      fit_internal::MatMul3(rotation, bone.local_rotation, with_local);
+    }
+    for (const Dof& dof : bone.dofs) {
+      T turn[3][3];
+      T turned[3][3];
+      fit_internal::AxisAngleRotation(dof.axis, joints[dof.index], turn);
+      fit_internal::MatMul3(with_local, turn, turned);
+      for (int r = 0; r < 3; ++r) {
+        for (int c = 0; c < 3; ++c) with_local[r][c] = turned[r][c];
+      }
+    }
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) rotation[r][c] = with_local[r][c];
+    }
+  }
+  for (int r = 0; r < 3; ++r) {
+    point_in_hand[r] =
+        chain.at_tail ? translation[r] + rotation[r][1] * chain.length : translation[r];
+  }
+}
+
+}  // namespace handdb
