@@ -59,7 +59,7 @@ TEST(ReadImage, PngsAsImreadReadsThem) {
     ExpectAsImread(e.path(), kFlags);
     ++n;
   }
-  EXPECT_EQ(n, 21);
+  EXPECT_EQ(n, 22);
 }
 
 // The development photos are phone JPEGs with EXIF orientations: applied except in
