@@ -15,7 +15,7 @@ namespace handdb {
 namespace {
 
 // Named by the file the caller asked for, not its temp file: "out.json: write failed: No space
-// left on device" (issue 14 item 8: one line naming the file and the problem).
+// left on device", one line naming the file and the problem.
 Status Errno(const std::string& what, const std::filesystem::path& path) {
   return Status(StatusCode::kIoError, path.string() + ": " + what + ": " + std::strerror(errno));
 }

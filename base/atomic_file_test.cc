@@ -57,8 +57,8 @@ TEST(AtomicFile, MissingFileIsNotFound) {
   EXPECT_NE(r.status().message().find("/nonexistent/handdb/file"), std::string::npos);
 }
 
-// Issue 14 item 7: a FIFO blocked open() forever and /dev/zero grew memory without end; both are
-// refused by stat() before anything opens them. Item 8: the other one-line reasons.
+// A FIFO or /dev/zero given as input is refused at once by stat(), before anything opens it: open()
+// of a FIFO blocks forever and reading /dev/zero grows memory without end. Also the other reasons.
 TEST(AtomicFile, ReadRefusesWhatIsNotARegularFile) {
   const auto dir = testing::TempDir("read_special");
   const auto fifo = dir / "fifo.json";

@@ -1,5 +1,5 @@
-// An exclusive advisory lock on a directory for one writer at a time (issue 14 item 10: two
-// `generate` runs into one --out both rendered everything, unlocked). flock(2) on the directory
+// An exclusive advisory lock on a directory for one writer at a time (without it, two `generate`
+// runs into one --out would both render everything). flock(2) on the directory
 // itself, so no lock file appears in it; the kernel drops the lock when the process dies, so a
 // killed run never leaves a stale lock behind.
 #pragma once

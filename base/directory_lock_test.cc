@@ -14,7 +14,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// Issue 14 item 10: a second writer is refused at once, with one line naming the directory.
+// A second writer is refused at once, with one line naming the directory.
 TEST(DirectoryLock, SecondWriterIsRefusedUntilTheFirstLetsGo) {
   const fs::path dir = testing::TempDir("dirlock");
   {

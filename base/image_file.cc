@@ -136,7 +136,7 @@ Status CheckImageFileComplete(const std::filesystem::path& path,
   const std::string tail = ReadAt(fd, tail_at, kTailBytes);
   const std::optional<ImageSize> size = SizeFromHeader(fd);
   ::close(fd);
-  // Issue 14 item 3: refused from the header, before a decoder allocates width x height.
+  // Refused from the header, before a decoder allocates width x height.
   const uint64_t limit =
       size && std::string_view(size->format) == "JPEG" ? max_jpeg_pixels : max_pixels;
   if (size && size->width * size->height > limit) {

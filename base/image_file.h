@@ -13,7 +13,7 @@ namespace handdb {
 
 // Pixels (width x height) an image may have before it is decoded: 64 Mpx (8192 x 8192; a 50 Mpx
 // phone photo fits). A decoded image costs ~15 bytes per pixel through the query pipeline, so a
-// 20000 x 20000 PNG of 5 MB peaked at 6.1 GB (issue 14 item 3); at the limit it is ~1 GB.
+// 20000 x 20000 PNG of 5 MB would peak at 6.1 GB; at the limit it is ~1 GB.
 constexpr uint64_t kMaxImagePixels = uint64_t{1} << 26;
 // A JPEG can be decoded at 1/2, 1/4 or 1/8 of its size without ever holding the full image, so
 // callers that do that may accept JPEGs up to 64x kMaxImagePixels (a 65536 x 65536 picture).

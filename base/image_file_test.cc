@@ -22,7 +22,7 @@ Status Check(const std::string& name, const std::string& bytes) {
   return CheckImageFileComplete(dir / name);
 }
 
-// Issue 14 item 6: a truncated JPEG or PNG decoded with only a library warning.
+// A truncated JPEG or PNG is refused (decoders accept it with only a library warning).
 TEST(ImageFile, CompleteFilesPass) {
   const std::string body(10000, 'x');
   EXPECT_TRUE(Check("a.png", kPngSignature + body + kPngEnd).ok());
@@ -71,8 +71,8 @@ std::string Jpeg(uint32_t w, uint32_t h) {
          std::string(12, '\1') + kJpegEnd;
 }
 
-// Issue 14 item 3: a 20000 x 20000 PNG (5 MB) peaked at 6.1 GB in `query`; a header claiming
-// 100000 x 100000 got OpenCV's message without the file. Refused from the header, one line.
+// A 20000 x 20000 PNG (5 MB) would peak at 6.1 GB in `query`; a header claiming 100000 x 100000
+// would get OpenCV's message without the file. Refused from the header, one line.
 TEST(ImageFile, ImagesAboveThePixelLimitAreRefusedFromTheHeader) {
   const auto dir = testing::TempDir("image_size");
   ASSERT_TRUE(WriteFileAtomic(dir / "p.png", Png(640, 480)).ok());

@@ -639,7 +639,7 @@ Status CheckJsonText(std::string_view text, const std::string& what) {
 Result<nlohmann::json> ParseJsonText(std::string_view text, const std::string& what) {
   if (Status s = CheckJsonText(text, what); !s.ok()) return s;
   // nlohmann keeps the last of two equal keys without a word, so a config with two "seed"s ran
-  // with one of them (issue 14 item 12): the parser's callback watches each object's keys.
+  // with one of them unnoticed: the parser's callback watches each object's keys.
   std::vector<std::set<std::string>> keys;  // one set per object being parsed
   std::string duplicate;
   const nlohmann::json::parser_callback_t check_keys =

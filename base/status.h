@@ -1,8 +1,8 @@
-// Two error tiers (see STYLE.md):
+// Two error tiers (docs/conventions.md "Errors and CLI"):
 //  - THROW_CHECK*: a broken precondition in our own code -> throws std::logic_error with file:line.
 //  - Status / Result<T>: bad bytes or bad files from outside -> a specific code and a message
-//  naming
-//    the file, the offset and the raw values seen. Never abort on outside input.
+//    naming the file, the offset and the raw values seen.
+//    Never abort on outside input.
 #pragma once
 
 #include <optional>

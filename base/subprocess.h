@@ -21,8 +21,8 @@ struct SpawnOptions {
   std::filesystem::path log;
   bool own_process_group = true;
   // The child is SIGKILLed when this process dies, however it dies (PR_SET_PDEATHSIG; it survives
-  // the child's own exec). Without it, a `kill -9` of generate left Blender workers, each in its
-  // own process group, rendering on (issue 14 item 9). Started with fork + exec instead of
+  // the child's own exec). Without it, a `kill -9` of generate leaves Blender workers, each in its
+  // own process group, rendering on. Started with fork + exec instead of
   // posix_spawn, which cannot set it; only async-signal-safe calls run between the two.
   bool die_with_parent = false;
 };

@@ -151,8 +151,8 @@ pid_t SpawnFromAKilledParent(bool die_with_parent) {
   return sleeper;
 }
 
-// Issue 14 item 9: after kill -9 of generate, its Blender workers (each in its own process group)
-// kept rendering. With die_with_parent they die with it.
+// After kill -9 of generate, its Blender workers (each in its own process group) would keep
+// rendering. With die_with_parent they die with it.
 TEST(Subprocess, DieWithParentKillsTheChildWhenTheParentIsKilled) {
   const pid_t tied = SpawnFromAKilledParent(true);
   ASSERT_GT(tied, 0);

@@ -1,4 +1,4 @@
-// Shard format benchmark (issue 2): writes and reads a shard of synthetic views and prints rates
+// Shard format benchmark: writes and reads a shard of synthetic views and prints rates
 // against the raw rate of read()ing the same bytes in the same run (warm page cache).
 //
 //   format_bench [--views 100000] [--points 600] [--reps 3] [--dir /tmp]

@@ -1,4 +1,4 @@
-// Indexed search benchmark (issue 12, docs/index.md): on a database with an index (`handdb
+// Indexed search benchmark (docs/index.md): on a database with an index (`handdb
 // index`), per query set (real photos, a test set's photo-like and clean label renders, perturbed
 // views; bench/query_sets.h) and for each --candidates count, the latency (median, p90, max; wall
 // and CPU of the whole process) of indexed search with `handdb query`'s defaults (top 10, --hand
@@ -32,7 +32,8 @@ using bench::Percentile;
 using bench::QuerySet;
 
 struct Args {
-  std::string db, photos = "/work/shared/photos/asl-digits", testset, cache;
+  std::string db, testset, cache;
+  std::string photos = bench::DefaultPhotoDir();
   int set_queries = 20;
   int perturbed = 10;
   int threads = 2;

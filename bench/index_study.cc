@@ -1,4 +1,4 @@
-// Index study (issue 12): how well do cheap per-(view, roll) scores rank the exact top-10, per
+// Index study (docs/index.md): how well do cheap per-(view, roll) scores rank the exact top-10, per
 // query set? For every query (both hands) the exact top-10 (Searcher, cached in --cache), then for
 // every (view, roll, hand) of the database several scores, and the rank each exact top-10 pair
 // gets under each score: "candidates needed" for recall@10 = 1 is the largest of those ranks + 1.
@@ -41,7 +41,8 @@ constexpr int kSide = CoarseGrid::kSide;
 constexpr int kCells = CoarseGrid::kCells;
 
 struct Args {
-  std::string db, photos = "/work/shared/photos/asl-digits", testset, cache;
+  std::string db, testset, cache;
+  std::string photos = bench::DefaultPhotoDir();
   int set_queries = 20;
   int perturbed = 10;
   int threads = 2;

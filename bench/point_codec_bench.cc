@@ -1,4 +1,4 @@
-// Point compression benchmark (issue 12 item 3): how small a real database's points get with the
+// Point compression benchmark: how small a real database's points get with the
 // lattice chain code (format/point_codec.h), and how fast the refine stage could decode them.
 //
 //   point_codec_bench --db DB_DIR [--reps 5] [--max-views N]

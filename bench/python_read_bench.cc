@@ -1,4 +1,4 @@
-// The C++ side of bench/python_bench.py (issue 13): the same reads and searches the Python
+// The C++ side of bench/python_bench.py: the same reads and searches the Python
 // benchmark makes, timed in C++, so the script can print Python / C++ ratios from one run.
 //
 //   python_read_bench scan DB [--reps 20]
@@ -24,8 +24,8 @@
 #include "format/manifest.h"
 #include "format/roll.h"
 #include "format/shard_reader.h"
-#include "query/database.h"
 #include "photo/image_edges.h"
+#include "query/database.h"
 #include "query/searcher.h"
 
 namespace handdb {

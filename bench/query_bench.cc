@@ -1,4 +1,4 @@
-// Query benchmark (issue 5): on a paper-size database (26 shapes x 86 directions = 2,236
+// Query benchmark: on a paper-size database (26 shapes x 86 directions = 2,236
 // canonical views x 48 rolls = 107,328 virtual views, ~600 points per view) measures, in one run,
 // the median latency of a top-10 query with N threads for
 //   (a) the pruned exact search (handdb's Searcher),
@@ -9,7 +9,7 @@
 //   (d) the floor: reading every point byte of the database once from memory,
 // with ratios, and the peak memory (getrusage) against the database's size on disk.
 //
-// With --db (a real database), it then measures what users send (issue 15 item 1) in four query
+// With --db (a real database), it then measures what users send in four query
 // sets, searched round-robin query by query so load changes hit them alike: real photos (--photos,
 // searched recursively), the photo-like and the clean label renders of a test set (--testset,
 // made by `handdb testset`), and the perturbed views above.
@@ -82,7 +82,7 @@ struct Args {
   float dt_cell = 1.0f;
   bool keep = false;
   // Query sets (with --db only). An empty path skips the set with a printed note.
-  std::string photos = "/work/shared/photos/asl-digits";
+  std::string photos = bench::DefaultPhotoDir();
   std::string testset;
   int set_queries = 20;  // per set, spread evenly over the set (0: all)
 };
@@ -282,7 +282,7 @@ bool SameResults(const std::vector<Match>& a, const std::vector<Match>& b) {
   return true;
 }
 
-// ---- Query sets (issue 15 item 1): what users send ----
+// ---- Query sets: what users send ----
 
 namespace fs = std::filesystem;
 
@@ -533,7 +533,7 @@ int RunQuerySets(const Args& args,
   double load[3] = {0, 0, 0};
   if (getloadavg(load, 3) < 1) load[0] = -1;
   std::printf(
-      "\nquery sets (issue 15): `handdb query`'s search (top-%d, --hand either, kd-tree %s, DT "
+      "\nquery sets: `handdb query`'s search (top-%d, --hand either, kd-tree %s, DT "
       "cell %.2f px) and --hand right, %d threads; latency = wall time of the search (not the "
       "input step; the sets are searched round-robin, query by query); CPU = process CPU time of "
       "the search, all threads; refined = SearchStats::refined over the (view, roll) pairs "
@@ -789,7 +789,7 @@ int Run(const Args& args) {
   (void)peak_before;
   int sets_rc = 0;
   if (args.db.empty()) {
-    std::printf("\nquery sets (issue 15): skipped, they need a real database (--db DIR)\n");
+    std::printf("\nquery sets: skipped, they need a real database (--db DIR)\n");
   } else {
     QuerySet perturbed;
     perturbed.key = "perturbed";

@@ -1,4 +1,4 @@
-// The query sets of the benchmarks (issue 15 item 1, "measure what users send"; issue 12): real
+// The query sets of the benchmarks ("measure what users send"; docs/query.md, docs/index.md): real
 // photos, a test set's photo-like and clean label renders, and perturbed database views, each
 // turned into query points by `handdb query`'s own input path. Shared by bench/query_bench.cc,
 // bench/index_bench.cc and bench/index_study.cc; header-only (benchmarks are single files).
@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "base/repo_root.h"
 #include "edges/view_conversion.h"
 #include "evaluate/evaluate.h"
 #include "evaluate/photos.h"
@@ -21,6 +22,12 @@
 #include "query/searcher.h"
 
 namespace handdb::bench {
+
+// --photos' default: the development photos beside the source tree (bench/run.sh's default too);
+// HANDDB_SOURCE_DIR moves it with the tree (base/repo_root.h).
+inline std::string DefaultPhotoDir() {
+  return (RepoRoot() / ".." / "shared" / "photos" / "asl-digits").lexically_normal().string();
+}
 
 inline double NowSeconds() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();

@@ -1,4 +1,4 @@
-// Synthetic databases for issue 12's scaling measurements: N canonical views made from a real
+// Synthetic databases for the index's scaling measurements: N canonical views made from a real
 // database's views without Blender, so that 10M and 50M virtual views can be built in minutes.
 //
 //   synth_db --from DB --out DIR --views N [--per-shard 4096] [--seed 1] [--threads 2] [--coded]

@@ -59,7 +59,7 @@ S["horns"] = shape(TH_FIST, ab(STRAIGHT, 10), CURL, CURL, ab(STRAIGHT, 20))
 S["gun"] = shape((-15, 10, 0, 0), STRAIGHT, STRAIGHT, CURL, CURL)
 # Fingers halfway to a fist, thumb open. (Its thumb was first bent towards the fingertips,
 # (15, 20, 20, 20): that made it a second O, its thumb tip nearer the index tip than asl-0's,
-# and the nearest wrong shape of most O photos; docs/hand_model.md, session 22.)
+# and the nearest wrong shape of most O photos; docs/hand_model.md.)
 S["half-open"] = shape(STRAIGHT, HALF, HALF, HALF, HALF)
 
 # Shapes in which the thumb tip touches a finger tip: search the thumb's 4 DOFs (and the
@@ -90,7 +90,7 @@ S["asl-8"] = touch(shape(STRAIGHT, ab(STRAIGHT, 8), STRAIGHT, ab(STRAIGHT, 8), a
 S["asl-9"] = touch(shape(STRAIGHT, STRAIGHT, ab(STRAIGHT, -3), ab(STRAIGHT, 8), ab(STRAIGHT, 15)), "index", (50, 0, 60, 30))
 S["pinch"] = touch(shape(STRAIGHT, STRAIGHT, HALF, HALF, HALF), "index", (45, 0, 45, 20))
 
-# The ASL digits as people make them (issue 16 item 4, docs/hand_model.md "Fitted to real
+# The ASL digits as people make them (docs/hand_model.md "Fitted to real
 # photographs"): the descriptions above were the starting points; each digit's 20 angles were then
 # fitted by coordinate descent (10 deg steps, two sweeps, then 5 deg, one sweep) to minimise the mean
 # exact chamfer distance between the rendered shape (best of 86 directions x 48 rolls per photo) and

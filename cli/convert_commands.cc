@@ -1,4 +1,4 @@
-// `handdb convert`, `handdb generate` and `handdb show` (issue 4).
+// `handdb convert`, `handdb generate` and `handdb show` (docs/conversion.md).
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <atomic>
@@ -123,7 +123,7 @@ int RunConvert(int argc, char** argv) {
   if (int rc = ParseArgs(app, argc, argv); rc >= 0) return rc;
   options.edges = edges.Get();
   options.progress = !quiet;
-  // One writer per database directory (issue 14 item 10).
+  // One writer per database directory (base/directory_lock.h).
   std::error_code ec;
   fs::create_directories(db_dir, ec);
   if (ec) {
@@ -385,8 +385,8 @@ int RunShow(int argc, char** argv) {
                               "/" + std::to_string(db->num_rolls()) +
                               (shape.empty() ? "" : "  " + shape) + "  " +
                               std::to_string(db->points(v).size()) + " pts";
-  // Issue 14 item 11: the anti-aliased caption in the pixels made `query` take the image for a
-  // photo (and with --input edges the caption became edges), so the tool's own output did not
+  // An anti-aliased caption in the pixels would make `query` take the image for a photo (and
+  // with --input edges the caption would become edges), so the tool's own output would not
   // find its own view. By default the pixels are the edges only (one grey level on black, what
   // query's auto-detection calls an edge image) and the caption is PNG text.
   if (draw_caption) {

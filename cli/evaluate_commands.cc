@@ -1,4 +1,4 @@
-// `handdb testset` and `handdb evaluate` (issue 6, docs/evaluation.md): render held-out test views
+// `handdb testset` and `handdb evaluate` (docs/evaluation.md): render held-out test views
 // with ground truth, and score a database's retrieval on them (the paper's Table 1,
 // success@(d, n), keypoint error, queries per second).
 #include <signal.h>

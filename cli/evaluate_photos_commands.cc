@@ -1,4 +1,4 @@
-// `handdb evaluate DB --photos DIR` (issue 16): shape accuracy of the search on real photographs
+// `handdb evaluate DB --photos DIR`: shape accuracy of the search on real photographs
 // sorted into one folder per expected shape, and 2D keypoint error on annotated ones
 // (evaluate/photos.h, docs/evaluation.md). Locally in one process, or with --slurm as a job array
 // of `handdb unit evaluate-photos` tasks and a `handdb unit evaluate-photos-merge` job

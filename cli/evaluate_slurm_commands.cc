@@ -1,6 +1,6 @@
 // `handdb evaluate --slurm` and the two worker commands its jobs run, `handdb unit evaluate` (one
 // array task: one slice of the test views -> WORK/parts/part-0000T.json) and
-// `handdb unit evaluate-merge` (the final job: parts -> the report of a local run). Issue 7,
+// `handdb unit evaluate-merge` (the final job: parts -> the report of a local run).
 // docs/cluster.md.
 #include <algorithm>
 #include <chrono>

@@ -1,4 +1,5 @@
-// `handdb info` and `handdb validate` (issue 2): look inside shards and database directories.
+// `handdb info` and `handdb validate` (docs/format.md): look inside shards and database
+// directories.
 #include <CLI/CLI.hpp>
 #include <cinttypes>
 #include <cstdio>

@@ -1,5 +1,5 @@
-// `handdb plan` and `handdb render` (issue 3): a generation config becomes a render plan, and the
-// plan's units are rendered by parallel Blender workers.
+// `handdb plan` and `handdb render` (docs/generator.md): a generation config becomes a render plan,
+// and the plan's units are rendered by parallel Blender workers.
 #include <CLI/CLI.hpp>
 #include <cmath>
 #include <cstdio>

@@ -1,5 +1,5 @@
 // `handdb unit render|convert|finalize|status` (the per-unit work a Slurm array task does) and the
-// `--slurm` path of `handdb generate` (issue 7, docs/cluster.md).
+// `--slurm` path of `handdb generate` (docs/cluster.md).
 #include "cli/slurm_commands.h"
 
 #include <cstdio>

@@ -1,5 +1,5 @@
-// The Slurm path of `handdb generate` (issue 7) and the per-unit worker commands its array tasks
-// run (`handdb unit render|convert|finalize|status`, in cli/slurm_commands.cc).
+// The Slurm path of `handdb generate` (docs/cluster.md) and the per-unit worker commands its array
+// tasks run (`handdb unit render|convert|finalize|status`, in cli/slurm_commands.cc).
 #pragma once
 
 #include <filesystem>

@@ -1,4 +1,4 @@
-# The installable package (issue 13): `cmake --install build --prefix P` puts
+# The installable package: `cmake --install build --prefix P` puts
 #   P/bin/handdb                                the tool
 #   P/lib/libhanddb_<module>.a                  one archive per module
 #   P/include/handdb/<module>/...h              each module's door headers only (below)

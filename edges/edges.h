@@ -1,4 +1,4 @@
-// Edge pixels of a rendered link-label image (DESIGN.md section 5, docs/conversion.md).
+// Edge pixels of a rendered link-label image (docs/conversion.md "Edge rule").
 //
 // A border between two 4-adjacent pixels with different labels is an edge, except a border
 // between a joint pair (parent and child link, e.g. palm and index link 1) whose depths are
@@ -47,8 +47,8 @@ class JointPairs {
   int count_ = 0;
 };
 
-// The 15 parent/child pairs of DESIGN.md section 2: palm 1; thumb 2-4; index 5-7; middle 8-10;
-// ring 11-13; pinky 14-16; each finger chain (1, f), (f, f+1), (f+1, f+2).
+// The 15 parent/child pairs of the hand model (docs/conversion.md "Edge rule"): palm 1; thumb 2-4;
+// index 5-7; middle 8-10; ring 11-13; pinky 14-16; each finger chain (1, f), (f, f+1), (f+1, f+2).
 JointPairs DefaultJointPairs();
 
 // The defaults (on, 10 mm) were chosen by evaluation on the paper database and test set: occlusion

@@ -1,4 +1,4 @@
-// The evaluation's metrics (DESIGN.md section 8), as pure functions over pose labels so they can
+// The evaluation's metrics (docs/evaluation.md), as pure functions over pose labels so they can
 // be tested on hand-made cases: when a database match counts as correct, the rank of the best
 // correct match and the paper's Table 1 bins, success@(d, n), and root-relative 3D keypoint error.
 //

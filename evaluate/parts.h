@@ -1,4 +1,4 @@
-// Evaluation split into parts (issue 7, `handdb evaluate --slurm`, docs/cluster.md): each Slurm
+// Evaluation split into parts (`handdb evaluate --slurm`, docs/cluster.md): each Slurm
 // array task scores a deterministic slice of the selected test views (EvaluateViews) and writes the
 // per-view outcomes to WORK/parts/part-0000i.json (schemas/evaluation_part.schema.json); the final
 // job merges the parts and aggregates them with FinishReport, the same function a local

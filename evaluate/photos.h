@@ -1,4 +1,5 @@
-// `handdb evaluate DB --photos DIR` (issue 16): shape accuracy of the search on real photographs.
+// `handdb evaluate DB --photos DIR` (docs/evaluation.md): shape accuracy of the search on real
+// photographs.
 //
 // DIR follows the common image-folder convention: one sub-folder per expected shape, named like a
 // shape of the database (DIR/asl-3/IMG_0001.JPG). Every photo goes through the real photo path

@@ -1,5 +1,5 @@
-// Lossless compression of a view's coarse field (format/coarse_field.h; issue 12 item 3,
-// docs/format.md "Point compression").
+// Lossless compression of a view's coarse field (format/coarse_field.h;
+// docs/format.md section 10, "Compressed points and coarse fields").
 //
 // A field is 43 x 43 bytes of distances that change by at most 16 units (one 8 px cell) from a
 // cell to the next, and are close to planar away from the points. Each cell is predicted from

@@ -27,8 +27,8 @@ constexpr char kManifestFileName[] = "manifest.json";
 constexpr char kManifestFormat[] = "handdb-manifest";
 constexpr int kManifestVersion = 1;
 // Largest roll count R a manifest may give (config.schema.json's "rolls" maximum: 0.1 degree
-// steps). Readers size per-roll work by R: a manifest with rolls = 10^8 made `query` grow to 4 GB
-// and die with std::bad_alloc (issue 14 item 3); above this ReadManifest refuses it.
+// steps). Readers size per-roll work by R: a manifest with rolls = 10^8 would make `query` grow to
+// 4 GB and die with std::bad_alloc; above this ReadManifest refuses it.
 constexpr uint32_t kMaxRolls = 3600;
 
 // A unit's shard is "shard-00007.hdb"; while a convert rewrites a database whose manifest lists
@@ -129,8 +129,8 @@ Result<Manifest> ManifestFromJson(const nlohmann::json& doc, const std::string& 
 
 // Reads DB_DIR/manifest.json (schema-checked). kNotFound when absent.
 Result<Manifest> ReadManifest(const std::filesystem::path& db_dir);
-// What the manifest says against what each listed shard's metadata section records (issue 14
-// item 4: a manifest saying 24 rolls over shards made with 48 made `query` search 24). Compared,
+// What the manifest says against what each listed shard's metadata section records (a manifest
+// saying 24 rolls over shards made with 48 would make `query` search 24). Compared,
 // shard metadata key -> manifest field: `rolls` -> `rolls`, `tool.version` -> `tool_version`,
 // `unit` -> the shard's file name, `generation`, `hand_model`, `labels`, `shapes` ->
 // `metadata.<same>`, `conversion.edges` / `conversion.normalisation` -> `metadata.conversion.*`,

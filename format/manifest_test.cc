@@ -50,7 +50,7 @@ TEST(Manifest, RoundTrip) {
   fs::remove_all(dir);
 }
 
-// Issue 14 item 10: what a reader returns comes from one manifest. A read during which the
+// What a reader returns comes from one manifest. A read during which the
 // manifest is replaced (as a convert's swap does, by rename) runs again; a read during which it
 // stays runs once; a manifest replaced on every attempt gives up after kManifestReadAttempts.
 TEST(Manifest, ReadWithStableManifestRunsAgainAfterASwap) {
@@ -125,8 +125,8 @@ TEST(Manifest, RefusesToWriteInconsistentTotals) {
   fs::remove_all(dir);
 }
 
-// Issue 14 item 3: rolls = 10^8 with a matching virtual-view count passed validate and `query`
-// then grew to 4 GB. The roll count is bounded (kMaxRolls) when a manifest is read or written.
+// rolls = 10^8 with a matching virtual-view count would pass validate and make `query` grow to
+// 4 GB. The roll count is bounded (kMaxRolls) when a manifest is read or written.
 TEST(Manifest, RefusesMoreRollsThanTheLimit) {
   auto dir = TempDir("rolls");
   Manifest m = Sample();

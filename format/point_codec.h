@@ -1,5 +1,5 @@
-// Lossless compression of a view's edge points on the source pixel lattice (issue 12 item 3;
-// docs/format.md "Point compression").
+// Lossless compression of a view's edge points on the source pixel lattice (format v1.2;
+// docs/format.md section 10, "Compressed points and coarse fields").
 //
 // A converted view's points are its edge pixels (integer columns and rows of the rendered label
 // image) pushed through the normalisation (edges/normalise.h): PointQ = round((pixel centre -

@@ -87,7 +87,7 @@ constexpr float kMaxAbsKeypointZ = 2048.0f;
 constexpr double kMaxAbsAngle = 2 * 3.14159265358979323846;
 
 // The range checks of one view label that need only its record, shared by the reader's open
-// checks and the validator (issue 14 item 5: a NaN joint angle was served as `nan`): every f32
+// checks and the validator (so a NaN joint angle is never served as `nan`): every f32
 // finite ("label-finite"), ids not 0xffffffff ("label-id"), each joint angle inside
 // [limits->min, limits->max] +- tolerance, or +-2 pi without limits ("label-joints"),
 // |camera_roll| <= 2 pi ("label-roll"), keypoints in range ("label-keypoints"). `at` is the

@@ -142,8 +142,8 @@ Result<ShardReader> ShardReader::Init(std::unique_ptr<Impl> impl) {
       !s.ok()) {
     return s;
   }
-  // Issue 14 item 5: the labels this reader returns are finite and in range (a NaN joint angle
-  // with recomputed checksums was served as `nan`).
+  // The labels this reader returns are finite and in range (a NaN joint angle with recomputed
+  // checksums would otherwise be served as `nan`).
   CheckViewLabels(impl->bytes, layout, &problems);
   if (!problems.empty()) return problems.FirstStatus();
   const RawSection& views = layout.sections[layout.views];

@@ -404,8 +404,8 @@ TEST(ShardReader, RejectsViewPointsOutsidePointsSection) {
   EXPECT_NE(bad.status().message().find("view 4"), std::string::npos);
 }
 
-// Issue 14 item 5: a shard whose checksums were recomputed over a NaN joint angle or an infinite
-// keypoint opened and was queried, printing `nan` / JSON null. The open checks range-check every
+// A shard whose checksums were recomputed over a NaN joint angle or an infinite keypoint would
+// open and be queried, printing `nan` / JSON null. The open checks range-check every
 // label, with one line naming the shard, the offset, the view and the field.
 TEST(ShardReader, RefusesLabelsOutOfRange) {
   const auto good = SampleShard("labels");

@@ -462,7 +462,7 @@ ValidationReport ValidateDatabaseOnce(const fs::path& db_dir, const ValidateOpti
                     options.show_progress && !listed.empty(),
                     manifest.ok() ? "views" : "shards");
   RenderIdMap seen;
-  // Issue 14 item 4: every manifest field against what the shards record.
+  // Every manifest field against what the shards record.
   std::optional<ManifestShardCheck> cross_check;
   if (manifest.ok()) {
     cross_check.emplace(*manifest);

@@ -172,8 +172,8 @@ TEST(Validator, BadMetadataJson) {
   fs::remove_all(dir);
 }
 
-// Issue 14 item 2: metadata nested 100,000 deep overflowed the stack of every reader (info dumps
-// it); the reader refuses it at open and validate reports it as one metadata problem.
+// Metadata nested 100,000 deep would overflow the stack of every reader (info dumps it); the
+// reader refuses it at open and validate reports it as one metadata problem.
 TEST(Validator, DeeplyNestedMetadataIsRefused) {
   ShardWriterOptions options;
   options.metadata_json = "{\"a\": " + std::string(100000, '[') + std::string(100000, ']') + "}";
@@ -345,8 +345,8 @@ ValidationReport ValidateWithManifest(const std::string& name, F edit) {
   return report;
 }
 
-// Issue 14 item 4: manifest rolls 24 over shards made with 48 passed validate, and query then
-// searched 24 rolls. Every manifest field is compared with what the shards record.
+// Manifest rolls 24 over shards made with 48 must not pass validate (query would search 24
+// rolls). Every manifest field is compared with what the shards record.
 TEST(Validator, ManifestFieldsAreCrossCheckedAgainstTheShards) {
   EXPECT_TRUE(ValidateWithManifest("xc_good", [](const fs::path&, Manifest*) {}).ok());
 

@@ -84,7 +84,7 @@ struct ViewLabel {
   std::array<float, 2> source_centre_px{};  // normalisation centre in the rendered image
 };
 
-// Roll is virtual (DESIGN.md section 3): the view (v, r) is canonical view v rotated in the image
+// Roll is virtual (docs/conversion.md): the view (v, r) is canonical view v rotated in the image
 // plane by angle a = 2*pi*r/R:  x' = cos(a) x - sin(a) y,  y' = sin(a) x + cos(a) y
 // (x right, y down: positive a turns +x towards +y, i.e. clockwise on screen). Its pose label
 // is the canonical one with camera_roll += a and keypoints (x, y) rotated the same way.

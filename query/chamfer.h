@@ -1,4 +1,4 @@
-// The chamfer distance of DESIGN.md section 7, exactly, on the fixed-point grid (1/16 px).
+// The chamfer distance of docs/query.md "The distance", exactly, on the fixed-point grid (1/16 px).
 //
 // For a query X (px, normalised frame) and the virtual view (v, r) = canonical points Y_v rolled
 // by a = 2*pi*r/R, both terms are computed in the canonical frame of the view: the query is

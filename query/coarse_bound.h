@@ -1,5 +1,5 @@
 // The search's cheap exact lower bound of the query -> view term A, before any kd-tree
-// (issue 15; the proof in docs/query.md).
+// (the proof in docs/query.md "The coarse B bound").
 //
 // The first bound (query/distance_transform.h) is on the view -> query term B. For the rolled
 // query Q_r with n_r(c) points in coarse cell c (format/coarse_field.h; points off the grid

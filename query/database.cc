@@ -120,7 +120,7 @@ Result<Database> Database::OpenOnce(const std::filesystem::path& dir,
                         std::to_string(entry.bytes));
     }
     // The one manifest field that sizes the search: a manifest saying 24 rolls over shards made
-    // with 48 made `query` search 24 silently (issue 14 item 4; validate checks every field).
+    // with 48 would make `query` search 24 silently (validate checks every field).
     const nlohmann::json meta =
         nlohmann::json::parse(reader->metadata_json(), nullptr, /*allow_exceptions=*/false);
     if (meta.is_object() && meta.contains("rolls") && meta["rolls"].is_number_unsigned() &&

@@ -1,6 +1,6 @@
 // A read-only database of canonical views for search: point sets and pose labels, either from a
 // database directory (manifest + shards, memory-mapped read-only via ShardReader) or from memory
-// (tests, benchmarks). Virtual views are (canonical view, roll) with R rolls (DESIGN.md section 3).
+// (tests, benchmarks). Virtual views are (canonical view, roll) with R rolls (format/view.h).
 // All accessors are const and safe from many threads.
 #pragma once
 

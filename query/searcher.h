@@ -1,4 +1,4 @@
-// Exact top-k chamfer search over a database of virtual views (DESIGN.md section 7, docs/query.md).
+// Exact top-k chamfer search over a database of virtual views (docs/query.md).
 //
 // Distance: D_c = A + B of query/chamfer.h, exact on the 1/16 px grid. Pruned search over the
 // (view, slot) pairs, a slot being a (hand, roll): the query (mirrored for a left hand) rolled

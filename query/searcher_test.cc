@@ -165,9 +165,9 @@ TEST(Searcher, ViewQueriedWithItsOwnEdgesIsRankOneAtDistanceZero) {
   }
 }
 
-// Issue 14 item 12: `--top 100000`, `--bruteforce` and big photo queries ran for minutes without
-// a progress line. A search that has run long enough (progress_since in the past) reports every
-// phase on stderr with its final count; a fast one prints nothing; the result is the same.
+// `--top 100000`, `--bruteforce` and big photo queries can run for minutes; they must not do so
+// without a progress line. A search that has run long enough (progress_since in the past) reports
+// every phase on stderr with its final count; a fast one prints nothing; the result is the same.
 TEST(Searcher, LongSearchesShowProgressOnStderrFastOnesNothing) {
   const Searcher searcher(TestDatabase());
   // Turned, shifted, thinned and cluttered, so that the refine step has pairs left to visit.

@@ -22,7 +22,7 @@ step "C++ tests"
 (cd build && ctest --output-on-failure -j "$jobs" --timeout 900)
 
 step "Python tests (Debian python3)"
-# tests/python/ includes the handdb module's tests (issue 13), against the module and the binary
+# tests/python/ includes the handdb module's tests, against the module and the binary
 # of this build; a missing module fails them instead of skipping.
 PYTHONPATH="$here/build/python" HANDDB_BINARY_DIR="$here/build" HANDDB_REQUIRE_PYTHON_MODULE=1 \
   /usr/bin/python3 -m pytest -q blender_scripts tests/python

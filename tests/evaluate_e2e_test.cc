@@ -1,4 +1,4 @@
-// Evaluation end to end with the real Blender (issue 6; CTest label `blender`): a tiny database
+// Evaluation end to end with the real Blender (CTest label `blender`): a tiny database
 // (`handdb generate`: 2 basic shapes x 12 directions x 8 rolls, 128 px), a tiny rendered test set
 // whose first two views are database views (shape, direction, roll of the grid) and whose others
 // are held-out samples, then `handdb evaluate` with clean and photo input. Checks: Table 1 adds up

@@ -1,4 +1,4 @@
-// `handdb evaluate DB --photos DIR` end to end (issue 16): a synthetic database (ShardWriter +
+// `handdb evaluate DB --photos DIR` end to end: a synthetic database (ShardWriter +
 // WriteManifest, shapes "alpha" and "beta", as tests/query_cli_test.cc makes it) and photo-like
 // pictures of some of its views sorted into shape folders, one of them filed under the wrong shape
 // and one without a hand; the text, --json (schema-checked) and --out outputs, and the errors;

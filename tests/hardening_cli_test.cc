@@ -1,14 +1,12 @@
-// The `handdb` binary against hostile inputs and outputs (issue 14): stdout on a full disk
-// (/dev/full) is exit 1 with one line, never exit 0 over an empty file (item 1); 100,000 nested
-// brackets in a config or manifest are refused with one line instead of a SIGSEGV (item 2); a FIFO
-// or /dev/zero as a manifest or shard is refused at once instead of blocking or growing memory
-// forever (item 7); a truncated PNG / JPEG, a directory or a symlink loop as the query image is one
-// line (items 6 and 8); validate cross-checks the manifest against the shards (item 4); labels
-// out of range are refused at open (item 5); rolls, image pixels and plan sizes are bounded
-// before allocating (item 3); `show`'s image finds its own view (item 11); a second writer is
-// refused and a bad config leaves no directory (items 10, 12); bad --skin / --canny / --dt-cell
-// values are one line (item 8). Every command runs under
-// `timeout`, so a regression fails instead of hanging.
+// The `handdb` binary against hostile inputs and outputs: stdout on a full disk (/dev/full) is
+// exit 1 with one line, never exit 0 over an empty file; 100,000 nested brackets in a config or
+// manifest are refused with one line instead of a SIGSEGV; a FIFO or /dev/zero as a manifest or
+// shard is refused at once instead of blocking or growing memory forever; a truncated PNG / JPEG,
+// a directory or a symlink loop as the query image is one line; validate cross-checks the
+// manifest against the shards; labels out of range are refused at open; rolls, image pixels and
+// plan sizes are bounded before allocating; `show`'s image finds its own view; a second writer is
+// refused and a bad config leaves no directory; bad --skin / --canny / --dt-cell values are one
+// line. Every command runs under `timeout`, so a regression fails instead of hanging.
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 #include <sys/sysmacros.h>

@@ -1,4 +1,4 @@
-// `handdb index` end to end (issue 12): the index file listed in the manifest, deterministic
+// `handdb index` end to end: the index file listed in the manifest, deterministic
 // builds, `handdb validate` checking it, `handdb query` searching indexed by default (and exact
 // on request) with the JSON saying which ran, and one-line errors for a damaged index.
 #include <gtest/gtest.h>

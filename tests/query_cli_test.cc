@@ -1,4 +1,4 @@
-// `handdb query` end to end (issue 5): a database written with ShardWriter + WriteManifest, an
+// `handdb query` end to end: a database written with ShardWriter + WriteManifest, an
 // edge image and a photo-like image of one of its views, the table / --json / --sheet outputs,
 // brute force == pruned through the CLI, and the one-line errors with exit codes.
 #include <gtest/gtest.h>

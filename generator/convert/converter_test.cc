@@ -357,7 +357,7 @@ TEST_F(ConvertDir, DifferentOptionsRewriteShards) {
   }
 }
 
-// What a reader opening DB while a convert rewrites it gets (issue 14 item 10): the manifest and
+// What a reader opening DB while a convert rewrites it gets: the manifest and
 // the shards of one database, each listed shard present with exactly its listed bytes, and the
 // edge options the shards were made with equal to the manifest's. "" when so, else the problem.
 std::string ReadConsistentSnapshot(const fs::path& db) {
@@ -382,9 +382,9 @@ std::string ReadConsistentSnapshot(const fs::path& db) {
   });
 }
 
-// Issue 14 item 10: a convert that rewrote a database removed its manifest first, so a query
-// meanwhile failed with "no such file"; rewriting shards under their listed names instead would
-// have shown an old manifest over new shards. Now every rewrite (all three shards change with the
+// A convert that removed a database's manifest before rewriting it would fail a query meanwhile
+// with "no such file"; rewriting shards under their listed names instead would show an old
+// manifest over new shards. Every rewrite (all three shards change with the
 // edge options) is invisible to a reader polling the database: it always finds one complete
 // database, old or new, and validate passes throughout.
 TEST_F(ConvertDir, ReadersSeeTheOldOrTheNewDatabaseDuringARewrite) {

@@ -310,8 +310,8 @@ std::string RenderFileStem(uint32_t render_id) {
 Result<json> MakePlan(const json& config, const fs::path& config_path, PlanSummary* summary) {
   HANDDB_RETURN_IF_ERROR(ValidateJson(config, "config.schema.json", config_path.string()));
   const std::string cfg = config_path.string();
-  // 2^64 and above parse as a float that the schema's "integer" accepts; the plan then recorded a
-  // float seed (issue 14 item 12).
+  // 2^64 and above parse as a float that the schema's "integer" accepts; the plan would then
+  // record a float seed.
   const json& seed_json = config.at("seed");
   if (!seed_json.is_number_integer() ||
       (!seed_json.is_number_unsigned() && seed_json.get<int64_t>() < 0)) {

@@ -25,10 +25,10 @@
 namespace handdb {
 
 constexpr int kPlanFormatVersion = 1;
-// Renders (shapes x directions) a plan may hold (issue 14 item 3: pairs with k = 1000 grew `plan`
-// past 4 GB, a pca count of 10^9 was std::bad_alloc). A plan takes ~0.9 KB of JSON per render, so
-// 250,000 renders (~225 MB) still fit under the 256 MiB ReadJsonFile allows a plan; checked from
-// the config's counts before any shape is sampled. pca-large has 22,016.
+// Renders (shapes x directions) a plan may hold (without a bound, pairs with k = 1000 would grow
+// `plan` past 4 GB and a pca count of 10^9 would be std::bad_alloc). A plan takes ~0.9 KB of JSON
+// per render, so 250,000 renders (~225 MB) still fit under the 256 MiB ReadJsonFile allows a plan;
+// checked from the config's counts before any shape is sampled. pca-large has 22,016.
 constexpr uint64_t kMaxPlanRenders = 250'000;
 // A path as written in a plan / hand-model / shapes file -> a path to open.
 std::filesystem::path ResolvePlanPath(const std::string& path_in_plan);

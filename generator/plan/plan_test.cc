@@ -142,7 +142,7 @@ TEST(Plan, RejectsBadConfigs) {
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.status().code(), StatusCode::kInvalidArgument);
 
-  // Issue 14 item 12: seed 2^64 was accepted and written into the plan as a float.
+  // Seed 2^64 is refused, not written into the plan as a float.
   c = SmallConfig();
   c["seed"] = json::parse("18446744073709551616");
   r = MakePlan(c, kConfigPath);
@@ -155,8 +155,8 @@ TEST(Plan, RejectsBadConfigs) {
   EXPECT_TRUE(MakePlan(c, kConfigPath).ok());
 }
 
-// Issue 14 item 3: {"method": "pairs", "k": 1000} made `plan` pass 4 GB in 22 s and a pca count of
-// 10^9 was std::bad_alloc. Both are refused from the counts, before sampling, in well under 1 s.
+// {"method": "pairs", "k": 1000} would make `plan` pass 4 GB in 22 s and a pca count of 10^9
+// would be std::bad_alloc. Both are refused from the counts, before sampling, in well under 1 s.
 TEST(Plan, RefusesMoreRendersThanAPlanMayHoldBeforeSampling) {
   const auto start = std::chrono::steady_clock::now();
   json c = SmallConfig();

@@ -86,7 +86,7 @@ Result<Subprocess> BlenderLauncher::Spawn(const std::vector<std::string>& script
   SpawnOptions options;
   options.log = log;
   options.own_process_group = true;
-  // A killed handdb leaves no Blender rendering on (issue 14 item 9).
+  // A killed handdb leaves no Blender rendering on.
   options.die_with_parent = true;
   return Subprocess::Spawn(Argv(script_args), options);
 }

@@ -88,7 +88,7 @@ std::string LastErrorLine(const fs::path& log) {
 // sidecar) of the paper plan is ~1 MB.
 constexpr uint64_t kLowDiskBytes = uint64_t{16} << 20;
 
-// Why a worker failed when the disk is full (issue 14 item 8): Blender then leaves a half-written
+// Why a worker failed when the disk is full: Blender then leaves a half-written
 // EXR and render.py reports "unreadable EXR header", the real cause only in the log. The log's
 // "No space left on device" line, or else the filesystem's free space when nearly none is left;
 // "" when neither.
@@ -322,7 +322,7 @@ class RenderRun {
     return running_.end();
   }
 
-  // Issue 14 item 9: a hung Blender (no render finished for stall_timeout_seconds) is killed,
+  // A hung Blender (no render finished for stall_timeout_seconds) is killed,
   // group and all, and its unit retried, instead of holding the run forever.
   void KillStalledWorkers() {
     if (options_.stall_timeout_seconds <= 0) return;

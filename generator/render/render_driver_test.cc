@@ -195,9 +195,9 @@ TEST_F(RenderDriverTest, GivesUpWithTheUnitAndItsLog) {
   EXPECT_NE(r.status().message().find("no DONE marker"), std::string::npos) << r.status().message();
 }
 
-// Issue 14 item 8: a full disk was reported as the worker's "unreadable EXR header", the real
-// cause only in the log. The message now says the disk is full, from the log's line or from the
-// filesystem's free space.
+// A full disk shows in the worker's result as "unreadable EXR header", the real cause only in
+// the log. The message says the disk is full, from the log's line or from the filesystem's free
+// space.
 TEST_F(RenderDriverTest, AFullDiskIsNamedAsTheCause) {
   ::setenv("FAKE_BLENDER_MODE", "enospc_unit1", 1);
   options_.jobs = 1;
@@ -251,7 +251,7 @@ TEST_F(RenderDriverTest, CancelKillsWorkersQuickly) {
   EXPECT_LT(seconds, 10.0);
 }
 
-// Issue 14 item 9: a hung Blender held the run forever. A worker whose unit finishes no render
+// A hung Blender must not hold the run forever. A worker whose unit finishes no render
 // for stall_timeout_seconds is killed and its unit retried; the last failure names the cause.
 TEST_F(RenderDriverTest, HungWorkerIsKilledAfterTheStallTimeout) {
   ::setenv("FAKE_BLENDER_MODE", "hang", 1);

@@ -1,8 +1,8 @@
-// Hand-shape samplers (DESIGN §3): `basic` (named shapes), `pairs` (points on the segments between
-// pairs of basic shapes), `pca` (Sobol or Gaussian coefficients in a PCA basis of a shape set) and
-// `grid` (levels per PCA component). All are deterministic functions of their inputs and seed;
-// every sample keeps its joint vector and its sampler coordinates, and samples outside the joint
-// limits are clamped (and counted).
+// Hand-shape samplers (docs/generator.md): `basic` (named shapes), `pairs` (points on the segments
+// between pairs of basic shapes), `pca` (Sobol or Gaussian coefficients in a PCA basis of a shape
+// set) and `grid` (levels per PCA component). All are deterministic functions of their inputs and
+// seed; every sample keeps its joint vector and its sampler coordinates, and samples outside the
+// joint limits are clamped (and counted).
 #pragma once
 
 #include <Eigen/Core>

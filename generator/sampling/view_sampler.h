@@ -1,5 +1,5 @@
-// Near-uniform view directions on the unit sphere (DESIGN §3) and their covering radius: the
-// largest angle from any direction on the sphere to its nearest sample, i.e. the worst-case
+// Near-uniform view directions on the unit sphere (docs/generator.md) and their covering radius:
+// the largest angle from any direction on the sphere to its nearest sample, i.e. the worst-case
 // viewpoint error of a database built on the set before roll and shape are considered.
 #pragma once
 

@@ -1,4 +1,4 @@
-// Held-out test sets for the evaluation (DESIGN.md section 8, docs/evaluation.md).
+// Held-out test sets for the evaluation (docs/evaluation.md).
 //
 // `handdb testset CONFIG.json --out DIR` plans test views off the database grid — hand shapes
 // sampled in the PCA shape space (Gaussian coefficients) plus a share of the named basic shapes,

@@ -1,4 +1,4 @@
-// The index's embedding of views and rolled queries (issue 12, docs/index.md): an approximate
+// The index's embedding of views and rolled queries (docs/index.md): an approximate
 // chamfer distance written as one inner product.
 //
 // On a square grid of `side` x `side` cells of `cell_units` (8 px by default) centred on the

@@ -1,5 +1,5 @@
 // An index over a database's canonical views for search that does not touch every (view, roll)
-// pair (issue 12, docs/index.md): filter, then refine exactly.
+// pair (docs/index.md): filter, then refine exactly.
 //
 // Filter. Each view's embedding e(Y_v) (query/index/embedding.h: an approximate chamfer distance
 // as an inner product <u(Q_r), e(Y_v)>) is projected to `dims` dimensions by a PCA in the space

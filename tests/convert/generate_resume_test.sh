@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Integration test (issue 4): `handdb generate` on a tiny real Blender plan, and kill -9 at many
+# Integration test: `handdb generate` on a tiny real Blender plan, and kill -9 at many
 # moments (during render, convert, manifest writing), each time checking that whatever manifest
 # exists lists only complete, valid shards; the final rerun must give shards and a manifest
 # byte-identical to an uninterrupted run, which `handdb validate` accepts. Also `handdb show`.

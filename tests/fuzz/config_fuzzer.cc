@@ -1,6 +1,6 @@
 // libFuzzer target for the config readers (scripts/fuzz.sh): the bytes as a generation config and
 // as a test-set config, through ReadJsonFile (regular file, size and depth bounds, parse, schema).
-// MakePlan is left out: a schema-valid config can ask for a huge plan (issue 14 item 3).
+// MakePlan is left out: a schema-valid config can ask for a huge plan (kMaxPlanRenders).
 #include <cstdint>
 
 #include "base/json_schema.h"

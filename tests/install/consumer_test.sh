@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# install/consumer_test (issue 13): the installed package works from outside this repository.
+# install/consumer_test: the installed package works from outside this repository.
 #   consumer_test.sh BUILD_DIR THIS_DIR WRITE_TEST_DATABASE HANDDB_PYTHON PYTHON3 PYTHON_SITE
 # 1. `cmake --install BUILD_DIR --prefix TMP/prefix`; the layout: binary, archives, door headers
 #    only, schemas, config files, Python package.

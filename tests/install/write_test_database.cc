@@ -1,7 +1,7 @@
 // write_test_database DIR [--shapes N] [--directions N] [--rolls R] [--shards N] [--points N]
 //                     [--coded 1]
 //
-// A small database without Blender for the install and Python tests (issue 13): hand-like
+// A small database without Blender for the install and Python tests: hand-like
 // synthetic views (query/search_testing.h: a palm outline and five fingers per shape, foreshortened
 // and turned per direction), self-consistent labels, shape names in the manifest, split over
 // --shards shards (coded shards, format v1.2, with --coded 1). Deterministic: the same arguments

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Real-photo regression test (issue 16 item 7): a database of the ten ASL digit shapes (86
+# Real-photo regression test: a database of the ten ASL digit shapes (86
 # directions x 48 rolls, real Blender renders), then `handdb evaluate --photos` on the 30 real
 # photos of tests/data/photos/asl-digits. Asserts a floor well below the measured accuracy, so it
 # catches a broken photo path or search, not noise.
@@ -8,11 +8,11 @@ set -euo pipefail
 HANDDB="$(realpath "${1:?usage: real_photos_test.sh HANDDB_EXE SOURCE_DIR}")"
 SRC="$(realpath "${2:?usage: real_photos_test.sh HANDDB_EXE SOURCE_DIR}")"
 command -v "${HANDDB_BLENDER:-blender}" >/dev/null || { echo "SKIP: blender not installed"; exit 77; }
-# Floors (top-1 and top-5 shape accuracy, %): measured 53.3% / 70.0% (16 / 21 of 30) in session 6
-# with the digits as described, 93.3% / 93.3% (28 of 30) in session 9 with the digits fitted to
-# the development photos (these 30 among them, so in-sample), top-k counted over the nearest
-# views. Since session 19 `evaluate --photos` ranks shapes (top-5 = the 5 nearest of this
-# database's 10 shapes; chance 10% / 50%): measured 93.3% / 100.0%. The floors sit well below, so
+# Floors (top-1 and top-5 shape accuracy, %): with the digits fitted to the development photos
+# (these 30 among them, so in-sample) and `evaluate --photos` ranking shapes (top-5 = the 5
+# nearest of this database's 10 shapes; chance 10% / 50%), the test measures 93.3% / 100.0%; the
+# digits as described, before fitting, gave 53.3% / 70.0% (16 / 21 of 30) counted over the
+# nearest views. The floors sit well below the fitted figures, so
 # a broken photo path, search or shape library fails the test and a changed view or two does not.
 # The photos are right hands and the floors were measured so: --hand right, not the default
 # either.

@@ -1,4 +1,4 @@
-"""Fixtures of the Python module tests (issue 13): the module, a small Blender-free database
+"""Fixtures of the Python module tests: the module, a small Blender-free database
 written by tests/install/write_test_database and an edge image of one of its views. Helpers are
 in handdb_testing.py.
 """

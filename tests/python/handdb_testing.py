@@ -1,4 +1,4 @@
-"""Helpers of the Python module tests (issue 13): the build tree, the `handdb` binary and the
+"""Helpers of the Python module tests: the build tree, the `handdb` binary and the
 module import. A module of its own name, not conftest: blender_scripts/tests has a conftest too,
 and `from conftest import ...` would get whichever pytest loaded first.
 

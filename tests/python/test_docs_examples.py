@@ -1,4 +1,4 @@
-"""The Python examples of README.md and docs/python.md run as written (issue 13), in a directory
+"""The Python examples of README.md and docs/python.md run as written, in a directory
 holding the test database as `db` and an edge image of its view 5 at roll 3 as `hand.png`.
 
 Each file's ```python blocks run in order in one namespace, so a later block may use what an

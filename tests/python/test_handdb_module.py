@@ -1,4 +1,4 @@
-"""The handdb Python module against the handdb binary (issue 13): what Python reads and finds is
+"""The handdb Python module against the handdb binary: what Python reads and finds is
 what `handdb info --json`, `handdb show`, `handdb query --json` and `handdb validate --json`
 report; errors carry the tool's one-line message; several processes read one database at once.
 """

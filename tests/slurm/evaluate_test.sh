@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Integration test (issue 7): `handdb evaluate --slurm` against a real single-node Slurm that this
+# Integration test: `handdb evaluate --slurm` against a real single-node Slurm that this
 # test starts (scripts/slurm_local.sh) and stops on every exit path, like generate_test.sh.
 #   1. a tiny database and test set evaluated on Slurm (3 array tasks + the merge job) give the
 #      report of a local `handdb evaluate`: the same text (but the speed line), the same --json

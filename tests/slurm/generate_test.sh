@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Integration test (issue 7): `handdb generate --slurm` against a real single-node Slurm that this
+# Integration test: `handdb generate --slurm` against a real single-node Slurm that this
 # test starts (scripts/slurm_local.sh: munged, slurmctld, slurmd on loopback, all state in a temp
 # dir) and stops on every exit path.
 #   1. a tiny plan built on Slurm is byte-identical to the same config built locally;
