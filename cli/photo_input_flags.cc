@@ -58,7 +58,7 @@ void PhotoInputFlags::Add(CLI::App& app, Which which) {
   app.add_flag_callback(
       "--edges-outside",
       [this] { options.picture.edges.interior_edges_only = false; },
-      "photo: also keep Canny edges up to 4 px outside the hand region (before issue 16)");
+      "photo: also keep Canny edges up to 4 px outside the hand region");
   app.add_option("--work-diameter",
                  options.picture.edges.work_diameter_px,
                  "photo: resample the hand to this diameter in px before the mask clean-up and "

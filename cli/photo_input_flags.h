@@ -1,6 +1,6 @@
 // The flags that say how a picture becomes a query and which hand it shows, bound once and shared
 // by `handdb query` and `handdb evaluate --photos` (and the Slurm tasks of the latter), so each
-// flag has one spelling, one default and one check (STYLE.md: bind a flag to the field).
+// flag has one spelling, one default and one check (bind a flag to the field).
 #pragma once
 
 #include <CLI/CLI.hpp>

@@ -1,4 +1,4 @@
-// `handdb query DB IMAGE` (issue 5): the top-k database views for a picture of a hand.
+// `handdb query DB IMAGE`: the top-k database views for a picture of a hand.
 #include <CLI/CLI.hpp>
 #include <chrono>
 #include <cmath>
@@ -191,8 +191,8 @@ bool QueryFlags::Finish() {
     return false;
   }
   if (!picture.Finish("query")) return false;
-  // One line naming the flag for what the flags can get wrong (issue 14 item 8: the option
-  // checks below print source paths); they stay as the backstop for the rest.
+  // One line naming the flag for what the flags can get wrong (the option checks below print
+  // source paths); they stay as the backstop for the rest.
   bool dt_cell_ok = false;
   for (int k = 0; k <= 4; ++k) dt_cell_ok |= search.dt_cell_px == 1.0f / static_cast<float>(1 << k);
   if (!dt_cell_ok) {
@@ -363,8 +363,9 @@ int RunQuery(int argc, char** argv) {
   SearcherOptions open;
   open.num_threads = flags.picture.options.search.num_threads;
   open.verify = flags.verify;
-  open.use_index =
-      flags.picture.options.search.brute_force ? IndexUse::kExact : ParseIndexUse(flags.search_mode).value();
+  open.use_index = flags.picture.options.search.brute_force
+                       ? IndexUse::kExact
+                       : ParseIndexUse(flags.search_mode).value();
   open.few_queries = true;
   auto searcher = Searcher::Open(db_dir, open);
   if (!searcher.ok()) return Fail("query", searcher.status());

@@ -72,13 +72,13 @@ struct ImageEdgeOptions {
   // so its diameter is this many px before the mask clean-up (3x3 opening, 5x5 closing) and
   // Canny; kernel sizes, blur, thresholds and `dilate_px` / `contour_clearance_px` are those of a
   // hand `kReferenceHandDiameterPx` across and scale with the working size. 0: work at the
-  // picture's own resolution (the behaviour before issue 16 item 3). Measured on the
+  // picture's own resolution. Measured on the
   // development photos (docs/evaluation.md): at their own size, 96/128/160 px and native are
   // within noise of each other (48.5-53% top-1); at 4x their size native falls to 35.5% and
   // 128 px keeps 49%. Smaller working sizes lose thin creases (a 1 px line at 150 px is gone at
   // 96), so the default is 128.
   double work_diameter_px = 128;
-  // The forearm (issue 16 item 2): a region that leaves the picture (or runs far) past the palm
+  // The forearm: a region that leaves the picture (or runs far) past the palm
   // is cut off along the line across it `wrist_cut_radii` palm radii from the palm centre (the
   // largest inscribed circle), at right angles to the way the arm leaves. The database's hand
   // ends ~1.8 radii from its palm centre (its short wrist stub); 2.6 cuts only arms clearly
@@ -89,7 +89,7 @@ struct ImageEdgeOptions {
   bool cut_forearm = true;
   double wrist_cut_radii = 2.6;
   // Canny edges inside the hand region only (the database's views have no background edges).
-  // false: also those within `dilate_px` outside it (the behaviour before issue 16 item 3).
+  // false: also those within `dilate_px` outside it.
   bool interior_edges_only = true;
   int dilate_px = 4;
   // Canny edges this close to the silhouette (px, in the input picture) are dropped: Canny

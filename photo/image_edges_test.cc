@@ -95,7 +95,7 @@ TEST_F(ImageEdgesTest, LabelQueryUsesTheGivenEdgeOptions) {
   EXPECT_FALSE(bad.Check());
 }
 
-// keypoints_image_px (issue 16 item 5): a database of label-path synthetic hands whose labels carry
+// keypoints_image_px: a database of label-path synthetic hands whose labels carry
 // their exact keypoints in the normalised frame; photos of one of them, as is (a right hand) and
 // mirrored (a left hand), must give that hand's true keypoints in the photo's pixels within ~1 px
 // after undoing the roll, the mirror and the normalisation.

@@ -1,9 +1,9 @@
-// The second stage of a photo query (issue 16): the exact chamfer search's nearest views,
+// The second stage of a photo query: the exact chamfer search's nearest views,
 // re-ranked by how well each view's 21 keypoints fit the hand landmarks a pretrained network
 // found in the photo (photo/hand_landmarks.h). D_c alone confuses basic shapes whose
 // outlines and inner edges agree (asl-0 with pinch and half-open, asl-5 with flat, asl-9 with B:
 // docs/results.md); the landmarks say where the fingertips and knuckles are. Measured on the
-// development photos and the rendered test sets in docs/results.md (session 21).
+// development photos and the rendered test sets (docs/decisions/0004-landmark-reranking.md).
 //
 // Score of a view v: D_c(v) / D_best + weight * E(v), where D_best is the smallest D_c of the
 // pool and E(v) the mean distance between v's keypoints (rolled, mirrored for a left-hand match,
@@ -31,7 +31,7 @@ struct LandmarkRankOptions {
   // directions to fit the landmarks with. A search without a per-shape limit re-ranks its own
   // top max(top_k, pool_views) as they are. On the development photos, pools of 40 x 4 and
   // 208 x 8 rank alike (165 and 166 of 200 top-1) and 2 per shape loses 4-5 photos; the pool
-  // search costs 1.27x the top-10 one (docs/results.md, session 21).
+  // search costs 1.27x the top-10 one (docs/decisions/0004-landmark-reranking.md).
   int pool_views = 40;
   int pool_per_shape = 4;
   bool Check() const;

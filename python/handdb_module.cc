@@ -1,4 +1,4 @@
-// handdb._handdb: the Python module (issue 13), a thin layer over the libraries' public API
+// handdb._handdb: the Python module, a thin layer over the libraries' public API
 // (query/database.h, query/searcher.h, photo/image_edges.h, format/manifest.h,
 // format/validator.h), so Python reads and searches exactly what the `handdb` binary does.
 // docs/python.md describes the API; python/handdb/__init__.py re-exports it.
