@@ -11,8 +11,8 @@
 #include "evaluate/evaluate.h"
 #include "evaluate/metrics.h"
 #include "format/roll.h"
-#include "query/database.h"
 #include "photo/image_edges.h"
+#include "query/database.h"
 #include "query/search_testing.h"
 
 namespace handdb::testing {
