@@ -78,7 +78,9 @@ TEST(MappedFileDeathTest, TruncatedWhileMappedIsOneLineAndExitOne) {
       // The threadsafe style runs the test again in the child, with its own temp dir.
       "^handdb: /.*/handdb_test_mapped_[0-9]+/truncated: changed or truncated while being "
       "read\n$");
-  // A SIGBUS outside every mapping still kills as before.
+  // A SIGBUS outside every mapping goes on to the handler installed before ours: the default
+  // one kills the process; AddressSanitizer's (a sanitizer build) reports and aborts instead.
+#ifndef __SANITIZE_ADDRESS__
   EXPECT_EXIT(
       {
         auto file = MappedFile::Open(path);
@@ -86,6 +88,7 @@ TEST(MappedFileDeathTest, TruncatedWhileMappedIsOneLineAndExitOne) {
       },
       ::testing::KilledBySignal(SIGBUS),
       "");
+#endif
   std::filesystem::remove(path);
 }
 
