@@ -226,7 +226,7 @@ TEST(Evaluate, FloorAndWristToMiddleMcpUnits) {
                    Summarise(wm).mean);
   const std::string text = ReportToText(*report);
   EXPECT_NE(text.find("floor (best view and roll of the database)"), std::string::npos);
-  EXPECT_NE(text.find("wrist-middle MCP"), std::string::npos);
+  EXPECT_NE(text.find("wrist-to-middle-MCP lengths"), std::string::npos);
   EXPECT_EQ(text.find("fitted pose"), std::string::npos);
 
   // The fitted slot: filled by a caller that fits poses, reported in both units.
