@@ -4,7 +4,9 @@
 //  - the paper's Table 1: how many test views have their highest-ranking correct match at rank 1,
 //    2-4, 5-16, 17-64, 65-256, 257-1024, > 1024;
 //  - success@(d, n) for n = 1, 10, 100 over a grid of joint distances d;
-//  - root-relative 3D keypoint error (hand sizes) of the top-1 match and of the best of the top 10;
+//  - root-relative 3D keypoint error of the top-1 match, of the best of the top 10 and of the best
+//    (view, roll) of the whole database (the floor), in hand sizes and in wrist-to-middle-knuckle
+//    lengths; a slot for the error of a fitted pose;
 //  - queries per second.
 // Ranks are exact: each query is first searched for the top `first_k` (the timed search); when a
 // criterion has no correct match among them, the query is searched again for the top `max_rank`,
@@ -96,6 +98,9 @@ struct EvaluationOptions {
   // ("" when none) is part of a Slurm run's fingerprint.
   LandmarkRankOptions landmark_rank;
   std::string landmark_model;
+  // The floor of the keypoint error: per test view, the best (view, roll) of the whole database
+  // (KeypointFloorIndex; on the paper database about a millisecond per test view).
+  bool keypoint_floor = true;
   bool Check() const;
 };
 
@@ -128,8 +133,17 @@ struct ViewOutcome {
   std::string error;           // query could not be made (empty: fine)
   std::vector<int64_t> ranks;  // per criterion; kNoCorrectMatch = none within max_rank;
                                // -1 = criterion does not apply to this view
+  // Root-relative 3D keypoint errors in hand sizes (KeypointError); NaN when not measured.
   double top1_keypoint_error = std::numeric_limits<double>::quiet_NaN();
   double best10_keypoint_error = std::numeric_limits<double>::quiet_NaN();
+  // The best (view, roll) of the whole database (KeypointFloorIndex), whether or not the query
+  // could be made; NaN when the evaluation ran without the floor.
+  double floor_keypoint_error = std::numeric_limits<double>::quiet_NaN();
+  // The error of a pose fitted to the test view (pose/fit.h), for the caller that fits; NaN: none.
+  double fitted_keypoint_error = std::numeric_limits<double>::quiet_NaN();
+  // The truth's wrist-to-middle-knuckle length (WristToMiddleMcp), px of the normalised frame: an
+  // error e in hand sizes is e * kNormalisedDiameter / this in these lengths.
+  double wrist_to_middle_mcp_px = std::numeric_limits<double>::quiet_NaN();
   std::optional<MatchBrief> top1;
   double input_seconds = 0;   // image -> query points
   double search_seconds = 0;  // the timed top-first_k search
@@ -164,8 +178,15 @@ struct EvaluationReport {
   // from every database shape); they are part of the last bin of the table.
   std::vector<int64_t> views_without_correct;
   std::vector<SuccessCell> success;
+  // Keypoint errors in hand sizes and, `_wm`, in wrist-to-middle-knuckle lengths of the truth.
   Summary top1_keypoint_error;
   Summary best10_keypoint_error;
+  Summary floor_keypoint_error;   // count 0: run without the floor
+  Summary fitted_keypoint_error;  // count 0: no fitted poses
+  Summary top1_keypoint_error_wm;
+  Summary best10_keypoint_error_wm;
+  Summary floor_keypoint_error_wm;
+  Summary fitted_keypoint_error_wm;
   // Chance baseline, main criterion, per success_n: the mean over test views of P(a correct match
   // in the top n of a uniformly random ordering of the database).
   std::vector<double> chance_success;

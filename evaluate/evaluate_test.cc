@@ -135,6 +135,124 @@ TEST(Evaluate, UnreachableTruthAndFailedInputsLandInTheLastBin) {
   EXPECT_TRUE(ValidateJson(ReportToJson(*report), "evaluation.schema.json", "report").ok());
 }
 
+// The exhaustive minimum over every (view, roll), as a search's match labels give them.
+double BruteForceFloor(const Database& db, const Keypoints& truth) {
+  double best = std::numeric_limits<double>::infinity();
+  for (view_id_t v = 0; v < db.num_views(); ++v) {
+    for (roll_id_t r = 0; r < db.num_rolls(); ++r) {
+      const ViewLabel rolled = RollLabel(db.label(v), RollAngle(r, db.num_rolls()));
+      best = std::min(best, KeypointError(truth, rolled.keypoints));
+    }
+  }
+  return best;
+}
+
+TEST(KeypointFloor, EqualsTheExhaustiveMinimum) {
+  auto db = testing::EvalDatabase();
+  std::vector<ViewLabel> labels;
+  for (view_id_t v = 0; v < db->num_views(); ++v) labels.push_back(db->label(v));
+  const KeypointFloorIndex index(labels, db->num_rolls());
+  // A database view's own keypoints: floor 0 at that (view, roll).
+  const PoseForEval own = PoseFromLabel(db->label(17), RollAngle(5, db->num_rolls()));
+  const KeypointFloor exact = index.Floor(own.keypoints);
+  EXPECT_EQ(exact.error, 0.0);
+  EXPECT_EQ(exact.view_id, 17u);
+  EXPECT_EQ(exact.roll, 5u);
+  // Noisy and unrelated truths: the pruned scan equals the exhaustive one, bit for bit, and
+  // tries fewer views than there are.
+  uint64_t checked = 0;
+  for (int t = 0; t < 20; ++t) {
+    Keypoints truth = db->label(static_cast<view_id_t>(t)).keypoints;
+    for (int k = 0; k < kNumKeypoints; ++k) {
+      for (int c = 0; c < 3; ++c) {
+        truth[k][c] += static_cast<float>(std::sin(7.1 * t + 3.3 * k + 1.7 * c)) * 8.0f * t;
+      }
+    }
+    const KeypointFloor f = index.Floor(truth);
+    EXPECT_EQ(f.error, BruteForceFloor(*db, truth)) << t;
+    const ViewLabel at = RollLabel(db->label(f.view_id), RollAngle(f.roll, db->num_rolls()));
+    EXPECT_EQ(KeypointError(truth, at.keypoints), f.error) << t;
+    checked += f.views_checked;
+  }
+  EXPECT_LT(checked, 20 * db->num_views());
+}
+
+TEST(KeypointFloor, WristToMiddleMcp) {
+  Keypoints k{};
+  k[0] = {10, 20, 30};
+  k[9] = {13, 24, 30};
+  EXPECT_DOUBLE_EQ(WristToMiddleMcp(k), 5.0);
+}
+
+TEST(Evaluate, FloorAndWristToMiddleMcpUnits) {
+  auto db = testing::EvalDatabase();
+  Searcher searcher(db);
+  TestSet set;
+  // Truths off the database (keypoints moved), queried by the edges of a nearby view.
+  for (uint32_t i = 0; i < 4; ++i) {
+    set.views.push_back(testing::ViewOf(*db, i, 3 + 7 * i, i, false));
+    for (auto& kp : set.views.back().truth.keypoints) kp[2] += 5.0f * static_cast<float>(i + 1);
+  }
+  auto points = [&](const TestView& t) -> Result<TestQuery> {
+    return TestQuery(testing::RolledView(*db, 3 + 7 * t.id, t.id));
+  };
+  auto report = Evaluate(searcher, set, QueryInput::kClean, points, FastOptions());
+  ASSERT_TRUE(report.ok()) << report.status().ToString();
+  for (const auto& v : report->views) {
+    const Keypoints& truth = set.views[v.testset_index].truth.keypoints;
+    EXPECT_EQ(v.floor_keypoint_error, BruteForceFloor(*db, truth));
+    EXPECT_LE(v.floor_keypoint_error, v.best10_keypoint_error);
+    EXPECT_LE(v.best10_keypoint_error, v.top1_keypoint_error);
+    EXPECT_EQ(v.wrist_to_middle_mcp_px, WristToMiddleMcp(truth));
+    EXPECT_TRUE(std::isnan(v.fitted_keypoint_error));
+  }
+  EXPECT_EQ(report->floor_keypoint_error.count, 4);
+  EXPECT_EQ(report->fitted_keypoint_error.count, 0);
+  EXPECT_LE(report->floor_keypoint_error.mean, report->best10_keypoint_error.mean);
+  // The same errors in wrist-to-middle-MCP lengths of each truth.
+  std::vector<double> wm;
+  for (const auto& v : report->views) {
+    wm.push_back(v.top1_keypoint_error * kNormalisedDiameter / v.wrist_to_middle_mcp_px);
+  }
+  EXPECT_DOUBLE_EQ(report->top1_keypoint_error_wm.mean, Summarise(wm).mean);
+  EXPECT_DOUBLE_EQ(report->top1_keypoint_error_wm.p90, Summarise(wm).p90);
+
+  nlohmann::json doc = ReportToJson(*report);
+  EXPECT_TRUE(ValidateJson(doc, "evaluation.schema.json", "report").ok());
+  EXPECT_TRUE(doc["keypoint_error"].contains("floor"));
+  EXPECT_FALSE(doc["keypoint_error"].contains("fitted"));
+  EXPECT_TRUE(doc["keypoint_error"]["wrist_to_middle_mcp"].contains("floor"));
+  EXPECT_DOUBLE_EQ(doc["keypoint_error"]["wrist_to_middle_mcp"]["top1"]["mean"].get<double>(),
+                   Summarise(wm).mean);
+  const std::string text = ReportToText(*report);
+  EXPECT_NE(text.find("floor (best view and roll of the database)"), std::string::npos);
+  EXPECT_NE(text.find("wrist-to-middle-MCP lengths"), std::string::npos);
+  EXPECT_EQ(text.find("fitted pose"), std::string::npos);
+
+  // The fitted slot: filled by a caller that fits poses, reported in both units.
+  for (auto& v : report->views) v.fitted_keypoint_error = 0.5 * v.best10_keypoint_error;
+  FinishReport(&*report);
+  EXPECT_EQ(report->fitted_keypoint_error.count, 4);
+  doc = ReportToJson(*report);
+  EXPECT_TRUE(ValidateJson(doc, "evaluation.schema.json", "report").ok());
+  EXPECT_TRUE(doc["keypoint_error"].contains("fitted"));
+  EXPECT_TRUE(doc["keypoint_error"]["wrist_to_middle_mcp"].contains("fitted"));
+  EXPECT_NE(ReportToText(*report).find("fitted pose"), std::string::npos);
+
+  // Without the floor: no floor anywhere.
+  EvaluationOptions no_floor = FastOptions();
+  no_floor.keypoint_floor = false;
+  auto without = Evaluate(searcher, set, QueryInput::kClean, points, no_floor);
+  ASSERT_TRUE(without.ok());
+  EXPECT_TRUE(std::isnan(without->views[0].floor_keypoint_error));
+  EXPECT_EQ(without->floor_keypoint_error.count, 0);
+  doc = ReportToJson(*without);
+  EXPECT_TRUE(ValidateJson(doc, "evaluation.schema.json", "report").ok());
+  EXPECT_FALSE(doc["keypoint_error"].contains("floor"));
+  EXPECT_EQ(ReportToText(*without).find("floor ("), std::string::npos);
+  EXPECT_EQ(without->views[2].top1_keypoint_error, report->views[2].top1_keypoint_error);
+}
+
 // A minimal schema-valid testset.json with one view; `edit` changes it before it is written.
 template <typename F>
 Result<TestSet> ReadEditedTestSet(const std::string& name, F edit) {

@@ -193,6 +193,88 @@ double KeypointError(const std::array<std::array<float, 3>, kNumKeypoints>& a,
   return sum / (kNumKeypoints - 1) / kNormalisedDiameter;
 }
 
+double WristToMiddleMcp(const Keypoints& keypoints) {
+  double sq = 0;
+  for (int c = 0; c < 3; ++c) {
+    const double d = static_cast<double>(keypoints[9][c]) - keypoints[0][c];
+    sq += d * d;
+  }
+  return std::sqrt(sq);
+}
+
+namespace {
+
+// Per keypoint 1..20: the in-plane distance from the wrist and the depth relative to it, the two
+// numbers a roll leaves unchanged.
+std::array<float, 2 * (kNumKeypoints - 1)> RollInvariants(const Keypoints& k) {
+  std::array<float, 2 * (kNumKeypoints - 1)> out{};
+  for (int i = 1; i < kNumKeypoints; ++i) {
+    const double dx = static_cast<double>(k[i][0]) - k[0][0];
+    const double dy = static_cast<double>(k[i][1]) - k[0][1];
+    out[2 * (i - 1)] = static_cast<float>(std::hypot(dx, dy));
+    out[2 * (i - 1) + 1] = static_cast<float>(static_cast<double>(k[i][2]) - k[0][2]);
+  }
+  return out;
+}
+
+// A lower bound of KeypointError between any roll of the view and the truth (|a - b| >=
+// ||a_xy| - |b_xy|| per keypoint, with the depths unchanged).
+double RollFreeBound(const std::array<float, 2 * (kNumKeypoints - 1)>& a,
+                     const std::array<float, 2 * (kNumKeypoints - 1)>& b) {
+  double sum = 0;
+  for (int i = 0; i < kNumKeypoints - 1; ++i) {
+    const double dr = static_cast<double>(a[2 * i]) - b[2 * i];
+    const double dz = static_cast<double>(a[2 * i + 1]) - b[2 * i + 1];
+    sum += std::sqrt(dr * dr + dz * dz);
+  }
+  return sum / (kNumKeypoints - 1) / kNormalisedDiameter;
+}
+
+// The invariants are floats and the rolled keypoints are rounded to floats, so the bound may
+// exceed the computed error by a few float ulps of the coordinates; a view is skipped only when
+// its bound is above the best by more than this (hand sizes: 0.002 px of mean joint distance).
+constexpr double kBoundSlack = 1e-5;
+
+}  // namespace
+
+KeypointFloorIndex::KeypointFloorIndex(std::vector<ViewLabel> labels, uint32_t num_rolls)
+    : labels_(std::move(labels)), num_rolls_(num_rolls) {
+  THROW_CHECK_GE(num_rolls_, 1u);
+  invariants_.reserve(labels_.size());
+  for (const ViewLabel& l : labels_) invariants_.push_back(RollInvariants(l.keypoints));
+}
+
+KeypointFloor KeypointFloorIndex::Floor(const Keypoints& truth) const {
+  KeypointFloor best;
+  if (labels_.empty()) return best;
+  const auto truth_inv = RollInvariants(truth);
+  std::vector<std::pair<double, view_id_t>> order(labels_.size());
+  for (size_t v = 0; v < labels_.size(); ++v) {
+    order[v] = {RollFreeBound(invariants_[v], truth_inv), static_cast<view_id_t>(v)};
+  }
+  std::sort(order.begin(), order.end());
+  double best_error = std::numeric_limits<double>::infinity();
+  for (const auto& [bound, v] : order) {
+    if (bound > best_error + kBoundSlack) break;
+    for (roll_id_t r = 0; r < num_rolls_; ++r) {
+      // The keypoints of (v, r) exactly as a search's match label carries them.
+      const Keypoints rolled =
+          r == 0 ? labels_[v].keypoints : RollLabel(labels_[v], RollAngle(r, num_rolls_)).keypoints;
+      const double e = KeypointError(truth, rolled);
+      // Ties go to the smallest (view, roll), so the answer does not depend on the scan order.
+      if (e < best_error ||
+          (e == best_error && std::make_pair(v, r) < std::make_pair(best.view_id, best.roll))) {
+        best_error = e;
+        best.view_id = v;
+        best.roll = r;
+      }
+    }
+    ++best.views_checked;
+  }
+  best.error = best_error;
+  return best;
+}
+
 std::string_view RankBinName(int bin) {
   static constexpr std::array<std::string_view, kNumRankBins> kNames = {
       "1", "2-4", "5-16", "17-64", "65-256", "257-1024", ">1024"};

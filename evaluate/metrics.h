@@ -1,6 +1,7 @@
 // The evaluation's metrics (docs/evaluation.md), as pure functions over pose labels so they can
 // be tested on hand-made cases: when a database match counts as correct, the rank of the best
-// correct match and the paper's Table 1 bins, success@(d, n), and root-relative 3D keypoint error.
+// correct match and the paper's Table 1 bins, success@(d, n), root-relative 3D keypoint error and
+// its floor over a whole database.
 //
 // Correctness of a database view (v, r) for a test view, all three must hold:
 //  - shape: the joint-vector distance is at most d (JointDistanceDeg below; default the RMS of
@@ -18,6 +19,7 @@
 
 #include <array>
 #include <cstdint>
+#include <limits>
 #include <optional>
 #include <span>
 #include <string>
@@ -136,6 +138,42 @@ class CorrectnessJudge {
 // mean joint error of a tenth of the hand's extent in the image.
 double KeypointError(const std::array<std::array<float, 3>, kNumKeypoints>& a,
                      const std::array<std::array<float, 3>, kNumKeypoints>& b);
+
+using Keypoints = std::array<std::array<float, 3>, kNumKeypoints>;
+
+// The 3D distance from the wrist (keypoint 0) to the middle finger's MCP (keypoint 9, the middle
+// knuckle; docs/conventions.md), px of the keypoints' frame. KeypointError * kNormalisedDiameter /
+// WristToMiddleMcp(truth) is the same error in units of this length of the true hand, a size
+// that does not depend on the view (the hand size of KeypointError is its silhouette's).
+double WristToMiddleMcp(const Keypoints& keypoints);
+
+// The smallest KeypointError of a truth over every (view, roll) of a database: the "floor" that
+// no retrieval from it can beat. The database's rolls are virtual, so each stored view's
+// keypoints are kept once and rolled as RollLabel rolls them; a roll-free lower bound per view (a
+// rotation about the optical axis keeps each keypoint's distance from the axis through the wrist
+// and its depth) orders the views and ends the scan once no remaining view can beat the best, so
+// the result equals the exhaustive minimum.
+struct KeypointFloor {
+  double error = std::numeric_limits<double>::quiet_NaN();  // hand sizes, as KeypointError
+  view_id_t view_id = kInvalidViewId;
+  roll_id_t roll = 0;
+  uint64_t views_checked = 0;  // stored views whose rolls were all tried
+};
+
+class KeypointFloorIndex {
+ public:
+  // labels: the canonical (roll 0) label of every stored view, index = view id.
+  KeypointFloorIndex(std::vector<ViewLabel> labels, uint32_t num_rolls);
+  // Thread-safe (const).
+  KeypointFloor Floor(const Keypoints& truth) const;
+  size_t num_views() const { return labels_.size(); }
+
+ private:
+  std::vector<ViewLabel> labels_;
+  uint32_t num_rolls_;
+  // Per view and keypoint 1..20: distance from the wrist in the image plane, and depth from it.
+  std::vector<std::array<float, 2 * (kNumKeypoints - 1)>> invariants_;
+};
 
 // ---- Ranks and the paper's Table 1 ----
 

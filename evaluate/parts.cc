@@ -160,6 +160,9 @@ json PartRow<ViewOutcome>::ToJson(const ViewOutcome& v) {
             {"num_correct", v.num_correct},
             {"top1_keypoint_error", NumberOrNull(v.top1_keypoint_error)},
             {"best10_keypoint_error", NumberOrNull(v.best10_keypoint_error)},
+            {"floor_keypoint_error", NumberOrNull(v.floor_keypoint_error)},
+            {"fitted_keypoint_error", NumberOrNull(v.fitted_keypoint_error)},
+            {"wrist_to_middle_mcp_px", NumberOrNull(v.wrist_to_middle_mcp_px)},
             {"input_seconds", v.input_seconds},
             {"search_seconds", v.search_seconds},
             {"deep_search", v.deep_search},
@@ -193,6 +196,9 @@ Result<ViewOutcome> PartRow<ViewOutcome>::FromJson(const json& j, const std::str
   v.num_correct = j.at("num_correct").get<int64_t>();
   v.top1_keypoint_error = NumberOrNaN(j.at("top1_keypoint_error"));
   v.best10_keypoint_error = NumberOrNaN(j.at("best10_keypoint_error"));
+  v.floor_keypoint_error = NumberOrNaN(j.at("floor_keypoint_error"));
+  v.fitted_keypoint_error = NumberOrNaN(j.at("fitted_keypoint_error"));
+  v.wrist_to_middle_mcp_px = NumberOrNaN(j.at("wrist_to_middle_mcp_px"));
   v.input_seconds = j.at("input_seconds").get<double>();
   v.search_seconds = j.at("search_seconds").get<double>();
   v.deep_search = j.at("deep_search").get<bool>();

@@ -137,6 +137,10 @@ TEST(EvalParts, PartJsonRoundTripsExactly) {
   ASSERT_TRUE(back->rows[2].top1.has_value());
   EXPECT_EQ(back->rows[2].top1->distance, part.rows[2].top1->distance);  // bit for bit
   EXPECT_EQ(back->rows[2].top1_keypoint_error, part.rows[2].top1_keypoint_error);
+  EXPECT_EQ(back->rows[2].floor_keypoint_error, part.rows[2].floor_keypoint_error);
+  EXPECT_FALSE(std::isnan(back->rows[5].floor_keypoint_error));  // needs the truth only
+  EXPECT_EQ(back->rows[2].wrist_to_middle_mcp_px, part.rows[2].wrist_to_middle_mcp_px);
+  EXPECT_TRUE(std::isnan(back->rows[2].fitted_keypoint_error));
 }
 
 // The guarantee: a report merged from parts equals the report of one run, for any task count

@@ -6,8 +6,9 @@ grey world gives ambient light, and a background card parented to the camera fil
 behind the hand: a plain colour, or (clutter) a seeded procedural texture of Voronoi cells, noise
 and stripes. Cycles renders the colour image with a few samples to an 8-bit sRGB PNG.
 
-With `forearm` the studio adds a skin-coloured forearm (forearm.py) to the photos; the label
-renders made before the studio exists never see it.
+With `forearm` the studio adds a skin-coloured forearm (forearm.py) to the photos; with
+`forearm_fraction` it adds it once and shows it on the items whose plan entry says `forearm`. The
+label renders made before the studio exists never see it.
 """
 
 from __future__ import annotations
@@ -53,8 +54,10 @@ class PhotoStudio:
         me = hand_scene.mesh.data
         for i in range(len(me.materials)):
             me.materials[i] = mat
-        if photo.get("forearm", False):
-            self._add_forearm(mat)
+        self.forearm_default = bool(photo.get("forearm", False))
+        self.forearm_obj = None
+        if testset.uses_forearm(photo):
+            self.forearm_obj = self._add_forearm(mat)
 
         # Ambient world.
         world = bpy.data.worlds.new("handdb_world")
@@ -118,6 +121,7 @@ class PhotoStudio:
         obj.parent = arm
         obj.matrix_parent_inverse.identity()
         mesh.materials.append(material)
+        return obj
 
     def _sun(self, name: str):
         data = bpy.data.lights.new(name, type="SUN")
@@ -190,6 +194,8 @@ class PhotoStudio:
         self.world_bg.inputs["Strength"].default_value = lights["ambient"]
         if self.clutter:
             self._set_clutter(testset.clutter_params(int(item["seed"])))
+        if self.forearm_obj is not None:
+            self.forearm_obj.hide_render = not testset.item_forearm(item, self.forearm_default)
 
     def _set_clutter(self, p: dict) -> None:
         self.mapping.inputs["Location"].default_value = p["offset"]

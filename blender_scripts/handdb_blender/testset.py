@@ -92,6 +92,17 @@ def make_sidecar(plan: dict, item: dict, keypoints_cam, keypoints_px, blender_ve
                            float(item["phi"]), plan["hand_model"]["sha256"])
 
 
+def uses_forearm(photo: dict) -> bool:
+    """Whether any photo of the plan shows a forearm: all (`forearm`) or those items whose entry
+    says so (`forearm_fraction`)."""
+    return bool(photo.get("forearm", False)) or "forearm_fraction" in photo
+
+
+def item_forearm(item: dict, default: bool) -> bool:
+    """Whether this item's photo shows the forearm: its own entry, else the plan's `forearm`."""
+    return bool(item.get("forearm", default))
+
+
 def srgb_to_linear(c: float) -> float:
     """Blender colour inputs are scene-linear; configs give sRGB."""
     return c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4

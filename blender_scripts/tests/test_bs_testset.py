@@ -105,3 +105,22 @@ def test_colour_helpers():
     assert testset.check_rgb([0.1, 0.2, 0.3], "x") == [0.1, 0.2, 0.3]
     with pytest.raises(RenderError, match="skin"):
         testset.check_rgb([0.1, 2.0, 0.3], "skin")
+
+
+def test_forearm_on_some_items(plan):
+    # A plan with photo.forearm_fraction marks every item; the studio shows the arm per item.
+    plan["photo"]["forearm_fraction"] = 0.5
+    for i, item in enumerate(plan["items"]):
+        item["forearm"] = i % 2 == 0
+    jsonschema.validate(plan, _schema("testset_plan.schema.json"))
+    assert testset.uses_forearm(plan["photo"])
+    shown = [testset.item_forearm(it, bool(plan["photo"].get("forearm", False))) for it in plan["items"]]
+    assert shown == [True, False, True, False, True]
+
+
+def test_forearm_all_or_none(plan):
+    assert not testset.uses_forearm(plan["photo"])
+    assert not testset.item_forearm(plan["items"][0], False)
+    plan["photo"]["forearm"] = True
+    assert testset.uses_forearm(plan["photo"])
+    assert testset.item_forearm(plan["items"][0], True)

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <fstream>
 #include <mutex>
+#include <optional>
 #include <thread>
 
 #include "base/atomic_file.h"
@@ -15,6 +16,7 @@
 #include "base/thread_pool.h"
 #include "generator/hand/hand_model.h"
 #include "generator/render/blender.h"
+#include "generator/sampling/natural_pose.h"
 #include "generator/sampling/random.h"
 #include "generator/sampling/shape_sampler.h"
 #include "handdb_version.h"
@@ -73,18 +75,6 @@ Result<nlohmann::json> MakeTestSetPlan(const nlohmann::json& config,
   if (!hand_doc.ok()) return hand_doc.status();
   const JointLimits limits = hand->limits();
 
-  auto shapes_file =
-      ResolveConfigPath(config.at("shapes").get<std::string>(), config_path, "shapes");
-  if (!shapes_file.ok()) return shapes_file.status();
-  const fs::path shapes_path = *shapes_file;
-  auto library = LoadShapes(shapes_path, limits);
-  if (!library.ok()) return library.status();
-  std::vector<std::string> basic_names;
-  if (config.contains("basic_names"))
-    basic_names = config["basic_names"].get<std::vector<std::string>>();
-  auto basic = SampleBasic(*library, basic_names, 0);
-  if (!basic.ok()) return Status(basic.status().code(), what + ": " + basic.status().message());
-
   // As the generation config's seed: 2^64 and above parse as a double that the schema's
   // "integer" accepts and a cast would turn into 0.
   Result<uint64_t> seed_checked = JsonInteger<uint64_t>(config.at("seed"), what, "seed");
@@ -93,9 +83,73 @@ Result<nlohmann::json> MakeTestSetPlan(const nlohmann::json& config,
   Result<uint32_t> count_checked = JsonInteger<uint32_t>(config.at("count"), what, "count");
   if (!count_checked.ok()) return count_checked.status();
   const uint32_t count = *count_checked;
-  const double basic_fraction = config.value("basic_fraction", 0.25);
+
+  // Where the hand shapes come from: the shape library (basic shapes and PCA samples), or the
+  // natural-pose sampler, which uses neither. Fields of the other source are errors.
+  const nlohmann::json poses_cfg = config.value("poses", nlohmann::json::object());
+  const bool natural = poses_cfg.value("method", std::string("library")) == "natural";
+  if (natural) {
+    for (const char* key : {"shapes", "basic_fraction", "basic_names", "pca"}) {
+      if (config.contains(key)) {
+        return Invalid(what,
+                       std::string(key) + " does not apply to poses.method \"natural\" (it " +
+                           "samples poses without the shape library)");
+      }
+    }
+  } else {
+    for (const char* key : {"finger_spread", "abduction_spread"}) {
+      if (poses_cfg.contains(key)) {
+        return Invalid(what,
+                       "poses." + std::string(key) +
+                           " applies only to poses.method \"natural\", not \"library\"");
+      }
+    }
+    if (!config.contains("shapes")) {
+      return Invalid(what,
+                     "shapes is required (the basic-shape library) unless poses.method is " +
+                         std::string("\"natural\""));
+    }
+  }
+
+  std::optional<fs::path> shapes_path;
+  std::vector<NamedShape> library;
+  std::vector<ShapeSample> basic;
+  if (!natural) {
+    auto shapes_file =
+        ResolveConfigPath(config.at("shapes").get<std::string>(), config_path, "shapes");
+    if (!shapes_file.ok()) return shapes_file.status();
+    shapes_path = *shapes_file;
+    auto loaded = LoadShapes(*shapes_path, limits);
+    if (!loaded.ok()) return loaded.status();
+    library = std::move(*loaded);
+    std::vector<std::string> basic_names;
+    if (config.contains("basic_names"))
+      basic_names = config["basic_names"].get<std::vector<std::string>>();
+    auto picked = SampleBasic(library, basic_names, 0);
+    if (!picked.ok())
+      return Status(picked.status().code(), what + ": " + picked.status().message());
+    basic = std::move(*picked);
+  }
+
+  const double basic_fraction = natural ? 0.0 : config.value("basic_fraction", 0.25);
   const uint32_t num_basic = static_cast<uint32_t>(std::lround(basic_fraction * count));
-  const uint32_t num_pca = count - num_basic;
+  const uint32_t num_pca = natural ? 0 : count - num_basic;
+  const uint32_t num_natural = natural ? count : 0;
+
+  // Natural poses: a grip level shared by the fingers (generator/sampling/natural_pose.h), from a
+  // stream of the test-set seed.
+  NaturalPoseOptions natural_options;
+  natural_options.finger_spread = poses_cfg.value("finger_spread", natural_options.finger_spread);
+  natural_options.abduction_spread =
+      poses_cfg.value("abduction_spread", natural_options.abduction_spread);
+  natural_options.seed = seed;
+  if (!natural_options.Check()) return Invalid(what, "bad poses options");
+  std::vector<NaturalPose> natural_poses;
+  uint64_t natural_clamped = 0;
+  for (uint32_t i = 0; i < num_natural; ++i) {
+    natural_poses.push_back(SampleNaturalPose(natural_options, limits, i));
+    natural_clamped += natural_poses.back().clamped ? 1 : 0;
+  }
 
   // PCA shapes: Gaussian (or Sobol) coefficients in the basis of a shape set, with a stream seed
   // derived from the test-set seed so they never coincide with a database's Sobol points.
@@ -113,8 +167,8 @@ Result<nlohmann::json> MakeTestSetPlan(const nlohmann::json& config,
       for (const auto& s : *basis_shapes) basis_set.push_back(s.joints);
       pca_report["basis"] = PathForPlan(*basis_path);
     } else {
-      for (const auto& s : *library) basis_set.push_back(s.joints);
-      pca_report["basis"] = PathForPlan(shapes_path);
+      for (const auto& s : library) basis_set.push_back(s.joints);
+      pca_report["basis"] = PathForPlan(*shapes_path);
     }
     auto basis = ComputePca(basis_set, pca_cfg.value("components", 6));
     if (!basis.ok()) return Invalid(what, basis.status().message());
@@ -154,7 +208,16 @@ Result<nlohmann::json> MakeTestSetPlan(const nlohmann::json& config,
   };
   // Written only when on, so plans of test sets made before the option stay byte-identical (a
   // rerun compares the plan on disk with the new one).
-  if (forearm || photo_cfg.value("forearm", false)) photo["forearm"] = true;
+  const bool forearm_all = forearm || photo_cfg.value("forearm", false);
+  if (forearm_all) photo["forearm"] = true;
+  // A forearm on some photos: each item draws its own, so every item can be regenerated alone.
+  // The CLI's --forearm puts it on all of them.
+  if (photo_cfg.contains("forearm_fraction") && photo_cfg.value("forearm", false)) {
+    return Invalid(what, "photo.forearm and photo.forearm_fraction exclude each other");
+  }
+  const bool forearm_some = !forearm_all && photo_cfg.contains("forearm_fraction");
+  const double forearm_fraction = photo_cfg.value("forearm_fraction", 0.0);
+  if (forearm_some) photo["forearm_fraction"] = forearm_fraction;
 
   // Items: the first num_basic are basic shapes, picked by a seeded shuffle of the library that
   // is repeated as often as needed (each shape about equally often); then the PCA samples. Every
@@ -163,7 +226,7 @@ Result<nlohmann::json> MakeTestSetPlan(const nlohmann::json& config,
   {
     Rng rng(DeriveSeed(seed, kTestViewStream, 0xBA51C));
     while (basic_order.size() < num_basic) {
-      std::vector<uint32_t> perm(basic->size());
+      std::vector<uint32_t> perm(basic.size());
       for (uint32_t i = 0; i < perm.size(); ++i) perm[i] = i;
       for (size_t i = perm.size(); i > 1; --i) {
         const size_t j = static_cast<size_t>(rng.Next() % i);
@@ -192,8 +255,18 @@ Result<nlohmann::json> MakeTestSetPlan(const nlohmann::json& config,
         {"phi", std::atan2(d[1], d[0])},
         {"roll", roll},
     };
-    if (i < num_basic) {
-      const ShapeSample& s = (*basic)[basic_order[i]];
+    if (forearm_some) {
+      item["forearm"] = Rng(DeriveSeed(item_seed, kForearmStream, 0)).Uniform() < forearm_fraction;
+    }
+    if (natural) {
+      const NaturalPose& p = natural_poses[i];
+      item["basic"] = false;
+      item["shape_name"] = Numbered("natural-", i, 5);
+      item["joints"] = nlohmann::json(p.joints);
+      item["coeffs"] = {p.grip};
+      item["clamped"] = p.clamped;
+    } else if (i < num_basic) {
+      const ShapeSample& s = basic[basic_order[i]];
       item["basic"] = true;
       item["shape_name"] = s.name;
       item["joints"] = nlohmann::json(s.joints);
@@ -210,6 +283,19 @@ Result<nlohmann::json> MakeTestSetPlan(const nlohmann::json& config,
     items.push_back(std::move(item));
   }
 
+  nlohmann::json shapes_report;
+  if (natural) {
+    shapes_report = {{"natural", num_natural},
+                     {"natural_sampler",
+                      {{"finger_spread", natural_options.finger_spread},
+                       {"abduction_spread", natural_options.abduction_spread},
+                       {"clamped", natural_clamped}}}};
+  } else {
+    shapes_report = {{"library", PathForPlan(*shapes_path)},
+                     {"basic", num_basic},
+                     {"pca", num_pca},
+                     {"pca_sampler", pca_report}};
+  }
   nlohmann::json plan = {
       {"format", "handdb-testset-plan"},
       {"version", kTestSetFormatVersion},
@@ -222,11 +308,7 @@ Result<nlohmann::json> MakeTestSetPlan(const nlohmann::json& config,
       {"render", {{"resolution", resolution}, {"ortho_scale", ortho_scale}}},
       {"photo", photo},
       {"unit_size", unit_size},
-      {"shapes",
-       {{"library", PathForPlan(shapes_path)},
-        {"basic", num_basic},
-        {"pca", num_pca},
-        {"pca_sampler", pca_report}}},
+      {"shapes", shapes_report},
       {"handdb_version", HANDDB_VERSION},
       {"items", items},
   };
@@ -255,6 +337,7 @@ Result<TestSetPlan> ParseTestSetPlanFields(const nlohmann::json& doc, const std:
   plan.photo.background_rgb = Vec3FromJson(photo.at("background_rgb"));
   plan.photo.clutter = photo.at("clutter").get<bool>();
   plan.photo.forearm = photo.value("forearm", false);  // absent in plans written before it
+  plan.photo.forearm_fraction = photo.value("forearm_fraction", plan.photo.forearm ? 1.0 : 0.0);
   for (const auto& j : doc.at("items")) {
     TestSetItem item;
     const std::string at = "items[" + std::to_string(plan.items.size()) + "].";
@@ -287,6 +370,7 @@ Result<TestSetPlan> ParseTestSetPlanFields(const nlohmann::json& doc, const std:
     item.phi = j.at("phi").get<double>();
     item.roll = j.at("roll").get<double>();
     item.seed = JsonIntegerOrThrow<uint64_t>(j.at("seed"), at + "seed");
+    item.forearm = j.value("forearm", plan.photo.forearm);
     plan.items.push_back(std::move(item));
   }
   return plan;

@@ -2,9 +2,10 @@
 //
 // `handdb testset CONFIG.json --out DIR` plans test views off the database grid — hand shapes
 // sampled in the PCA shape space (Gaussian coefficients) plus a share of the named basic shapes,
-// view directions uniform on the sphere, camera rolls uniform in [0, 2 pi) — from a seed that
-// should differ from any database's; renders each one as a label EXR + sidecar (the database's
-// render layout, so the converter's code gives its clean edges and normalised keypoints) and as a
+// or "natural" poses that use no shape library (generator/sampling/natural_pose.h) — view
+// directions uniform on the sphere, camera rolls uniform in [0, 2 pi) — from a seed that should
+// differ from any database's; renders each one as a label EXR + sidecar (the database's render
+// layout, so the converter's code gives its clean edges and normalised keypoints) and as a
 // photo-like RGB image (blender_scripts/render_testset.py); then writes the ground truth.
 //
 // DIR/testset_plan.json            the plan (schemas/testset_plan.schema.json); a pure function of
@@ -33,6 +34,8 @@ namespace handdb {
 constexpr int kTestSetFormatVersion = 1;
 // Stream tag of the per-item randomness (direction, roll, basic-shape pick, clutter).
 constexpr uint64_t kTestViewStream = 0x5445535456000000ull;  // "TESTV"
+// Stream tag, under an item's seed, of whether its photo shows a forearm (photo.forearm_fraction).
+constexpr uint64_t kForearmStream = 0x464f524541000000ull;  // "FOREA"
 
 struct PhotoSettings {
   int samples = 16;                                        // Cycles samples per pixel
@@ -43,21 +46,25 @@ struct PhotoSettings {
   // frame) in the photos only, as in real photos of hands; the label renders (the ground truth)
   // stay the hand alone. Measures the query's wrist cut (docs/evaluation.md).
   bool forearm = false;
+  // The share of items whose photo shows the forearm, each drawn from its own seed (1 when
+  // `forearm`); the plan marks every item. Absent from the config: all or none, by `forearm`.
+  double forearm_fraction = 0;
 };
 
 struct TestSetItem {
   uint32_t id = 0;  // == render id, shape id and dir id in its sidecar
   uint32_t unit = 0;
   bool basic = false;      // a named basic shape (the paper's "same shape" criterion applies)
-  std::string shape_name;  // basic: library name; pca: "pca-00012"
+  std::string shape_name;  // basic: library name; pca: "pca-00012"; natural: "natural-00012"
   JointVector joints{};
-  std::vector<double> coeffs;         // pca coefficients (empty for basic shapes)
+  std::vector<double> coeffs;         // pca coefficients; natural: [grip level]; basic: empty
   bool clamped = false;               // joint vector clamped to the limits
   std::array<double, 3> direction{};  // unit, hand -> camera, hand frame
   double theta = 0;
   double phi = 0;
-  double roll = 0;    // camera roll, radians in [0, 2 pi)
-  uint64_t seed = 0;  // DeriveSeed(seed, kTestViewStream, id): clutter texture etc.
+  double roll = 0;       // camera roll, radians in [0, 2 pi)
+  uint64_t seed = 0;     // DeriveSeed(seed, kTestViewStream, id): clutter texture etc.
+  bool forearm = false;  // its photo shows a forearm
 };
 
 struct TestSetPlan {

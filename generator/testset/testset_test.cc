@@ -176,6 +176,127 @@ TEST(TestSetPlan, ForearmIsWrittenOnlyWhenOn) {
   }
 }
 
+// The demo config with natural poses instead of the shape library.
+nlohmann::json NaturalConfig() {
+  nlohmann::json config = DemoConfig();
+  for (const char* key : {"shapes", "basic_fraction", "basic_names", "pca"}) config.erase(key);
+  config["count"] = 60;
+  config["unit_size"] = 30;
+  config["poses"] = {{"method", "natural"}, {"finger_spread", 0.15}};
+  config["photo"]["forearm_fraction"] = 0.5;
+  return config;
+}
+
+TEST(TestSetPlan, NaturalPosesAreDeterministicWithinLimitsAndFollowTheGrip) {
+  auto a = MakeTestSetPlan(NaturalConfig(), DemoConfigPath(), false);
+  auto b = MakeTestSetPlan(NaturalConfig(), DemoConfigPath(), false);
+  ASSERT_TRUE(a.ok()) << a.status().ToString();
+  ASSERT_TRUE(b.ok());
+  EXPECT_EQ(a->dump(), b->dump());
+  EXPECT_EQ(a->at("shapes").at("natural").get<int>(), 60);
+  EXPECT_FALSE(a->at("shapes").contains("library"));
+  auto plan = ParseTestSetPlan(*a, "natural");
+  ASSERT_TRUE(plan.ok()) << plan.status().ToString();
+  auto hand = LoadHandModel(RepoRoot() / "configs/hands/webxr_generic_right.json");
+  ASSERT_TRUE(hand.ok());
+  const JointLimits limits = hand->limits();
+  int forearms = 0;
+  double sum_gap = 0;
+  for (const TestSetItem& item : plan->items) {
+    EXPECT_FALSE(item.basic);
+    EXPECT_EQ(item.shape_name.rfind("natural-", 0), 0u) << item.shape_name;
+    EXPECT_TRUE(limits.Contains(item.joints)) << item.id;
+    ASSERT_EQ(item.coeffs.size(), 1u);
+    const double g = item.coeffs[0];
+    EXPECT_GE(g, 0.0);
+    EXPECT_LT(g, 1.0);
+    // The middle finger's PIP (range 0..max) bends with the grip level.
+    const double pip = item.joints[10] / limits.max[10];
+    sum_gap += std::abs(pip - g);
+    forearms += item.forearm ? 1 : 0;
+    EXPECT_EQ(a->at("items").at(item.id).at("forearm").get<bool>(), item.forearm);
+  }
+  EXPECT_LT(sum_gap / plan->items.size(), 0.15);
+  // About half of the photos show the forearm (60 draws of p = 0.5).
+  EXPECT_GT(forearms, 15);
+  EXPECT_LT(forearms, 45);
+  EXPECT_DOUBLE_EQ(plan->photo.forearm_fraction, 0.5);
+  EXPECT_FALSE(plan->photo.forearm);
+
+  // Another seed, other poses.
+  nlohmann::json other = NaturalConfig();
+  other["seed"] = other["seed"].get<uint64_t>() + 1;
+  auto c = MakeTestSetPlan(other, DemoConfigPath(), false);
+  ASSERT_TRUE(c.ok());
+  EXPECT_NE(c->at("items").at(0).at("joints"), a->at("items").at(0).at("joints"));
+  // The CLI's --forearm puts the arm on every photo.
+  auto all = MakeTestSetPlan(NaturalConfig(), DemoConfigPath(), false, true);
+  ASSERT_TRUE(all.ok());
+  EXPECT_TRUE(all->at("photo").at("forearm").get<bool>());
+  EXPECT_FALSE(all->at("photo").contains("forearm_fraction"));
+  EXPECT_FALSE(all->at("items").at(0).contains("forearm"));
+}
+
+TEST(TestSetPlan, NaturalPosesRejectFieldsOfTheOtherSource) {
+  for (const char* key : {"shapes", "basic_fraction", "basic_names", "pca"}) {
+    nlohmann::json config = NaturalConfig();
+    config[key] = DemoConfig()[key];
+    auto bad = MakeTestSetPlan(config, DemoConfigPath(), false);
+    ASSERT_FALSE(bad.ok()) << key;
+    EXPECT_EQ(bad.status().code(), StatusCode::kInvalidArgument) << key;
+    EXPECT_NE(bad.status().message().find(key), std::string::npos) << bad.status().message();
+  }
+  // finger_spread belongs to the natural sampler only.
+  nlohmann::json config = DemoConfig();
+  config["poses"] = {{"method", "library"}, {"finger_spread", 0.1}};
+  auto bad = MakeTestSetPlan(config, DemoConfigPath(), false);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("poses.finger_spread"), std::string::npos);
+  // The library needs its shapes.
+  config = DemoConfig();
+  config.erase("shapes");
+  bad = MakeTestSetPlan(config, DemoConfigPath(), false);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("shapes is required"), std::string::npos);
+  // Schema: unknown fields, unknown methods and out-of-range spreads.
+  config = NaturalConfig();
+  config["poses"]["grip"] = 0.5;
+  EXPECT_EQ(MakeTestSetPlan(config, DemoConfigPath(), false).status().code(),
+            StatusCode::kSchemaViolation);
+  config = NaturalConfig();
+  config["poses"]["method"] = "random";
+  EXPECT_EQ(MakeTestSetPlan(config, DemoConfigPath(), false).status().code(),
+            StatusCode::kSchemaViolation);
+  config = NaturalConfig();
+  config["poses"]["finger_spread"] = 2;
+  EXPECT_EQ(MakeTestSetPlan(config, DemoConfigPath(), false).status().code(),
+            StatusCode::kSchemaViolation);
+  config = NaturalConfig();
+  config["poses"].erase("method");
+  EXPECT_EQ(MakeTestSetPlan(config, DemoConfigPath(), false).status().code(),
+            StatusCode::kSchemaViolation);
+  config = NaturalConfig();
+  config["photo"]["forearm_fraction"] = 1.5;
+  EXPECT_EQ(MakeTestSetPlan(config, DemoConfigPath(), false).status().code(),
+            StatusCode::kSchemaViolation);
+  config = NaturalConfig();
+  config["photo"]["forearm"] = true;
+  bad = MakeTestSetPlan(config, DemoConfigPath(), false);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("exclude each other"), std::string::npos);
+}
+
+TEST(TestSetPlan, ShippedNaturalConfigIsValid) {
+  const fs::path path = RepoRoot() / "configs" / "testset-natural.json";
+  auto config = ReadJsonFile(path, "testset_config.schema.json");
+  ASSERT_TRUE(config.ok()) << config.status().ToString();
+  auto doc = MakeTestSetPlan(*config, path, false);
+  ASSERT_TRUE(doc.ok()) << doc.status().ToString();
+  auto plan = ParseTestSetPlan(*doc, path.string());
+  ASSERT_TRUE(plan.ok()) << plan.status().ToString();
+  EXPECT_EQ(plan->items.size(), 120u);
+}
+
 TEST(TestSetPlan, RejectsBadConfigsAndPlans) {
   nlohmann::json config = DemoConfig();
   config["count"] = 0;

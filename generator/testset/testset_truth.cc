@@ -84,6 +84,8 @@ Status WriteTestSetGroundTruth(const fs::path& dir, int num_threads, bool progre
     };
     const fs::path photo = TestSetPhotoPath(dir, item.unit, item.id);
     if (fs::exists(photo)) j["photo"] = fs::relative(photo, dir).generic_string();
+    // Per item only when the plan draws the forearm per item; otherwise the set's "forearm" says.
+    if (plan->doc.at("photo").contains("forearm_fraction")) j["forearm"] = item.forearm;
     items[i] = std::move(j);
     progress.Add();
     return true;
