@@ -14,6 +14,7 @@
 #include "cli/commands.h"
 #include "cli/photo_input_flags.h"
 #include "format/roll.h"
+#include "generator/hand/database_rig.h"
 #include "handdb_version.h"
 #include "photo/image_edges.h"
 #include "pose/landmark_rank.h"
@@ -107,6 +108,29 @@ void PrintTable(const std::vector<Match>& matches,
   }
 }
 
+// The fitted pose under the table: from which match, how far the keypoints moved towards the
+// landmarks, and the solver's verdict.
+void PrintFit(const PictureFit& fit) {
+  if (fit.fits.empty()) return;
+  if (fit.best < 0) {
+    std::printf("\npose fit: none (%s)\n", fit.fits.front().reason.c_str());
+    return;
+  }
+  const MatchFit& f = fit.fits[fit.best];
+  std::printf(
+      "\nfitted pose (from match %d of %zu fitted): landmark error %.2f -> %.2f px (normalised), "
+      "%s after %d iterations\n",
+      fit.best + 1,
+      fit.fits.size(),
+      f.landmark_error_start_px,
+      f.landmark_error_px,
+      f.fit.termination.c_str(),
+      f.fit.iterations);
+  std::printf("  joints (deg):");
+  for (double a : f.fit.joints) std::printf(" %.0f", a * kDeg);
+  std::printf("\n");
+}
+
 // The flags of `handdb query`, bound to the option structs they set.
 struct QueryFlags {
   std::string db_dir, image, sheet;
@@ -114,6 +138,7 @@ struct QueryFlags {
   std::string search_mode = "auto";  // IndexUse: auto attaches the index the manifest lists
   std::string kdtree = std::string(KdTreeBackendName(SearchOptions{}.kdtree));
   bool as_json = false, verify = false, quiet = false;
+  std::string fit = "auto";  // auto: fit when the database carries its rig
   // The search flags are bound to picture.options.search: one options struct for the picture,
   // its search and the landmark re-ranking (pose/picture_search.h).
   PhotoInputFlags picture;
@@ -174,6 +199,19 @@ void QueryFlags::Add(CLI::App& app) {
                  "batched scan of all rolls)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  app.add_option("--fit",
+                 fit,
+                 "fit the pose of the first --fit-matches matches to the picture's hand landmarks "
+                 "(pose/fit_matches.h): joint angles, rotation and keypoints off the database's "
+                 "grid; auto: when the database carries its rig (hand_model.json); off: the "
+                 "stored views alone")
+      ->check(CLI::IsMember({"auto", "on", "off"}))
+      ->capture_default_str();
+  app.add_option("--fit-matches",
+                 picture.options.fit.max_matches,
+                 "fit this many of the first matches; the best fit by its cost is the pose")
+      ->check(CLI::Range(1, 100000))
+      ->capture_default_str();
   app.add_flag("--quiet,-q",
                quiet,
                "no progress line (otherwise one on stderr once a search runs 1 s on a "
@@ -214,6 +252,7 @@ bool QueryFlags::Finish() {
 Status WriteSheet(const QueryFlags& flags,
                   const PictureEvidence& picture,
                   const std::vector<Match>& matches,
+                  const PictureFit& fit,
                   const Database& db) {
   std::vector<SheetTile> tiles;
   int rank = 1;
@@ -244,9 +283,13 @@ Status WriteSheet(const QueryFlags& flags,
     }
     tiles.push_back(std::move(t));
   }
-  // The top match's skeleton over the input picture, where --json's keypoints_image_px put it.
+  // The fitted pose's skeleton over the input picture, else the top match's: where --json's
+  // pose / first match put their keypoints_image_px.
   std::vector<Point2f> skeleton;
-  if (!matches.empty()) {
+  if (fit.best >= 0) {
+    const auto& k = fit.fits[fit.best].keypoints_image_px;
+    skeleton.assign(k.begin(), k.end());
+  } else if (!matches.empty()) {
     for (const auto& k : matches.front().label.keypoints) {
       skeleton.push_back(picture.edges.ImageFromNormalised({k[0], k[1]}));
     }
@@ -259,12 +302,16 @@ Status WriteSheet(const QueryFlags& flags,
 json ResultJson(const QueryFlags& flags,
                 const PictureEvidence& picture,
                 const std::vector<Match>& matches,
+                const PictureFit& fit,
                 const SearchStats& stats,
                 const Database& db) {
   const QueryEdges& query = picture.edges;
   json matches_json = json::array();
-  int rank = 1;
-  for (const Match& m : matches) matches_json.push_back(MatchToJson(m, rank++, &query));
+  for (size_t i = 0; i < matches.size(); ++i) {
+    json m = MatchToJson(matches[i], static_cast<int>(i) + 1, &query);
+    if (i < fit.fits.size()) m["fit"] = MatchFitToJson(fit.fits[i]);
+    matches_json.push_back(std::move(m));
+  }
   const SearchOptions& search = flags.picture.options.search;
   json query_json = {{"edge_points", query.points.size()},
                      {"width", query.width},
@@ -302,42 +349,49 @@ json ResultJson(const QueryFlags& flags,
             {"angle_deg", l.crop_angle_deg}}}};
     }
   }
-  return {{"format", "handdb-query-result"},
-          {"version", 1},
-          {"tool_version", HANDDB_VERSION},
-          {"database", flags.db_dir},
-          {"image", flags.image},
-          {"input_kind", std::string(QueryInputKindName(query.kind))},
-          {"query", query_json},
-          {"options",
-           {{"top_k", search.top_k},
-            {"max_per_shape", search.max_per_shape},
-            {"threads", ResolveNumThreads(search.num_threads)},
-            {"brute_force", search.brute_force},
-            {"hand", flags.hand.name},
-            {"kdtree", flags.kdtree},
-            {"dt_cell_px", search.dt_cell_px},
-            {"coarse_bound", search.coarse_bound},
-            {"search", std::string(SearchModeName(stats.mode))},
-            {"candidates", search.index.candidates},
-            {"nprobe", search.index.nprobe}}},
-          {"stats",
-           {{"virtual_views", stats.virtual_views},
-            {"canonical_views", db.num_views()},
-            {"rolls", db.num_rolls()},
-            {"refined", stats.refined},
-            {"abandoned", stats.abandoned},
-            {"view_kdtrees", stats.view_trees},
-            {"scan_abandoned", stats.probe_abandoned},
-            {"grids", stats.grids},
-            {"grid_bounded", stats.grid_bounded},
-            {"searches", stats.searches},
-            {"candidates", stats.candidates},
-            {"seconds_index", stats.seconds_index},
-            {"seconds", stats.seconds_total},
-            {"seconds_bounds", stats.seconds_bounds},
-            {"seconds_refine", stats.seconds_refine}}},
-          {"matches", matches_json}};
+  json doc = {{"format", "handdb-query-result"},
+              {"version", 1},
+              {"tool_version", HANDDB_VERSION},
+              {"database", flags.db_dir},
+              {"image", flags.image},
+              {"input_kind", std::string(QueryInputKindName(query.kind))},
+              {"query", query_json},
+              {"options",
+               {{"top_k", search.top_k},
+                {"max_per_shape", search.max_per_shape},
+                {"threads", ResolveNumThreads(search.num_threads)},
+                {"brute_force", search.brute_force},
+                {"hand", flags.hand.name},
+                {"kdtree", flags.kdtree},
+                {"dt_cell_px", search.dt_cell_px},
+                {"coarse_bound", search.coarse_bound},
+                {"search", std::string(SearchModeName(stats.mode))},
+                {"candidates", search.index.candidates},
+                {"nprobe", search.index.nprobe}}},
+              {"stats",
+               {{"virtual_views", stats.virtual_views},
+                {"canonical_views", db.num_views()},
+                {"rolls", db.num_rolls()},
+                {"refined", stats.refined},
+                {"abandoned", stats.abandoned},
+                {"view_kdtrees", stats.view_trees},
+                {"scan_abandoned", stats.probe_abandoned},
+                {"grids", stats.grids},
+                {"grid_bounded", stats.grid_bounded},
+                {"searches", stats.searches},
+                {"candidates", stats.candidates},
+                {"seconds_index", stats.seconds_index},
+                {"seconds", stats.seconds_total},
+                {"seconds_bounds", stats.seconds_bounds},
+                {"seconds_refine", stats.seconds_refine}}},
+              {"matches", matches_json}};
+  doc["options"]["fit"] = flags.fit == "off" ? "off" : (fit.fits.empty() ? "unavailable" : "on");
+  if (fit.best >= 0) {
+    json pose = MatchFitToJson(fit.fits[fit.best]);
+    pose["match_rank"] = fit.best + 1;
+    doc["pose"] = std::move(pose);
+  }
+  return doc;
 }
 
 }  // namespace
@@ -373,6 +427,17 @@ int RunQuery(int argc, char** argv) {
   if (db.num_views() == 0)
     return Fail("query", Status(StatusCode::kNotFound, db_dir + ": the database has no views"));
 
+  // The pose fit needs the rig the database was rendered with.
+  if (flags.fit != "off") {
+    auto rig = LoadDatabaseRig(db_dir);
+    if (rig.ok()) {
+      flags.picture.options.rig = std::make_shared<const DatabaseRig>(std::move(rig).value());
+    } else if (flags.fit == "on") {
+      return Fail("query", rig.status());
+    } else if (!flags.quiet) {
+      std::fprintf(stderr, "handdb query: no pose fit: %s\n", rig.status().message().c_str());
+    }
+  }
   // A label EXR is converted with the edge options the database was made with.
   const Status recorded = flags.picture.UseDatabaseConversion(db, db_dir);
   if (!recorded.ok()) return Fail("query", recorded);
@@ -383,18 +448,19 @@ int RunQuery(int argc, char** argv) {
   const std::vector<Match>& matches = result->matches;
 
   if (!flags.sheet.empty()) {
-    const Status st = WriteSheet(flags, query, matches, db);
+    const Status st = WriteSheet(flags, query, matches, result->fit, db);
     if (!st.ok()) return Fail("query", st);
   }
 
   if (flags.as_json) {
-    const json doc = ResultJson(flags, query, matches, stats, db);
+    const json doc = ResultJson(flags, query, matches, result->fit, stats, db);
     const Status valid = ValidateJson(doc, "query_result.schema.json", "query result");
     // A bug, but never print JSON that breaks the schema.
     if (!valid.ok()) return Fail("query", valid);
     std::printf("%s\n", doc.dump(2).c_str());
   } else {
     PrintTable(matches, query, stats, db);
+    PrintFit(result->fit);
     if (!flags.sheet.empty()) std::printf("\ncontact sheet: %s\n", flags.sheet.c_str());
   }
   return kExitOk;

@@ -33,12 +33,13 @@ set(HANDDB_DOORS_format view.h roll.h shard_reader.h shard_writer.h manifest.h v
 set(HANDDB_DOORS_cluster slurm.h)
 set(HANDDB_DOORS_edges edges.h normalise.h exr_io.h view_conversion.h)
 set(HANDDB_DOORS_generator plan/plan.h hand/hand_model.h render/blender.h render/render_driver.h
-                           convert/converter.h testset/testset.h)
+                           convert/converter.h testset/testset.h hand/camera.h
+                           hand/kinematics.h hand/database_rig.h)
 set(HANDDB_DOORS_query database.h searcher.h kdtree.h coarse_bound.h index/view_index.h
                        index/embedding.h)
 set(HANDDB_DOORS_nn tflite.h)
 set(HANDDB_DOORS_photo image_edges.h hand_landmarks.h)
-set(HANDDB_DOORS_pose landmark_rank.h match_json.h picture_search.h sheet.h)
+set(HANDDB_DOORS_pose fit.h fit_matches.h landmark_rank.h match_json.h picture_search.h sheet.h)
 set(HANDDB_DOORS_evaluate evaluate.h metrics.h plots.h parts.h photos.h photo_keypoints.h)
 set(HANDDB_MODULES base nn format cluster edges generator query photo pose evaluate)
 

@@ -274,6 +274,7 @@ bool PoseFitOptions::Check() const {
   CHECK_OPTION(std::isfinite(joint_prior_sigma) && joint_prior_sigma > 0);
   CHECK_OPTION(std::isfinite(rotation_prior_sigma) && rotation_prior_sigma > 0);
   CHECK_OPTION_GE(max_iterations, 1);
+  CHECK_OPTION(function_tolerance > 0 && function_tolerance < 1);
   CHECK_OPTION_GE(num_threads, 1);
   return true;
 }
@@ -378,6 +379,7 @@ Result<PoseFit> FitPose(const HandRig& rig,
   ceres::Solver::Options solver;
   solver.linear_solver_type = ceres::DENSE_QR;
   solver.max_num_iterations = options.max_iterations;
+  solver.function_tolerance = options.function_tolerance;
   solver.num_threads = options.num_threads;
   solver.logging_type = ceres::SILENT;
   solver.minimizer_progress_to_stdout = false;

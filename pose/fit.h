@@ -37,6 +37,8 @@ struct PoseFitOptions {
   double rotation_prior_sigma = 0.35;
   // Caps the work of one fit (each iteration is a few dozen microseconds).
   int max_iterations = 50;
+  // Ceres' stop on the cost's relative decrease in one step (its function_tolerance).
+  double function_tolerance = 1e-6;
   int num_threads = 1;
   bool Check() const;
 };

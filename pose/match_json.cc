@@ -58,4 +58,35 @@ nlohmann::json MatchToJson(const Match& match, int rank, const QueryEdges* query
   return j;
 }
 
+nlohmann::json MatchFitToJson(const MatchFit& mf) {
+  using json = nlohmann::json;
+  if (!mf.fitted) return {{"fitted", false}, {"reason", mf.reason}};
+  const PoseFit& f = mf.fit;
+  json rotation = json::array();
+  for (const Vec3d& row : f.cam_from_hand) rotation.push_back({row[0], row[1], row[2]});
+  json kps = json::array();
+  for (const auto& k : mf.keypoints_3d) kps.push_back({k[0], k[1], k[2]});
+  json kps_image = json::array();
+  for (const Point2f& p : mf.keypoints_image_px) kps_image.push_back({p.x, p.y});
+  return {{"fitted", true},
+          {"converged", f.converged},
+          {"termination", f.termination},
+          {"iterations", f.iterations},
+          {"joint_angles", f.joints},
+          {"view_direction", f.view_direction},
+          {"camera_roll", f.roll},
+          {"cam_from_hand", rotation},
+          {"scale", f.scale},
+          {"shift", f.shift},
+          {"keypoints", kps},
+          {"keypoints_image_px", kps_image},
+          {"landmark_error_px",
+           {{"start", mf.landmark_error_start_px}, {"fitted", mf.landmark_error_px}}},
+          {"cost",
+           {{"initial", f.initial_cost},
+            {"final", f.final_cost},
+            {"landmarks", f.landmark_cost},
+            {"prior", f.prior_cost}}}};
+}
+
 }  // namespace handdb

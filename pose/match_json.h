@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include "photo/image_edges.h"
+#include "pose/fit_matches.h"
 #include "query/searcher.h"
 
 namespace handdb {
@@ -17,5 +18,9 @@ double RollDegrees0To360(double roll_rad);
 // landmark_error when landmarks re-ranked it, and keypoints_image_px (its keypoints in the
 // query picture's pixels) when `query` is given (null: a query of bare points, no picture).
 nlohmann::json MatchToJson(const Match& match, int rank, const QueryEdges* query);
+
+// A match's pose fit (pose/fit_matches.h): the "fit" object of its match. Unfitted: fitted false
+// and the reason; fitted: the fitted joints, camera, keypoints, costs and the solver's verdict.
+nlohmann::json MatchFitToJson(const MatchFit& fit);
 
 }  // namespace handdb

@@ -8,6 +8,7 @@ bool PictureSearchOptions::Check() const {
   CHECK_OPTION(picture.Check());
   CHECK_OPTION(search.Check());
   CHECK_OPTION(landmark_rank.Check());
+  CHECK_OPTION(fit.Check());
   return true;
 }
 
@@ -28,6 +29,12 @@ Result<PictureMatches> SearchPicture(const Searcher& searcher,
   if (!matches.ok()) return matches.status();
   out.matches = std::move(matches).value();
   out.landmarks_used = UsesLandmarks(out.evidence, options.landmark_rank);
+  if (options.rig != nullptr) {
+    auto fit = FitPictureMatches(
+        *options.rig, searcher.database(), out.evidence, out.matches, options.fit);
+    if (!fit.ok()) return fit.status();
+    out.fit = std::move(fit).value();
+  }
   return out;
 }
 

@@ -5,10 +5,13 @@
 #pragma once
 
 #include <filesystem>
+#include <memory>
 #include <vector>
 
 #include "base/status.h"
+#include "generator/hand/database_rig.h"
 #include "photo/image_edges.h"
+#include "pose/fit_matches.h"
 #include "pose/landmark_rank.h"
 #include "query/searcher.h"
 
@@ -18,6 +21,10 @@ struct PictureSearchOptions {
   PictureOptions picture;  // how the picture becomes evidence
   SearchOptions search;    // the search of its edges (top_k, hand, per-shape limit, ...)
   LandmarkRankOptions landmark_rank;
+  // The database's rig (LoadDatabaseRig): set, the matches' poses are fitted to the picture
+  // (pose/fit_matches.h); null, the answer is the stored views alone.
+  std::shared_ptr<const DatabaseRig> rig;
+  MatchFitOptions fit;
   bool Check() const;
 };
 
@@ -25,10 +32,11 @@ struct PictureMatches {
   PictureEvidence evidence;
   std::vector<Match> matches;   // best first
   bool landmarks_used = false;  // the landmarks re-ranked the matches (UsesLandmarks)
+  PictureFit fit;               // with PictureSearchOptions::rig: the first matches' fits
 };
 
-// ReadPicture, then SearchEvidence. Errors: kInvalidArgument (options), ReadPicture's and
-// Search's.
+// ReadPicture, then SearchEvidence, then (with options.rig) FitPictureMatches. Errors:
+// kInvalidArgument (options), ReadPicture's and Search's.
 Result<PictureMatches> SearchPicture(const Searcher& searcher,
                                      const std::filesystem::path& picture,
                                      const PictureSearchOptions& options,

@@ -34,6 +34,7 @@
 #include "format/roll.h"
 #include "format/validator.h"
 #include "format/view.h"
+#include "generator/hand/database_rig.h"
 #include "handdb_version.h"
 #include "photo/image_edges.h"
 #include "pose/landmark_rank.h"
@@ -316,6 +317,21 @@ class PyDatabase {
 
   const Database& db() const { return *db_; }
   const fs::path& path() const { return path_; }
+  // The rig the database was rendered with (the pose fit's), read on the first fit under the
+  // GIL, as the searcher is; null when the database carries none and `required` is false.
+  std::shared_ptr<const DatabaseRig> rig(bool required) const {
+    if (!rig_loaded_) {
+      auto rig = LoadDatabaseRig(path_);
+      if (rig.ok()) {
+        rig_ = std::make_shared<const DatabaseRig>(std::move(rig).value());
+      } else {
+        rig_status_ = rig.status();
+      }
+      rig_loaded_ = true;
+    }
+    if (rig_ == nullptr && required) throw StatusError(rig_status_);
+    return rig_;
+  }
   bool verify() const { return verify_; }
   const std::string& search() const { return search_; }
   // The manifest the shards were opened with (Database keeps it): re-reading manifest.json could
@@ -478,6 +494,9 @@ class PyDatabase {
   SearcherOptions searcher_options_;
   std::shared_ptr<const Database> db_;
   mutable std::unique_ptr<Searcher> searcher_;
+  mutable bool rig_loaded_ = false;
+  mutable std::shared_ptr<const DatabaseRig> rig_;
+  mutable Status rig_status_;
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -486,6 +505,7 @@ class PyDatabase {
 struct PyMatch {
   int rank = 0;
   Match match;
+  std::optional<MatchFit> fit;  // a picture search with fit on: this match's pose fit
   std::optional<std::vector<Point2f>> keypoints_image;  // only for an image query
   std::shared_ptr<const QueryEdges> query;              // only for an image query
 };
@@ -498,7 +518,9 @@ py::object KeypointsImage(const PyMatch& m) {
 // The match as `handdb query --json` prints it (schemas/query_result.schema.json, matches[]):
 // the one JSON writer of a match (pose/match_json.h), as plain dicts and lists.
 py::dict MatchDict(const PyMatch& pm) {
-  return JsonToPython(MatchToJson(pm.match, pm.rank, pm.query.get()));
+  json j = MatchToJson(pm.match, pm.rank, pm.query.get());
+  if (pm.fit) j["fit"] = MatchFitToJson(*pm.fit);
+  return JsonToPython(j);
 }
 
 py::dict StatsDict(const SearchStats& st, const Database& db) {
@@ -556,6 +578,8 @@ py::object Search(const PyDatabase& self,
                   bool return_stats,
                   int per_shape,
                   double landmark_weight,
+                  const std::string& fit,
+                  int fit_matches,
                   const py::kwargs& edge_kwargs) {
   SearchOptions options;
   options.top_k = top_k;
@@ -578,6 +602,10 @@ py::object Search(const PyDatabase& self,
   LandmarkRankOptions landmark_rank;
   landmark_rank.weight = landmark_weight;
   if (!landmark_rank.Check()) throw py::value_error("landmark_weight must be >= 0");
+  if (fit != "auto" && fit != "on" && fit != "off") {
+    throw py::value_error("fit must be auto, on or off");
+  }
+  if (fit_matches < 1) throw py::value_error("fit_matches must be >= 1");
 
   std::optional<PictureEvidence> picture;
   std::vector<Point2f> points;
@@ -593,6 +621,8 @@ py::object Search(const PyDatabase& self,
     picture_search.picture = PictureOptionsFromKwargs(edge_kwargs);
     picture_search.search = options;
     picture_search.landmark_rank = landmark_rank;
+    picture_search.fit.max_matches = fit_matches;
+    if (fit != "off") picture_search.rig = self.rig(fit == "on");
   } else {
     if (edge_kwargs.size()) throw py::type_error("image options given with a points query");
     points = QueryPoints(py::array::ensure(query));
@@ -601,6 +631,7 @@ py::object Search(const PyDatabase& self,
   const Searcher& searcher = self.searcher();
   SearchStats stats;
   std::optional<Result<std::vector<Match>>> matches;
+  PictureFit fitted;
   {
     py::gil_scoped_release release;
     if (picture_file) {
@@ -609,6 +640,7 @@ py::object Search(const PyDatabase& self,
       if (!found.ok()) throw StatusError(found.status());
       picture = std::move(found->evidence);
       matches.emplace(std::move(found->matches));
+      fitted = std::move(found->fit);
     } else if (picture) {
       matches.emplace(SearchEvidence(searcher, *picture, options, landmark_rank, &stats));
     } else {
@@ -629,6 +661,9 @@ py::object Search(const PyDatabase& self,
       for (const auto& kp : m.label.keypoints) {
         pm.keypoints_image->push_back(query_edges->ImageFromNormalised({kp[0], kp[1]}));
       }
+    }
+    if (static_cast<size_t>(pm.rank - 1) < fitted.fits.size()) {
+      pm.fit = std::move(fitted.fits[pm.rank - 1]);
     }
     pm.match = std::move(m);
     out.append(py::cast(std::move(pm)));
@@ -966,6 +1001,15 @@ void BindMatch(py::module_& m) {
           "label",
           [](const PyMatch& p) { return LabelDict(p.match.label); },
           "The rolled label as a dict of numbers and numpy arrays.")
+      .def_property_readonly(
+          "fit",
+          [](const PyMatch& p) -> py::object {
+            if (!p.fit) return py::none();
+            return JsonToPython(MatchFitToJson(*p.fit));
+          },
+          "The pose fit from this match (a dict as `handdb query --json`'s matches[].fit: "
+          "fitted, joint_angles, cam_from_hand, keypoints, keypoints_image_px, cost, ...), or "
+          "None when no fit ran (fit='off', a points query)")
       .def("to_dict", &MatchDict, "The match as in `handdb query --json` (plain lists).")
       .def("__repr__", [](const PyMatch& p) {
         char buf[160];
@@ -1120,6 +1164,8 @@ void BindDatabase(py::module_& m) {
           py::arg("return_stats") = false,
           py::arg("per_shape") = 0,
           py::arg("landmark_weight") = LandmarkRankOptions{}.weight,
+          py::arg("fit") = "auto",
+          py::arg("fit_matches") = MatchFitOptions{}.max_matches,
           "Exact top-k (view, roll) by the chamfer distance (docs/query.md), best first, as a list "
           "of Match; the GIL is released while searching.\n\n"
           "query: an image path (photo, edge image or label EXR: converted like `handdb query "
@@ -1132,7 +1178,9 @@ void BindDatabase(py::module_& m) {
           "top_k nearest shapes, each by its best view, as `handdb query --per-shape 1`). A photo "
           "whose QueryEdges carry hand landmarks (query_edges(landmarks='auto'), the default) is "
           "re-ranked by them as `handdb query` does (Match.score; landmark_weight as "
-          "--landmark-weight).")
+          "--landmark-weight). fit: for an image path, 'auto' (default) fits the pose of the "
+          "first fit_matches matches to the photo's landmarks as `handdb query --fit` does "
+          "(Match.fit; 'on' raises if the database carries no rig, 'off' skips it).")
       .def("__repr__",
            [](const PyDatabase& d) {
              return "<handdb.Database '" + d.path().string() +

@@ -1,0 +1,140 @@
+#include "pose/fit_matches.h"
+
+#include <cmath>
+#include <sstream>
+#include <utility>
+
+namespace handdb {
+namespace {
+
+// The picture's landmarks in its normalised frame (the inverse of QueryEdges::ImageFromNormalised),
+// x negated for a left-hand match, whose fit is of the right hand to the mirrored picture.
+NormalisedKeypoints2d LandmarksNormalised(const PictureEvidence& picture, bool mirrored) {
+  const QueryEdges& q = picture.edges;
+  NormalisedKeypoints2d out{};
+  for (int k = 0; k < kNumKeypoints; ++k) {
+    const Point2f& p = picture.landmarks->image_px[k];
+    const double x = (p.x - q.centre_x) * q.scale;
+    const double y = (p.y - q.centre_y) * q.scale;
+    out[k] = {static_cast<float>(mirrored ? -x : x), static_cast<float>(y)};
+  }
+  return out;
+}
+
+double MeanDistance(const NormalisedKeypoints2d& a, const NormalisedKeypoints2d& b) {
+  double sum = 0;
+  for (int k = 0; k < kNumKeypoints; ++k) sum += std::hypot(a[k].x - b[k].x, a[k].y - b[k].y);
+  return sum / kNumKeypoints;
+}
+
+// The depth of each fitted keypoint (normalised px, away from the camera, relative to the look-at
+// point), as ProjectToRenderPx and the normalisation give the labels' keypoints their z.
+std::array<double, kNumKeypoints> Depths(const HandRig& rig, const PoseFit& fit) {
+  std::array<double, kNumKeypoints> z{};
+  for (int k = 0; k < kNumKeypoints; ++k) {
+    double d = 0;
+    for (int c = 0; c < 3; ++c) {
+      d += fit.cam_from_hand[2][c] * (fit.keypoints_in_hand[k][c] - rig.look_at()[c]);
+    }
+    z[k] = fit.scale * d;
+  }
+  return z;
+}
+
+// A right-hand fit to the mirrored picture as the left hand in the picture itself: the camera's
+// x and the hand frame's y change sign (cam_from_hand -> S_x R S_y, a rotation again), and with
+// them the keypoints' x, the view direction's y and the roll, as MirrorLabel does for labels.
+void MirrorFit(PoseFit* fit) {
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) {
+      if ((r == 0) != (c == 1)) fit->cam_from_hand[r][c] = -fit->cam_from_hand[r][c];
+    }
+  }
+  fit->view_direction[1] = -fit->view_direction[1];
+  fit->roll = -fit->roll;
+  fit->shift[0] = -fit->shift[0];
+  for (auto& p : fit->keypoints_normalised) p.x = -p.x;
+}
+
+std::string PresenceReason(float presence, float min_presence) {
+  std::ostringstream s;
+  s.precision(3);
+  s << "landmark presence " << presence << " below " << min_presence;
+  return s.str();
+}
+
+}  // namespace
+
+bool MatchFitOptions::Check() const {
+  if (!fit.Check()) return false;
+  CHECK_OPTION_GE(max_matches, 0);
+  CHECK_OPTION(min_presence >= 0.0f && min_presence <= 1.0f);
+  return true;
+}
+
+Result<PictureFit> FitPictureMatches(const DatabaseRig& rig,
+                                     const Database& database,
+                                     const PictureEvidence& picture,
+                                     const std::vector<Match>& matches,
+                                     const MatchFitOptions& options) {
+  if (!options.Check()) {
+    return Status(StatusCode::kInvalidArgument, "pose fit: options fail their checks (see above)");
+  }
+  PictureFit out;
+  const size_t n = std::min(matches.size(), static_cast<size_t>(options.max_matches));
+  out.fits.resize(n);
+
+  std::string no_evidence;
+  if (!picture.landmarks.has_value() || !(picture.edges.scale > 0)) {
+    no_evidence = "no landmarks";
+  } else if (!(picture.landmarks->presence >= options.min_presence)) {
+    no_evidence = PresenceReason(picture.landmarks->presence, options.min_presence);
+  }
+
+  for (size_t i = 0; i < n; ++i) {
+    const Match& match = matches[i];
+    MatchFit& mf = out.fits[i];
+    if (!no_evidence.empty()) {
+      mf.reason = no_evidence;
+      continue;
+    }
+    const bool mirrored = match.hand == Hand::kLeft;
+    // The stored view's own label (right hand, roll 0): the start of its virtual view (v, r).
+    auto start =
+        PoseFitStartFromLabel(rig.rig, database.label(match.view_id), rig.render, match.roll_angle);
+    if (!start.ok()) {
+      mf.reason = start.status().message();
+      continue;
+    }
+    PoseFitEvidence evidence;
+    evidence.has_landmarks = true;
+    evidence.landmarks_px = LandmarksNormalised(picture, mirrored);
+    evidence.weights.fill(picture.landmarks->presence);
+    auto fit = FitPose(rig.rig, *start, evidence, options.fit);
+    if (!fit.ok()) {
+      mf.reason = fit.status().message();
+      continue;
+    }
+    if (fit->termination == "FAILURE") {  // the answer is the start: the match stands
+      mf.reason = "the solver failed: " + fit->message;
+      continue;
+    }
+    mf.landmark_error_start_px = MeanDistance(start->keypoints_normalised, evidence.landmarks_px);
+    mf.landmark_error_px = MeanDistance(fit->keypoints_normalised, evidence.landmarks_px);
+    const std::array<double, kNumKeypoints> depth = Depths(rig.rig, *fit);
+    mf.fit = std::move(fit).value();
+    if (mirrored) MirrorFit(&mf.fit);
+    for (int k = 0; k < kNumKeypoints; ++k) {
+      const Point2f& p = mf.fit.keypoints_normalised[k];
+      mf.keypoints_3d[k] = {p.x, p.y, depth[k]};
+      mf.keypoints_image_px[k] = picture.edges.ImageFromNormalised(p);
+    }
+    mf.fitted = true;
+    if (out.best < 0 || mf.fit.final_cost < out.fits[out.best].fit.final_cost) {
+      out.best = static_cast<int>(i);
+    }
+  }
+  return out;
+}
+
+}  // namespace handdb
