@@ -2,13 +2,18 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <limits>
 #include <optional>
 #include <system_error>
 
+#include "nn/tflite_graph.h"
 #include "nn/tflite_ops.h"
+#if HANDDB_HAVE_XNNPACK
+#include "nn/tflite_xnnpack.h"
+#endif
 
 namespace handdb {
 namespace {
@@ -19,18 +24,8 @@ enum ModelField { kModelOperatorCodes = 1, kModelSubgraphs = 2, kModelBuffers = 
 enum SubgraphField { kSgTensors = 0, kSgInputs = 1, kSgOutputs = 2, kSgOperators = 3 };
 enum TensorField { kTensorShape = 0, kTensorType = 1, kTensorBuffer = 2 };
 enum OperatorField { kOpOpcode = 0, kOpInputs = 1, kOpOutputs = 2, kOpOptions = 4 };
-enum BuiltinOp {
-  kAdd = 0,
-  kConv2d = 3,
-  kDepthwiseConv2d = 4,
-  kDequantize = 6,
-  kFullyConnected = 9,
-  kLogistic = 14,
-  kMaxPool2d = 17,
-  kReshape = 22,
-  kMean = 40,
-};
-enum TensorType { kFloat32 = 0, kFloat16 = 1, kInt32 = 2 };
+using enum tflite::BuiltinOp;
+using enum tflite::TensorType;
 
 constexpr size_t kMaxFileBytes = size_t{256} << 20;
 constexpr int64_t kMaxTensorElements = int64_t{1} << 26;
@@ -215,33 +210,6 @@ float HalfToFloat(uint16_t h) {
 
 using tflite::Padding;
 using tflite::Window;
-
-struct TfliteModel::Graph {
-  struct Tensor {
-    std::vector<int> shape;
-    int64_t elements = 1;
-    int type = kFloat32;
-    bool constant = false;
-    std::vector<float> values;  // constants (float16 weights converted at load)
-    std::vector<int> ints;      // int32 constants (MEAN's axes, RESHAPE's shape)
-  };
-  struct Op {
-    int code = 0;
-    std::vector<int> in, out;
-    Window win;
-    int activation = 0;
-    bool keep_dims = false;
-  };
-  std::vector<Tensor> tensors;
-  std::vector<Op> ops;
-  std::vector<int> inputs, outputs;
-  std::vector<int> last_use;  // per tensor: the last op that reads it (-1: none / output)
-  // Per non-constant tensor: the workspace buffer it lives in. Buffers are shared by tensors
-  // whose lives do not overlap (the full landmark model needs 4 instead of 166 tensors' worth).
-  std::vector<int> slot;
-  int num_slots = 0;
-  int64_t multiply_adds = 0;
-};
 
 TfliteModel::TfliteModel(std::unique_ptr<Graph> graph) : graph_(std::move(graph)) {}
 TfliteModel::TfliteModel(TfliteModel&&) noexcept = default;
@@ -707,10 +675,23 @@ void PlanBuffers(Graph* g) {
   }
 }
 
+// kDefault resolved: HANDDB_NN_BACKEND when set, else XNNPACK.
+Result<TfliteBackend> ChooseBackend(TfliteBackend asked) {
+  if (asked != TfliteBackend::kDefault) return asked;
+  const char* env = std::getenv("HANDDB_NN_BACKEND");
+  const std::string_view name = env == nullptr ? "" : env;
+  if (name.empty() || name == "xnnpack") return TfliteBackend::kXnnpack;
+  if (name == "portable") return TfliteBackend::kPortable;
+  return Status(StatusCode::kInvalidArgument,
+                "HANDDB_NN_BACKEND=" + std::string(name) + ": expected portable or xnnpack");
+}
+
 }  // namespace
 
-Result<TfliteModel> TfliteModel::Load(const std::filesystem::path& path) {
+Result<TfliteModel> TfliteModel::Load(const std::filesystem::path& path, TfliteBackend backend) {
   const std::string what = path.string();
+  auto chosen = ChooseBackend(backend);
+  if (!chosen.ok()) return chosen.status();
   auto bytes = ReadModelFile(path);
   if (!bytes.ok()) return bytes.status();
   const Flat f(*bytes);
@@ -746,7 +727,19 @@ Result<TfliteModel> TfliteModel::Load(const std::filesystem::path& path) {
   // Plan the buffers Run() uses.
   g->multiply_adds = CountMultiplyAdds(*g);
   PlanBuffers(g.get());
+#if HANDDB_HAVE_XNNPACK
+  // A graph XNNPACK cannot run (an operator or activation it lacks, a CPU without its
+  // instructions) runs on the portable kernels: same results up to rounding, only slower.
+  if (*chosen == TfliteBackend::kXnnpack) {
+    auto executor = tflite::NewXnnpackExecutor(*g);
+    if (executor.ok()) g->executor = std::move(executor).value();
+  }
+#endif
   return TfliteModel(std::move(g));
+}
+
+TfliteBackend TfliteModel::backend() const {
+  return graph_->executor != nullptr ? TfliteBackend::kXnnpack : TfliteBackend::kPortable;
 }
 
 std::vector<std::vector<float>> TfliteModel::Run(std::span<const float> input) const {
@@ -762,6 +755,7 @@ std::vector<std::vector<float>> TfliteModel::Run(std::span<const float> input,
                                                  Workspace* ws) const {
   const Graph& g = *graph_;
   THROW_CHECK_EQ(input.size(), static_cast<size_t>(g.tensors[g.inputs[0]].elements));
+  if (g.executor != nullptr) return g.executor->Run(input);
   ws->slots.resize(g.num_slots);
   auto value = [&](int t) -> const float* {
     return g.tensors[t].constant ? g.tensors[t].values.data() : ws->slots[g.slot[t]].data();
