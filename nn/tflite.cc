@@ -329,8 +329,11 @@ bool CheckOp(const TfliteModel::Graph& g,
 
 using Graph = TfliteModel::Graph;
 
+// The model file's bytes, in huge pages like the weights (nn/huge_pages.h).
+using FileBytes = std::vector<uint8_t, nn::HugePageAllocator<uint8_t>>;
+
 // The whole file, after its size and identifier checks.
-Result<std::vector<uint8_t>> ReadModelFile(const std::filesystem::path& path) {
+Result<FileBytes> ReadModelFile(const std::filesystem::path& path) {
   const std::string what = path.string();
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) {
@@ -343,7 +346,7 @@ Result<std::vector<uint8_t>> ReadModelFile(const std::filesystem::path& path) {
                   what + ": " + std::to_string(file_size) +
                       " bytes, more than a landmark model's 256 MiB limit");
   }
-  std::vector<uint8_t> bytes(file_size);
+  FileBytes bytes(file_size);
   {
     std::ifstream in(path, std::ios::binary);
     if (!in.read(reinterpret_cast<char*>(bytes.data()),
@@ -623,6 +626,24 @@ Status AddOperator(Parse* p, size_t k, Graph::Op op, std::vector<bool>* ready, G
   return Status::Ok();
 }
 
+// The float16 constants only folded DEQUANTIZEs read: their values were copied into the
+// DEQUANTIZEs' outputs, and nothing reads them again (the full landmark model: 11 MB).
+void ReleaseFoldedFloat16(Graph* g) {
+  std::vector<bool> read(g->tensors.size(), false);
+  for (const Graph::Op& op : g->ops) {
+    for (int i : op.in) {
+      if (i >= 0) read[i] = true;
+    }
+  }
+  for (int o : g->outputs) read[o] = true;
+  for (size_t t = 0; t < g->tensors.size(); ++t) {
+    Graph::Tensor& tensor = g->tensors[t];
+    if (tensor.type == kFloat16 && tensor.constant && !read[t]) {
+      decltype(tensor.values)().swap(tensor.values);
+    }
+  }
+}
+
 // Multiply-adds of one Run: convolutions and products, one per output element for the rest.
 int64_t CountMultiplyAdds(const Graph& g) {
   double work = 0;  // double: a hostile graph's counts could overflow int64
@@ -723,6 +744,7 @@ Result<TfliteModel> TfliteModel::Load(const std::filesystem::path& path, TfliteB
                     what + ": graph output tensor " + std::to_string(o) + " is never computed");
     }
   }
+  ReleaseFoldedFloat16(g.get());
 
   // Plan the buffers Run() uses.
   g->multiply_adds = CountMultiplyAdds(*g);

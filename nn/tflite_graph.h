@@ -9,6 +9,7 @@
 #include <span>
 #include <vector>
 
+#include "nn/huge_pages.h"
 #include "nn/tflite.h"
 #include "nn/tflite_ops.h"
 
@@ -45,8 +46,9 @@ struct TfliteModel::Graph {
     int64_t elements = 1;
     int type = tflite::kFloat32;
     bool constant = false;
-    std::vector<float> values;  // constants (float16 weights converted at load)
-    std::vector<int> ints;      // int32 constants (MEAN's axes, RESHAPE's shape)
+    // Constants (float16 weights converted at load), in huge pages (nn/huge_pages.h).
+    std::vector<float, nn::HugePageAllocator<float>> values;
+    std::vector<int> ints;  // int32 constants (MEAN's axes, RESHAPE's shape)
   };
   struct Op {
     int code = 0;

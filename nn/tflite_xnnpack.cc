@@ -3,6 +3,7 @@
 #include <xnnpack.h>
 
 #include <algorithm>
+#include <cstdlib>
 #include <cstring>
 #include <limits>
 #include <mutex>
@@ -14,9 +15,21 @@ namespace {
 
 using XnnGraph = TfliteModel::Graph;
 
+// XNNPACK's aligned blocks (packed weights, the runtimes' activations: 16 MB for the full
+// landmark model) in huge pages, as the model's own weights (nn/huge_pages.h).
+void* Allocate(void*, size_t bytes) { return std::malloc(bytes); }
+void* Reallocate(void*, void* p, size_t bytes) { return std::realloc(p, bytes); }
+void Deallocate(void*, void* p) { std::free(p); }
+void* AllocateAligned(void*, size_t alignment, size_t bytes) {
+  return nn::AllocateHuge(bytes, alignment);
+}
+void DeallocateAligned(void*, void* p) { nn::FreeHuge(p); }
+
 // XNNPACK's own state is set up once per process and kept: its status answers every later call.
 xnn_status InitializeXnnpack() {
-  static const xnn_status status = xnn_initialize(nullptr);
+  static const xnn_allocator allocator = {
+      nullptr, Allocate, Reallocate, Deallocate, AllocateAligned, DeallocateAligned};
+  static const xnn_status status = xnn_initialize(&allocator);
   return status;
 }
 
