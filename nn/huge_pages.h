@@ -4,7 +4,8 @@
 // faults, which on a virtual machine cost ~17 us each (40 MB: 170 ms, against 3.5 ms in huge
 // pages; docs/decisions/0013-landmark-network-on-xnnpack.md). Where the kernel gives no huge
 // pages (transparent_hugepage=never) the mappings are plain ones: slower, the same results.
-// Internal to nn/.
+// Under AddressSanitizer the blocks are plain heap blocks, checked like any other. Internal to
+// nn/.
 #pragma once
 
 #include <cstddef>
