@@ -290,8 +290,10 @@ bool CheckOp(const TfliteModel::Graph& g,
   if (op.code != kDequantize && x->type != kFloat32) return fail("input is not float32");
   auto dims4 = [](const Tensor* t) { return t->shape.size() == 4 && t->shape[0] == 1; };
   // Weights and biases: constants with float values (float32, or float16 converted at load).
-  auto float_constant = [](const Tensor* t) {
-    return t != nullptr && t->constant && static_cast<int64_t>(t->values.size()) == t->elements;
+  auto float_constant = [&g](const Tensor* t) {
+    return t != nullptr && t->constant &&
+           static_cast<int64_t>(g.Values(static_cast<int>(t - g.tensors.data())).size()) ==
+               t->elements;
   };
   switch (op.code) {
     case kConv2d:
@@ -648,32 +650,22 @@ Status AddOperator(Parse* p, size_t k, Graph::Op op, std::vector<bool>* ready, G
   if (!CheckOp(*g, k, op, p)) return p->error;
   (*ready)[op.out[0]] = true;
   if (op.code == kDequantize) {
-    // Constant folding: the weights are converted once, here.
+    // Constant folding: the output takes the float16 tensor's values (converted by
+    // ParseTensor), moved rather than copied (11 MB for the full landmark model) unless another
+    // DEQUANTIZE took them first; readers of either tensor find them through Graph::Values.
     Graph::Tensor& out = g->tensors[op.out[0]];
-    out.values = g->tensors[op.in[0]].values;
+    Graph::Tensor& in = g->tensors[op.in[0]];
+    if (in.folded_into < 0) {
+      out.values = std::move(in.values);
+      in.folded_into = op.out[0];
+    } else {
+      out.values = g->Values(op.in[0]);
+    }
     out.constant = true;
     return Status::Ok();
   }
   g->ops.push_back(std::move(op));
   return Status::Ok();
-}
-
-// The float16 constants only folded DEQUANTIZEs read: their values were copied into the
-// DEQUANTIZEs' outputs, and nothing reads them again (the full landmark model: 11 MB).
-void ReleaseFoldedFloat16(Graph* g) {
-  std::vector<bool> read(g->tensors.size(), false);
-  for (const Graph::Op& op : g->ops) {
-    for (int i : op.in) {
-      if (i >= 0) read[i] = true;
-    }
-  }
-  for (int o : g->outputs) read[o] = true;
-  for (size_t t = 0; t < g->tensors.size(); ++t) {
-    Graph::Tensor& tensor = g->tensors[t];
-    if (tensor.type == kFloat16 && tensor.constant && !read[t]) {
-      decltype(tensor.values)().swap(tensor.values);
-    }
-  }
 }
 
 // Multiply-adds of one Run: convolutions and products, one per output element for the rest.
@@ -776,7 +768,6 @@ Result<TfliteModel> TfliteModel::Load(const std::filesystem::path& path, TfliteB
                     what + ": graph output tensor " + std::to_string(o) + " is never computed");
     }
   }
-  ReleaseFoldedFloat16(g.get());
 
   // Plan the buffers Run() uses.
   g->multiply_adds = CountMultiplyAdds(*g);
@@ -812,7 +803,7 @@ std::vector<std::vector<float>> TfliteModel::Run(std::span<const float> input,
   if (g.executor != nullptr) return g.executor->Run(input);
   ws->slots.resize(g.num_slots);
   auto value = [&](int t) -> const float* {
-    return g.tensors[t].constant ? g.tensors[t].values.data() : ws->slots[g.slot[t]].data();
+    return g.tensors[t].constant ? g.Values(t).data() : ws->slots[g.slot[t]].data();
   };
   ws->slots[g.slot[g.inputs[0]]].assign(input.begin(), input.end());
   for (size_t k = 0; k < g.ops.size(); ++k) {

@@ -46,8 +46,10 @@ struct TfliteModel::Graph {
     int64_t elements = 1;
     int type = tflite::kFloat32;
     bool constant = false;
-    // Constants (float16 weights converted at load), in huge pages (nn/huge_pages.h).
+    // Constants (float16 weights converted at load), in huge pages (nn/huge_pages.h). Read them
+    // through Graph::Values: a folded DEQUANTIZE moves its input's here.
     std::vector<float, nn::HugePageAllocator<float>> values;
+    int folded_into = -1;   // a float16 constant: the DEQUANTIZE output that holds its values
     std::vector<int> ints;  // int32 constants (MEAN's axes, RESHAPE's shape)
   };
   struct Op {
@@ -57,6 +59,13 @@ struct TfliteModel::Graph {
     int activation = 0;
     bool keep_dims = false;
   };
+  // Constant t's float values (followed through the DEQUANTIZEs that moved them: each writes a
+  // tensor written by no earlier operator, so the chain ends).
+  const std::vector<float, nn::HugePageAllocator<float>>& Values(int t) const {
+    while (tensors[t].folded_into >= 0) t = tensors[t].folded_into;
+    return tensors[t].values;
+  }
+
   std::vector<Tensor> tensors;
   std::vector<Op> ops;
   std::vector<int> inputs, outputs;

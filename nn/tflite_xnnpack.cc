@@ -125,7 +125,7 @@ class SubgraphBuilder {
       flags |= XNN_VALUE_FLAG_EXTERNAL_OUTPUT;
     }
     const std::vector<size_t> dims(tensor.shape.begin(), tensor.shape.end());
-    const void* data = tensor.constant ? tensor.values.data() : nullptr;
+    const void* data = tensor.constant ? g_.Values(t).data() : nullptr;
     uint32_t out = 0;
     if (xnn_define_tensor_value(
             sg_.get(), xnn_datatype_fp32, dims.size(), dims.data(), data, id, flags, &out) !=
