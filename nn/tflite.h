@@ -8,7 +8,7 @@
 //
 // The checked graph then runs on one of two backends (TfliteBackend): XNNPACK, the kernels
 // TFLite itself uses (the full landmark model in a few ms on one core; its weights are packed
-// once, at load), or handdb's portable kernels (im2col + Eigen products, tens of times slower),
+// once, at load), or handdb's portable kernels (im2col + Eigen products, ~10x slower),
 // used where XNNPACK is not built in, where the CPU lacks its instructions, or when asked for
 // with HANDDB_NN_BACKEND=portable. The two agree to float rounding (XNNPACK sums in another
 // order), not bit for bit.
