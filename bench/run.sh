@@ -15,6 +15,8 @@
 # Steps (each one's stdout/stderr and wall time go to $HANDDB_BENCH_DIR/out/):
 #   build     Release build of handdb and the bench programs (build-bench/)
 #   format    bench/format_bench: shard write / scan / validate vs raw read() of the same bytes
+#   landmark  bench/landmark_bench on one core: the landmark network on the portable kernels and
+#             on XNNPACK, load + first run (fresh processes) and warm run
 #   render    bench/render_bench.py: Blender renders/s vs one bare Blender start
 #   generate  handdb generate configs/paper.json (26 shapes x 86 directions x 48 rolls)
 #   convert   bench/convert_bench on the paper renders: views/s with 1 and 2 threads
@@ -50,7 +52,7 @@ cd "$here"
 work="${HANDDB_BENCH_DIR:-/tmp/handdb-bench}"
 build="${HANDDB_BENCH_BUILD:-$here/build-bench}"
 jobs="${HANDDB_BENCH_JOBS:-$(nproc)}"
-steps="${HANDDB_BENCH_STEPS:-build format render generate convert query testset evaluate photos index codec report}"
+steps="${HANDDB_BENCH_STEPS:-build format landmark render generate convert query testset evaluate photos index codec report}"
 if [ "${HANDDB_BENCH_PCA_LARGE:-0}" = 1 ] && [ -z "${HANDDB_BENCH_STEPS:-}" ]; then
   steps="$steps pca_large_generate pca_large_query pca_large_evaluate"
 fi
@@ -93,12 +95,16 @@ if want build; then
   cmake -S "$here" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=Release -DHANDDB_BUILD_TESTS=OFF \
     >"$out/build.txt" 2>&1
   cmake --build "$build" -j "$jobs" --target handdb format_bench convert_bench query_bench \
-    index_bench synth_db point_codec_bench \
+    index_bench synth_db point_codec_bench landmark_bench \
     >>"$out/build.txt" 2>&1
 fi
 
 if want format; then
   run format "$build/bench/format_bench" --dir "$work"
+fi
+
+if want landmark; then
+  run landmark taskset -c 0 "$build/bench/landmark_bench"
 fi
 
 if want render; then

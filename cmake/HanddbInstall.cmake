@@ -94,4 +94,5 @@ write_basic_package_version_file(${PROJECT_BINARY_DIR}/generated/handdbConfigVer
   VERSION ${PROJECT_VERSION} COMPATIBILITY SameMinorVersion)
 install(FILES ${PROJECT_BINARY_DIR}/generated/handdbConfig.cmake
               ${PROJECT_BINARY_DIR}/generated/handdbConfigVersion.cmake
+              ${PROJECT_SOURCE_DIR}/cmake/FindXNNPACK.cmake
         DESTINATION ${HANDDB_CMAKE_INSTALL_DIR})

@@ -1,7 +1,7 @@
 // Each operator of the TFLite interpreter against a direct computation: three small models
 // (tests/data/tflite, written by make_models.py there with weights from a fixed formula) run on
 // a fixed input, and the same arithmetic done here with plain loops and TFLite's SAME/VALID
-// padding rule.
+// padding rule. Each on both backends: the portable kernels and XNNPACK (when built in).
 #include "nn/tflite.h"
 
 #include <gtest/gtest.h>
@@ -91,6 +91,30 @@ std::vector<float> Conv(const std::vector<float>& x,
   return y;
 }
 
+// Loads a model on the backend under test. XNNPACK runs every operator of these models: when it
+// is built in, a fallback to the portable kernels is a failure.
+class TfliteOperatorsTest : public ::testing::TestWithParam<TfliteBackend> {
+ protected:
+  Result<TfliteModel> Load(const char* name) {
+    auto m = TfliteModel::Load(ModelPath(name), GetParam());
+    if (m.ok()) {
+#if HANDDB_HAVE_XNNPACK
+      EXPECT_EQ(m->backend(), GetParam());
+#else
+      EXPECT_EQ(m->backend(), TfliteBackend::kPortable);
+#endif
+    }
+    return m;
+  }
+};
+
+INSTANTIATE_TEST_SUITE_P(Backends,
+                         TfliteOperatorsTest,
+                         ::testing::Values(TfliteBackend::kPortable, TfliteBackend::kXnnpack),
+                         [](const ::testing::TestParamInfo<TfliteBackend>& info) {
+                           return info.param == TfliteBackend::kPortable ? "Portable" : "Xnnpack";
+                         });
+
 void ExpectNear(const std::vector<float>& got, const std::vector<float>& want) {
   ASSERT_EQ(got.size(), want.size());
   for (size_t i = 0; i < got.size(); ++i) {
@@ -98,8 +122,8 @@ void ExpectNear(const std::vector<float>& got, const std::vector<float>& want) {
   }
 }
 
-TEST(TfliteOperatorsTest, ConvolutionsWithSamePaddingStridesBiasRelu6AndFloat16Weights) {
-  auto m = TfliteModel::Load(ModelPath("conv.tflite"));
+TEST_P(TfliteOperatorsTest, ConvolutionsWithSamePaddingStridesBiasRelu6AndFloat16Weights) {
+  auto m = Load("conv.tflite");
   ASSERT_TRUE(m.ok()) << m.status().ToString();
   const Shape s{5, 6, 3};
   const std::vector<float> x = Input(5 * 6 * 3);
@@ -114,8 +138,8 @@ TEST(TfliteOperatorsTest, ConvolutionsWithSamePaddingStridesBiasRelu6AndFloat16W
   ExpectNear(out[0], want);
 }
 
-TEST(TfliteOperatorsTest, DepthwiseAddAndLogistic) {
-  auto m = TfliteModel::Load(ModelPath("depthwise.tflite"));
+TEST_P(TfliteOperatorsTest, DepthwiseAddAndLogistic) {
+  auto m = Load("depthwise.tflite");
   ASSERT_TRUE(m.ok()) << m.status().ToString();
   const Shape s{5, 5, 3};
   const std::vector<float> x = Input(5 * 5 * 3);
@@ -130,8 +154,8 @@ TEST(TfliteOperatorsTest, DepthwiseAddAndLogistic) {
   ExpectNear(m->Run(x, ws.get())[0], want);
 }
 
-TEST(TfliteOperatorsTest, MaxPoolMeanAndFullyConnected) {
-  auto m = TfliteModel::Load(ModelPath("head.tflite"));
+TEST_P(TfliteOperatorsTest, MaxPoolMeanAndFullyConnected) {
+  auto m = Load("head.tflite");
   ASSERT_TRUE(m.ok()) << m.status().ToString();
   const Shape s{4, 4, 3};
   const std::vector<float> x = Input(4 * 4 * 3);
@@ -161,13 +185,13 @@ TEST(TfliteOperatorsTest, MaxPoolMeanAndFullyConnected) {
 
 // Inputs the fuzzer found (tests/fuzz/tflite_fuzzer.cc): each was read out of bounds before the
 // check that now refuses it.
-TEST(TfliteOperatorsTest, RefusesWhatItCannotRunSafely) {
-  auto int32_weights = TfliteModel::Load(ModelPath("bad_int32_weights.tflite"));
+TEST_P(TfliteOperatorsTest, RefusesWhatItCannotRunSafely) {
+  auto int32_weights = Load("bad_int32_weights.tflite");
   ASSERT_FALSE(int32_weights.ok());
   EXPECT_EQ(int32_weights.status().code(), StatusCode::kSizeMismatch);
   EXPECT_NE(int32_weights.status().message().find("FULLY_CONNECTED"), std::string::npos)
       << int32_weights.status().ToString();
-  auto no_output = TfliteModel::Load(ModelPath("bad_no_output.tflite"));
+  auto no_output = Load("bad_no_output.tflite");
   ASSERT_FALSE(no_output.ok());
   EXPECT_EQ(no_output.status().code(), StatusCode::kBadLayout);
   EXPECT_NE(no_output.status().message().find(
