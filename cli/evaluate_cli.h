@@ -32,6 +32,7 @@ struct EvaluateFlags {
   std::string distance = "rms";
   std::string roll_compare = "aligned";
   std::string search = "auto";  // IndexUse, as `handdb query --search`
+  std::string fit = "auto";     // as `handdb query --fit`: photo queries only
   EvaluationOptions options;
   // --input photo: the installed landmark model (ResolveLandmarker("auto")), as `handdb query`
   // uses by default; a test set's photos take the photo path's defaults.
@@ -46,6 +47,9 @@ struct EvaluateFlags {
   std::vector<std::string> Args() const;
   // How the searcher opens DB: the search threads, and the index as --search says.
   SearcherOptions searcher_options() const;
+  // --fit: loads DB_DIR's rig into options.fit_rig for photo queries (auto: when it has one).
+  // False (message printed) when --fit on finds none.
+  bool LoadFit(const std::filesystem::path& db_dir, const std::string& cmd, bool quiet);
 };
 
 // Test view -> query edge points: the clean label render through the database's own conversion

@@ -21,6 +21,7 @@
 #include "edges/view_conversion.h"
 #include "evaluate/evaluate.h"
 #include "format/manifest.h"
+#include "generator/hand/database_rig.h"
 #include "generator/testset/testset.h"
 #include "photo/image_edges.h"
 #include "query/searcher.h"
@@ -241,6 +242,24 @@ bool EvaluateFlags::Finish(const std::string& cmd, bool quiet) {
   return true;
 }
 
+bool EvaluateFlags::LoadFit(const fs::path& db_dir, const std::string& cmd, bool quiet) {
+  if (fit == "off" || query_input() != QueryInput::kPhoto) return true;
+  auto rig = LoadDatabaseRig(db_dir);
+  if (rig.ok()) {
+    options.fit_rig = std::make_shared<const DatabaseRig>(std::move(rig).value());
+    return true;
+  }
+  if (fit == "on") {
+    std::fprintf(stderr, "handdb %s: %s\n", cmd.c_str(), rig.status().message().c_str());
+    return false;
+  }
+  if (!quiet) {
+    std::fprintf(
+        stderr, "handdb %s: no pose fit: %s\n", cmd.c_str(), rig.status().message().c_str());
+  }
+  return true;
+}
+
 std::vector<std::string> EvaluateFlags::Args() const {
   auto exact = [](double v) {
     char buf[40];
@@ -250,6 +269,8 @@ std::vector<std::string> EvaluateFlags::Args() const {
   const CorrectnessOptions& c = options.correctness;
   std::vector<std::string> args = {"--input",
                                    input,
+                                   "--fit",
+                                   fit,
                                    "--d",
                                    exact(c.max_joint_distance_deg),
                                    "--distance",
@@ -430,6 +451,7 @@ int RunEvaluate(int argc, char** argv) {
   auto searcher = Searcher::Open(db_dir, flags.searcher_options());
   if (!searcher.ok()) return Fail("evaluate", searcher.status());
   WarnIfTestSetMatchesDatabase(db_dir, *testset);
+  if (!flags.LoadFit(db_dir, "evaluate", quiet)) return kExitError;
 
   const QueryInput query_input = flags.query_input();
   auto points_fn =

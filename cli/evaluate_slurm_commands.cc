@@ -354,6 +354,7 @@ int UnitEvaluateCommands::Run() {
   if (!testset.ok()) return Fail(cmd, testset.status());
   auto searcher = Searcher::Open(db_, flags_.searcher_options());
   if (!searcher.ok()) return Fail(cmd, searcher.status());
+  if (!merge && !flags_.LoadFit(db_, cmd_name, quiet_)) return kExitError;
   auto fp = ComputeEvaluationFingerprint(db_, *testset, input, options, tasks_);
   if (!fp.ok()) return Fail(cmd, fp.status());
   const std::vector<uint32_t> selected = SelectTestViews(*testset, options);

@@ -205,6 +205,7 @@ bool EvaluationOptions::Check() const {
   CHECK_OPTION(num_threads == -1 || num_threads >= 1);
   CHECK_OPTION_GE(max_views, 0);
   CHECK_OPTION_GE(stride, 1);
+  CHECK_OPTION(fit.Check());
   for (double d : d_grid_deg) CHECK_OPTION_GE(d, 0.0);
   for (int64_t n : success_n) {
     CHECK_OPTION_GE(n, 1);
@@ -447,6 +448,20 @@ Result<std::vector<ViewOutcome>> EvaluateViews(const Searcher& searcher,
             std::min(best10, KeypointError(view.truth.keypoints, (*matches)[r].label.keypoints));
       }
       out.best10_keypoint_error = best10;
+      if (options.fit_rig != nullptr && query->picture) {
+        auto fit = FitPictureMatches(
+            *options.fit_rig, searcher.database(), *query->picture, *matches, options.fit);
+        if (!fit.ok()) return fit.status();
+        out.fitted_keypoint_error = out.top1_keypoint_error;
+        if (fit->best >= 0) {
+          std::array<std::array<float, 3>, kNumKeypoints> kps{};
+          const auto& fitted = fit->fits[fit->best].keypoints_3d;
+          for (int j = 0; j < kNumKeypoints; ++j) {
+            for (int c = 0; c < 3; ++c) kps[j][c] = static_cast<float>(fitted[j][c]);
+          }
+          out.fitted_keypoint_error = KeypointError(view.truth.keypoints, kps);
+        }
+      }
     }
     out.query_points = std::move(query->points);
     outcomes.push_back(std::move(out));

@@ -30,7 +30,9 @@
 #include "base/status.h"
 #include "evaluate/metrics.h"
 #include "format/roll.h"
+#include "generator/hand/database_rig.h"
 #include "photo/image_edges.h"
+#include "pose/fit_matches.h"
 #include "pose/landmark_rank.h"
 #include "query/searcher.h"
 
@@ -101,6 +103,11 @@ struct EvaluationOptions {
   // The floor of the keypoint error: per test view, the best (view, roll) of the whole database
   // (KeypointFloorIndex; on the paper database about a millisecond per test view).
   bool keypoint_floor = true;
+  // The database's rig: set, a photo query's matches are fitted to its landmarks as `handdb
+  // query --fit` does, and ViewOutcome::fitted_keypoint_error is the answer's error after the
+  // fit (the chosen fit, or the top match where nothing was fitted).
+  std::shared_ptr<const DatabaseRig> fit_rig;
+  MatchFitOptions fit;
   bool Check() const;
 };
 
