@@ -10,6 +10,7 @@
 #include <string_view>
 #include <system_error>
 #include <utility>
+#include <vector>
 
 #include "base/image_file.h"
 #include "edges/edges.h"
@@ -235,13 +236,16 @@ double RegionDiameter(const cv::Mat& region) {
 
 struct BorderRun {
   int length = 0;        // px along the border, bridged gaps included
-  cv::Point2d centroid;  // of the run's region pixels (pixel centres at +0.5)
+  int contact = 0;       // of them, px where the contact mask is set
+  cv::Point2d centroid;  // of those contact px (pixel centres at +0.5)
 };
 
 // Runs of the region's pixels along the picture's border, walked once around it (top left to
 // right, right side down, bottom right to left, left side up); runs separated by fewer than
-// `gap` background pixels are one run (a dark band across a forearm, a strap).
-std::vector<BorderRun> BorderRuns(const cv::Mat& region, int gap) {
+// `gap` background pixels are one run (a dark band across a forearm, a strap). A run's centroid
+// and contact count are those of its pixels set in `contact` (the region itself, or the region
+// a border reach was taken of).
+std::vector<BorderRun> BorderRuns(const cv::Mat& region, int gap, const cv::Mat& contact) {
   const int w = region.cols;
   const int h = region.rows;
   std::vector<cv::Point> ring;
@@ -260,18 +264,22 @@ std::vector<BorderRun> BorderRuns(const cv::Mat& region, int gap) {
   }
   std::vector<BorderRun> runs;
   BorderRun run;
-  int pixels = 0, bg = 0;
+  int bg = 0;
   const auto close_run = [&] {
     if (run.length > 0) {
-      run.centroid /= std::max(1, pixels);
+      run.centroid /= std::max(1, run.contact);
       runs.push_back(run);
     }
     run = {};
-    pixels = 0;
+  };
+  const auto add = [&](int i) {
+    ++run.length;
+    if (contact.at<uint8_t>(ring[i]) == 0) return;
+    ++run.contact;
+    run.centroid += cv::Point2d(ring[i].x + 0.5, ring[i].y + 0.5);
   };
   if (start < 0) {
-    for (int i = 0; i < n; ++i) run.centroid += cv::Point2d(ring[i].x + 0.5, ring[i].y + 0.5);
-    run.length = pixels = n;
+    for (int i = 0; i < n; ++i) add(i);
     close_run();
     return runs;
   }
@@ -284,15 +292,37 @@ std::vector<BorderRun> BorderRuns(const cv::Mat& region, int gap) {
         close_run();
       }
       bg = 0;
-      ++run.length;
-      ++pixels;
-      run.centroid += cv::Point2d(ring[i].x + 0.5, ring[i].y + 0.5);
+      add(i);
     } else if (run.length > 0) {
       ++bg;
     }
   }
   close_run();
   return runs;
+}
+
+std::vector<BorderRun> BorderRuns(const cv::Mat& region, int gap) {
+  return BorderRuns(region, gap, region);
+}
+
+// The region seen from the picture's border through a strip `depth` px deep: a border pixel is
+// set when the region has a pixel within `depth` of it, straight inwards.
+cv::Mat BorderReach(const cv::Mat& region, int depth) {
+  const int w = region.cols;
+  const int h = region.rows;
+  cv::Mat reach = cv::Mat::zeros(h, w, CV_8U);
+  const int dy = std::clamp(depth, 1, h);
+  const int dx = std::clamp(depth, 1, w);
+  const auto any = [&](cv::Rect r) { return cv::countNonZero(region(r)) > 0 ? 255 : 0; };
+  for (int x = 0; x < w; ++x) {
+    reach.at<uint8_t>(0, x) |= any({x, 0, 1, dy});
+    reach.at<uint8_t>(h - 1, x) |= any({x, h - dy, 1, dy});
+  }
+  for (int y = 0; y < h; ++y) {
+    reach.at<uint8_t>(y, 0) |= any({0, y, dx, 1});
+    reach.at<uint8_t>(y, w - 1) |= any({w - dx, y, dx, 1});
+  }
+  return reach;
 }
 
 struct WristCut {
@@ -307,6 +337,12 @@ struct WristCut {
 // A wrist is 1.2-2 palm radii wide (a fist has the largest radius); one finger is about half a
 // radius to one radius (fingers leaving the picture side by side are separate runs).
 constexpr double kArmRadii = 0.8;
+// How deep a strip along the border the arm's run is seen through, in palm radii. A bracelet, a
+// strap or a watch band across the forearm where it leaves the picture (or a speckled skin edge
+// there) breaks the region's own run along the border into pieces too short for an arm, but the
+// arm lies just inside them; the notch between two fingers that leave the picture is deeper than
+// a palm radius, so their runs stay apart.
+constexpr double kArmReachRadii = 0.5;
 // Where it leaves the picture after the wrist cut, an arm's run along the border is at most 2.15
 // palm radii on the 200 development photos and 2.04 on 745 photo-like renders with a forearm;
 // the rest of a longer run is hand cut by the border.
@@ -314,9 +350,10 @@ constexpr double kArmRunRadii = 2.5;
 
 // The palm is the region's largest inscribed circle (distance-transform maximum; the picture's
 // border counts as background, so an arm running out of the picture does not look wide). The arm
-// is the region's widest run along the picture's border, if it is at least kArmRadii palm radii
-// long (fingers that leave the picture are narrower, and are not an arm); it leaves in the
-// direction from the palm centre to that run's centroid. Everything farther than `radii` palm
+// is the region's widest run along the picture's border as seen through a strip kArmReachRadii
+// deep, if it is at least kArmRadii palm radii long (fingers that leave the picture are narrower,
+// and are not an arm); it leaves in the direction from the palm centre to the centroid of the
+// region's own border pixels in that run. Everything farther than `radii` palm
 // radii from the palm centre along that direction is the forearm and is removed. A region that
 // does not touch the border, or only with narrow runs, is left alone.
 WristCut CutForearm(cv::Mat* region, double radii) {
@@ -333,7 +370,11 @@ WristCut CutForearm(cv::Mat* region, double radii) {
   out.palm_radius = max_dt;
   const int w = region->cols;
   const int h = region->rows;
-  const std::vector<BorderRun> runs = BorderRuns(*region, 1);
+  const int depth = std::max(1, static_cast<int>(std::lround(kArmReachRadii * out.palm_radius)));
+  std::vector<BorderRun> runs = BorderRuns(BorderReach(*region, depth), 1, *region);
+  // Only the region's own border contact leaves the picture: a run that merely comes near it is
+  // no arm.
+  std::erase_if(runs, [](const BorderRun& r) { return r.contact == 0; });
   const auto widest =
       std::max_element(runs.begin(), runs.end(), [](const BorderRun& a, const BorderRun& b) {
         return a.length < b.length;
@@ -488,7 +529,14 @@ Result<FoundHand> FindHand(const std::string& what,
   cv::Mat small = cand;
   if (!keep.empty()) small = cand & keep;
   if (out.find_scale < 1) {
-    cv::resize(small, small, cv::Size(), out.find_scale, out.find_scale, cv::INTER_AREA);
+    // A long thin picture would round its short side to no pixels: one at least.
+    const int cols = cvRound(cand.cols * out.find_scale),
+              rows = cvRound(cand.rows * out.find_scale);
+    if (cols > 0 && rows > 0) {
+      cv::resize(small, small, cv::Size(), out.find_scale, out.find_scale, cv::INTER_AREA);
+    } else {
+      cv::resize(small, small, {std::max(1, cols), std::max(1, rows)}, 0, 0, cv::INTER_AREA);
+    }
     small = small > 127;
   }
   if (!use_mask) CleanMask(&small, 1.0);
@@ -765,6 +813,15 @@ Result<QueryEdges> FromPhoto(const std::filesystem::path& path,
                              cv::Size source,
                              const ImageEdgeOptions& options) {
   const std::string what = path.string();
+  // The clean-up, the crop and Canny need some room: a picture a few px high or wide is a strip,
+  // not a photo of a hand.
+  constexpr int kMinPhotoSide = 16;
+  if (source.width < kMinPhotoSide || source.height < kMinPhotoSide) {
+    return Status(StatusCode::kNoHand,
+                  what + ": a " + std::to_string(source.width) + "x" +
+                      std::to_string(source.height) + " picture is too thin to hold a hand (" +
+                      std::to_string(kMinPhotoSide) + " px each way at least)");
+  }
   const bool use_mask = !options.mask.empty();
   auto cand = HandCandidates(what, bgr, source, options);
   if (!cand.ok()) return cand.status();

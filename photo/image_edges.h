@@ -82,7 +82,8 @@ struct ImageEdgeOptions {
   // is cut off along the line across it `wrist_cut_radii` palm radii from the palm centre (the
   // largest inscribed circle), at right angles to the way the arm leaves. The database's hand
   // ends ~1.8 radii from its palm centre (its short wrist stub); 2.6 cuts only arms clearly
-  // longer than that. The arm is the widest run of the region along the picture's border if it
+  // longer than that. The arm is the widest run of the region along the picture's border (seen
+  // through a strip half a palm radius deep, so a band across the forearm does not break it) if it
   // is at least 0.8 palm radii long; narrower runs are fingers leaving the picture (and the
   // picture is refused as a cut hand). Failure case: four fingers held together that leave the
   // picture look like an arm. false: keep the whole region.
