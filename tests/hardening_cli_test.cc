@@ -305,7 +305,7 @@ TEST_F(HardeningCli, BadPhotoAndSearchFlagsAreOneLineNamingTheFlag) {
   };
   for (const auto& [model, problem] : models) {
     const CliRun r = Handdb(query + "--landmarks " + model.string());
-    EXPECT_EQ(r.code, 2) << model;
+    EXPECT_EQ(r.code, 1) << model;  // a bad file, not bad usage
     EXPECT_EQ(r.err, "handdb query: --landmarks: " + model.string() + ": " + problem + "\n");
   }
 }
@@ -788,6 +788,71 @@ TEST_F(HardeningCli, StdoutOnFullDiskNamesNoSpaceLeft) {
     EXPECT_EQ(full.code, 1) << full.err;
     EXPECT_EQ(full.err, "handdb " + name + ": cannot write to stdout: No space left on device\n");
   }
+}
+
+}  // namespace
+}  // namespace handdb
+
+namespace handdb {
+namespace {
+
+// A landmark model that cannot be loaded is a bad file, not bad usage: exit 1 and one line naming
+// the file and the problem, whatever is wrong with it; a directory, a FIFO or a device is named
+// as what it is, not as a missing file (and a FIFO is not opened, so nothing blocks).
+TEST_F(HardeningCli, BadLandmarkModelsAreExitOneNamingTheFile) {
+  const std::string query = "query " + Db() + " " + (*dir_ / "q.pgm").string() + " --landmarks ";
+  const fs::path real = fs::path(HANDDB_SOURCE_DIR) / "third_party" / "assets" / "mediapipe-hands" /
+                        "hand_landmark_full.tflite";
+  const fs::path models = *dir_ / "models";
+  fs::create_directories(models / "a-directory.tflite");
+  const fs::path fifo = models / "fifo.tflite";
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0) << std::strerror(errno);
+  std::ofstream(models / "empty.tflite");
+  std::string random(4096, '\0');
+  for (size_t i = 0; i < random.size(); ++i) random[i] = static_cast<char>((i * 2654435761u) >> 13);
+  std::ofstream(models / "random.tflite", std::ios::binary) << random;
+  // The TFL3 identifier after a root offset that points far outside the file.
+  const std::string header = std::string("\xfc\xff\xff\x0fTFL3", 8) + std::string(56, '\xff');
+  std::ofstream(models / "header.tflite", std::ios::binary) << header;
+  std::vector<std::pair<fs::path, std::string>> cases = {
+      {models / "a-directory.tflite", "a directory, not a model file"},
+      {fifo, "a FIFO, not a model file"},
+      {"/dev/zero", "a device, not a model file"},
+      {models / "empty.tflite", ""},
+      {models / "random.tflite", ""},
+      {models / "header.tflite", ""},
+  };
+  if (fs::exists(real)) {
+    std::ifstream in(real, std::ios::binary);
+    const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    for (const size_t keep : {size_t{16}, size_t{1000}, bytes.size() / 2, bytes.size() - 1}) {
+      const fs::path cut = models / ("cut-" + std::to_string(keep) + ".tflite");
+      std::ofstream(cut, std::ios::binary) << bytes.substr(0, keep);
+      cases.emplace_back(cut, "");
+    }
+  }
+  for (const auto& [model, problem] : cases) {
+    const CliRun r = Handdb(query + model.string());
+    EXPECT_EQ(r.code, 1) << model << ": " << r.err;
+    EXPECT_EQ(Lines(r.err), 1) << r.err;
+    const std::string prefix = "handdb query: --landmarks: " + model.string() + ": ";
+    EXPECT_EQ(r.err.rfind(prefix, 0), 0u) << r.err;
+    if (!problem.empty()) EXPECT_EQ(r.err, prefix + problem + "\n");
+  }
+}
+
+// A flag CLI11 rejects is bad usage in one line naming the command and the flag (exit 2), like
+// every other error, not CLI11's two lines without the command.
+TEST_F(HardeningCli, RejectedFlagsAreOneLineNamingTheCommand) {
+  const std::string query = "query " + Db() + " " + (*dir_ / "q.pgm").string() + " ";
+  for (const std::string flags : {"--top 0", "--top x", "--per-shape -1", "--no-such-flag"}) {
+    const CliRun r = Handdb(query + flags);
+    EXPECT_EQ(r.code, 2) << flags;
+    EXPECT_EQ(Lines(r.err), 1) << r.err;
+    EXPECT_EQ(r.err.rfind("handdb query: ", 0), 0u) << r.err;
+  }
+  EXPECT_EQ(Handdb(query + "--top 0").err.rfind("handdb query: --top: ", 0), 0u);
+  EXPECT_EQ(Handdb("query --help").code, 0);
 }
 
 }  // namespace
