@@ -134,6 +134,18 @@ struct PyQueryEdges {
   PictureEvidence picture;
 };
 
+// A path argument (str, bytes or os.PathLike). No file name holds a NUL character: that is a bad
+// value (ValueError naming the argument), not a failed cast.
+fs::path PathArg(py::handle value, const char* name) {
+  py::object fspath = py::module_::import("os").attr("fspath")(value);
+  const std::string text = py::isinstance<py::bytes>(fspath) ? fspath.cast<std::string>()
+                                                             : py::str(fspath).cast<std::string>();
+  if (text.find('\0') != std::string::npos) {
+    throw py::value_error(std::string(name) + ": a path may not contain a NUL character");
+  }
+  return fs::path(text);
+}
+
 py::array_t<int32_t> PixelArray(const std::vector<EdgePixelXY>& px) {
   py::array_t<int32_t> out({static_cast<py::ssize_t>(px.size()), py::ssize_t{2}});
   int32_t* p = out.mutable_data();
@@ -223,7 +235,7 @@ PictureOptions PictureOptionsFromKwargs(const py::kwargs& kw) {
       if (!kind.ok()) throw py::value_error("input must be auto, photo, edges or labels");
       o.kind = *kind;
     } else if (key == "mask") {
-      if (!value.is_none()) o.mask = py::cast<fs::path>(value);
+      if (!value.is_none()) o.mask = PathArg(value, "mask");
     } else if (key == "roi") {
       if (!value.is_none()) {
         const auto v = IntList(value, 4, "roi (x, y, w, h)");
@@ -575,6 +587,14 @@ py::object Search(const PyDatabase& self,
   if (threads == 0 || threads < -1 || threads > MaxNumThreads()) {
     throw py::value_error("threads must be -1 or 1.." + std::to_string(MaxNumThreads()));
   }
+  // The grids the distance transform supports (as `handdb query --dt-cell` checks): one message
+  // naming the argument, not the option check's source lines.
+  bool dt_cell_ok = false;
+  for (int k = 0; k <= 4; ++k) dt_cell_ok |= dt_cell_px == 1.0f / static_cast<float>(1 << k);
+  if (!dt_cell_ok) {
+    throw py::value_error("dt_cell_px " + py::str(py::float_(dt_cell_px)).cast<std::string>() +
+                          ": must be 1, 0.5, 0.25, 0.125 or 0.0625 (px)");
+  }
   LandmarkRankOptions landmark_rank;
   landmark_rank.weight = landmark_weight;
   if (!landmark_rank.Check()) throw py::value_error("landmark_weight must be >= 0");
@@ -589,7 +609,7 @@ py::object Search(const PyDatabase& self,
     if (edge_kwargs.size()) throw py::type_error("image options given with a QueryEdges query");
     picture = py::cast<const PyQueryEdges&>(query).picture;
   } else if (py::isinstance<py::str>(query) || py::hasattr(query, "__fspath__")) {
-    picture_file = py::cast<fs::path>(query);
+    picture_file = PathArg(query, "query");
     picture_search.picture = PictureOptionsFromKwargs(edge_kwargs);
     picture_search.search = options;
     picture_search.landmark_rank = landmark_rank;
@@ -806,7 +826,7 @@ void BindQueryEdges(py::module_& m) {
         if (py::isinstance<PyDatabase>(database)) {
           db_dir = py::cast<const PyDatabase&>(database).path();
         } else if (!database.is_none()) {
-          db_dir = py::cast<fs::path>(database);
+          db_dir = PathArg(database, "database");
         }
         return LoadEdges(image, PictureOptionsFromKwargs(kw), db_dir);
       },
@@ -1089,23 +1109,39 @@ void BindDatabase(py::module_& m) {
           "view_theta, view_phi, camera_roll, keypoints (n, 21, 3), source_diameter_px, scale, "
           "source_centre_px (n, 2)).")
       .def("__len__", [](const PyDatabase& d) { return d.db().num_views(); })
-      .def("__getitem__",
-           [](py::object self, py::object key) -> py::object {
-             const auto& d = py::cast<const PyDatabase&>(self);
-             if (py::isinstance<py::slice>(key)) {
-               size_t start = 0, stop = 0, step = 0, length = 0;
-               if (!py::cast<py::slice>(key).compute(
-                       d.db().num_views(), &start, &stop, &step, &length)) {
-                 throw py::error_already_set();
-               }
-               py::list out;
-               for (size_t k = 0; k < length; ++k) {
-                 out.append(d.View(self, static_cast<py::ssize_t>(start + k * step)));
-               }
-               return out;
-             }
-             return py::cast(d.View(self, py::cast<py::ssize_t>(key)));
-           })
+      .def(
+          "__getitem__",
+          [](py::object self, py::object key) -> py::object {
+            const auto& d = py::cast<const PyDatabase&>(self);
+            if (py::isinstance<py::slice>(key)) {
+              size_t start = 0, stop = 0, step = 0, length = 0;
+              if (!py::cast<py::slice>(key).compute(
+                      d.db().num_views(), &start, &stop, &step, &length)) {
+                throw py::error_already_set();
+              }
+              py::list out;
+              for (size_t k = 0; k < length; ++k) {
+                out.append(d.View(self, static_cast<py::ssize_t>(start + k * step)));
+              }
+              return out;
+            }
+            // An index is an int (or has __index__); one too large for the platform's index
+            // type is out of range, not a failed cast.
+            if (!PyIndex_Check(key.ptr())) {
+              throw py::type_error("database indices must be integers or slices, not " +
+                                   py::str(py::type::of(key).attr("__name__")).cast<std::string>());
+            }
+            const Py_ssize_t i = PyNumber_AsSsize_t(key.ptr(), PyExc_OverflowError);
+            if (i == -1 && PyErr_Occurred()) {
+              if (!PyErr_ExceptionMatches(PyExc_OverflowError)) throw py::error_already_set();
+              PyErr_Clear();
+              throw py::index_error(d.path().string() + ": view " +
+                                    py::str(key).cast<std::string>() +
+                                    " out of range (database has " +
+                                    std::to_string(d.db().num_views()) + " canonical views)");
+            }
+            return py::cast(d.View(self, i));
+          })
       .def(
           "search",
           &Search,
