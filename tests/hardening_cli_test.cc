@@ -837,7 +837,9 @@ TEST_F(HardeningCli, BadLandmarkModelsAreExitOneNamingTheFile) {
     EXPECT_EQ(Lines(r.err), 1) << r.err;
     const std::string prefix = "handdb query: --landmarks: " + model.string() + ": ";
     EXPECT_EQ(r.err.rfind(prefix, 0), 0u) << r.err;
-    if (!problem.empty()) EXPECT_EQ(r.err, prefix + problem + "\n");
+    if (!problem.empty()) {
+      EXPECT_EQ(r.err, prefix + problem + "\n");
+    }
   }
 }
 
