@@ -49,6 +49,13 @@ Status Fill(const std::string& what,
         StatusCode::kNoHand,
         what + ": no hand found (the edges span only " + std::to_string(norm.diameter) + " px)");
   }
+  // Every kind of picture passes here: the one place the points that size a search are bounded.
+  if (points.size() > kMaxQueryPoints) {
+    return Status(StatusCode::kInvalidArgument,
+                  what + ": " + std::to_string(points.size()) + " edge points, more than the " +
+                      std::to_string(kMaxQueryPoints) +
+                      " a query may have (a hand's outline and creases have a few thousand)");
+  }
   out->centre_x = norm.centre_x;
   out->centre_y = norm.centre_y;
   out->diameter_px = norm.diameter;
@@ -123,6 +130,14 @@ Result<QueryEdges> FromEdgeImage(const std::filesystem::path& path, const cv::Ma
     cv::split(any, ch);
     nonzero = ch[0] != 0;
     for (size_t c = 1; c < std::min<size_t>(ch.size(), 3); ++c) nonzero |= ch[c] != 0;
+  }
+  // Counted before they are listed: a filled area given as an edge image (--input edges) would
+  // otherwise cost its lists before the points are refused.
+  if (const int on = cv::countNonZero(nonzero); on > kMaxEdgeImagePixels) {
+    return Status(StatusCode::kInvalidArgument,
+                  path.string() + ": " + std::to_string(on) + " edge pixels, more than the " +
+                      std::to_string(kMaxEdgeImagePixels) +
+                      " an edge image may have (edges are lines, not filled areas)");
   }
   const std::vector<EdgePixel> edges = NonZeroPixels(nonzero);
   HANDDB_RETURN_IF_ERROR(Finish(path.string(), edges, edges, &out));
@@ -337,11 +352,12 @@ struct WristCut {
 // A wrist is 1.2-2 palm radii wide (a fist has the largest radius); one finger is about half a
 // radius to one radius (fingers leaving the picture side by side are separate runs).
 constexpr double kArmRadii = 0.8;
-// How deep a strip along the border the arm's run is seen through, in palm radii. A bracelet, a
+// How deep a strip along the border the arm's run is seen through, in palm radii, when the
+// region's own runs hold no arm and the hand would be refused as cut by the border. A bracelet, a
 // strap or a watch band across the forearm where it leaves the picture (or a speckled skin edge
 // there) breaks the region's own run along the border into pieces too short for an arm, but the
 // arm lies just inside them; the notch between two fingers that leave the picture is deeper than
-// a palm radius, so their runs stay apart.
+// half a palm radius, so their runs stay apart.
 constexpr double kArmReachRadii = 0.5;
 // Where it leaves the picture after the wrist cut, an arm's run along the border is at most 2.15
 // palm radii on the 200 development photos and 2.04 on 745 photo-like renders with a forearm;
@@ -350,13 +366,15 @@ constexpr double kArmRunRadii = 2.5;
 
 // The palm is the region's largest inscribed circle (distance-transform maximum; the picture's
 // border counts as background, so an arm running out of the picture does not look wide). The arm
-// is the region's widest run along the picture's border as seen through a strip kArmReachRadii
-// deep, if it is at least kArmRadii palm radii long (fingers that leave the picture are narrower,
-// and are not an arm); it leaves in the direction from the palm centre to the centroid of the
-// region's own border pixels in that run. Everything farther than `radii` palm
-// radii from the palm centre along that direction is the forearm and is removed. A region that
-// does not touch the border, or only with narrow runs, is left alone.
-WristCut CutForearm(cv::Mat* region, double radii) {
+// is the region's widest run along the picture's border, if it is at least kArmRadii palm radii
+// long (fingers that leave the picture are narrower, and are not an arm); with `reach_radii` > 0
+// the runs are those of the region seen through a strip that many palm radii deep along the
+// border (BorderReach), each counted only where the region itself touches the border. The arm
+// leaves in the direction from the palm centre to the centroid of the region's own border pixels
+// in its run. Everything farther than `radii` palm radii from the palm centre along that
+// direction is the forearm and is removed. A region that does not touch the border, or only with
+// narrow runs, is left alone.
+WristCut CutForearm(cv::Mat* region, double radii, double reach_radii) {
   WristCut out;
   cv::Mat padded;
   cv::copyMakeBorder(*region, padded, 1, 1, 1, 1, cv::BORDER_CONSTANT, 0);
@@ -370,11 +388,16 @@ WristCut CutForearm(cv::Mat* region, double radii) {
   out.palm_radius = max_dt;
   const int w = region->cols;
   const int h = region->rows;
-  const int depth = std::max(1, static_cast<int>(std::lround(kArmReachRadii * out.palm_radius)));
-  std::vector<BorderRun> runs = BorderRuns(BorderReach(*region, depth), 1, *region);
-  // Only the region's own border contact leaves the picture: a run that merely comes near it is
-  // no arm.
-  std::erase_if(runs, [](const BorderRun& r) { return r.contact == 0; });
+  std::vector<BorderRun> runs;
+  if (reach_radii > 0) {
+    const int depth = std::max(1, static_cast<int>(std::lround(reach_radii * out.palm_radius)));
+    runs = BorderRuns(BorderReach(*region, depth), 1, *region);
+    // Only the region's own border contact leaves the picture: a run that merely comes near it
+    // is no arm.
+    std::erase_if(runs, [](const BorderRun& r) { return r.contact == 0; });
+  } else {
+    runs = BorderRuns(*region, 1);
+  }
   const auto widest =
       std::max_element(runs.begin(), runs.end(), [](const BorderRun& a, const BorderRun& b) {
         return a.length < b.length;
@@ -637,11 +660,12 @@ Result<WorkingHand> CropToWorkingSize(const std::string& what,
   return out;
 }
 
-// Step 4a: the hand, not the arm (CutForearm), keeping the largest piece left.
-WristCut CutArm(const ImageEdgeOptions& options, cv::Mat* hand) {
+// Step 4a: the hand, not the arm (CutForearm, its runs seen `reach_radii` deep), keeping the
+// largest piece left.
+WristCut CutArm(const ImageEdgeOptions& options, double reach_radii, cv::Mat* hand) {
   WristCut wrist;
   if (!options.cut_forearm) return wrist;
-  wrist = CutForearm(hand, options.wrist_cut_radii);
+  wrist = CutForearm(hand, options.wrist_cut_radii, reach_radii);
   if (wrist.cut) {
     const Regions kept = LargestRegions(*hand);
     *hand = kept.labels == kept.largest;
@@ -691,6 +715,28 @@ Status CheckNotCutByBorder(const std::string& what,
                       "); the search needs the whole hand: use a picture with a margin around it");
   }
   return Status::Ok();
+}
+
+// Step 4: the arm cut off (4a) and the hand checked whole (4b). When the region's own runs along
+// the border hold no arm and the hand would be refused as cut by the border, the arm is looked
+// for once more through a strip along the border (kArmReachRadii): a band across the forearm
+// where it leaves the picture breaks its run into pieces. Only a hand refused by the first look
+// can change, and the second look's answer is kept only when it is not refused either.
+Result<WristCut> CutArmOfWholeHand(const std::string& what,
+                                   WorkingHand* work,
+                                   cv::Size picture,
+                                   const ImageEdgeOptions& options) {
+  const WristCut wrist = CutArm(options, 0, &work->hand);
+  const Status whole = CheckNotCutByBorder(what, *work, picture, wrist, options);
+  if (whole.ok()) return wrist;
+  // With no arm found CutArm left the region as it was.
+  if (!options.cut_forearm || wrist.arm) return whole;
+  WorkingHand banded = *work;
+  banded.hand = work->hand.clone();
+  const WristCut seen = CutArm(options, kArmReachRadii, &banded.hand);
+  if (!seen.arm || !CheckNotCutByBorder(what, banded, picture, seen, options).ok()) return whole;
+  *work = std::move(banded);
+  return seen;
 }
 
 // Step 5: the silhouette contour with the converter's rule (a one-link label image).
@@ -815,9 +861,8 @@ Result<QueryEdges> FromPhoto(const std::filesystem::path& path,
   const std::string what = path.string();
   // The clean-up, the crop and Canny need some room: a picture a few px high or wide is a strip,
   // not a photo of a hand.
-  constexpr int kMinPhotoSide = 16;
   if (source.width < kMinPhotoSide || source.height < kMinPhotoSide) {
-    return Status(StatusCode::kNoHand,
+    return Status(StatusCode::kInvalidArgument,
                   what + ": a " + std::to_string(source.width) + "x" +
                       std::to_string(source.height) + " picture is too thin to hold a hand (" +
                       std::to_string(kMinPhotoSide) + " px each way at least)");
@@ -831,8 +876,9 @@ Result<QueryEdges> FromPhoto(const std::filesystem::path& path,
   if (!found.ok()) return found.status();
   auto work = CropToWorkingSize(what, bgr, *cand, *keep, use_mask, *found, options);
   if (!work.ok()) return work.status();
-  const WristCut wrist = CutArm(options, &work->hand);
-  HANDDB_RETURN_IF_ERROR(CheckNotCutByBorder(what, *work, bgr.size(), wrist, options));
+  auto cut = CutArmOfWholeHand(what, &*work, bgr.size(), options);
+  if (!cut.ok()) return cut.status();
+  const WristCut wrist = *cut;
   const EdgeResult silhouette = Silhouette(work->hand);
   const cv::Mat edges = HandEdges(*work, silhouette, options);
   QueryEdges out;

@@ -410,7 +410,8 @@ TEST_F(ImageEdgesTest, ThinPicturesAreRefusedNamingTheFile) {
                               cv::Size(1, 2000),
                               cv::Size(3000, 4),
                               cv::Size(900, 15),
-                              cv::Size(2000, 30)}) {
+                              cv::Size(2000, 30),
+                              cv::Size(60000, 16)}) {
     const std::string name =
         "strip-" + std::to_string(size.width) + "x" + std::to_string(size.height) + ".png";
     const fs::path path = dir_ / name;
@@ -420,6 +421,41 @@ TEST_F(ImageEdgesTest, ThinPicturesAreRefusedNamingTheFile) {
     ASSERT_FALSE(r->ok()) << name;
     EXPECT_EQ(r->status().message().rfind(path.string() + ": ", 0), 0u) << r->status().message();
   }
+  auto strip = LoadQueryEdges(dir_ / "strip-2000x1.png", ImageEdgeOptions{});
+  EXPECT_EQ(strip.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(strip.status().message(),
+            (dir_ / "strip-2000x1.png").string() +
+                ": a 2000x1 picture is too thin to hold a hand (16 px each way at least)");
+}
+
+// A query's points size the search (each kept once per roll and hand): past kMaxQueryPoints the
+// picture is refused naming it, whatever its kind; an edge image's pixels are counted before any
+// list of them is made.
+TEST_F(ImageEdgesTest, EdgePointsPastTheLimitAreRefused) {
+  ImageEdgeOptions edges;
+  edges.kind = QueryInputKind::kEdges;
+  const fs::path filled = dir_ / "filled-600.png";
+  ASSERT_TRUE(cv::imwrite(filled.string(), cv::Mat(600, 600, CV_8U, cv::Scalar(255))));
+  auto r = LoadQueryEdges(filled, edges);
+  EXPECT_EQ(r.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(r.status().message(),
+            filled.string() +
+                ": 360000 edge points, more than the 65536 a query may have (a "
+                "hand's outline and creases have a few thousand)");
+  const fs::path huge = dir_ / "filled-1100.png";
+  ASSERT_TRUE(cv::imwrite(huge.string(), cv::Mat(1100, 1100, CV_8U, cv::Scalar(255))));
+  r = LoadQueryEdges(huge, edges);
+  EXPECT_EQ(r.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(r.status().message(),
+            huge.string() +
+                ": 1210000 edge pixels, more than the 1048576 an edge image may have "
+                "(edges are lines, not filled areas)");
+  // A 250 x 250 filled square stays a query (62,500 points), as before.
+  const fs::path fits = dir_ / "filled-250.png";
+  ASSERT_TRUE(cv::imwrite(fits.string(), cv::Mat(250, 250, CV_8U, cv::Scalar(255))));
+  r = LoadQueryEdges(fits, edges);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(r->points.size(), 62500u);
 }
 
 TEST_F(ImageEdgesTest, AHugeJpegIsDecodedReducedNotRefused) {
