@@ -67,6 +67,9 @@ T Unwrap(Result<T> r) {
 }
 
 py::object* error_type = nullptr;  // handdb.Error, created in the module init (never freed)
+// handdb.ArgumentError: a handdb.Error that is also a ValueError, for the library's
+// kInvalidArgument (a picture or value the library cannot take), so both handlers catch it.
+py::object* argument_error_type = nullptr;
 
 // Marks a fresh array read-only (it views the mapping, or is shared by every caller).
 template <typename A>
@@ -134,16 +137,15 @@ struct PyQueryEdges {
   PictureEvidence picture;
 };
 
-// A path argument (str, bytes or os.PathLike). No file name holds a NUL character: that is a bad
+// A path argument (str, bytes or os.PathLike), encoded as the file system wants it (os.fsencode,
+// as pybind11's own path conversion does). No file name holds a NUL character: that is a bad
 // value (ValueError naming the argument), not a failed cast.
 fs::path PathArg(py::handle value, const char* name) {
-  py::object fspath = py::module_::import("os").attr("fspath")(value);
-  const std::string text = py::isinstance<py::bytes>(fspath) ? fspath.cast<std::string>()
-                                                             : py::str(fspath).cast<std::string>();
-  if (text.find('\0') != std::string::npos) {
+  const std::string bytes = py::module_::import("os").attr("fsencode")(value).cast<std::string>();
+  if (bytes.find('\0') != std::string::npos) {
     throw py::value_error(std::string(name) + ": a path may not contain a NUL character");
   }
-  return fs::path(text);
+  return fs::path(bytes);
 }
 
 py::array_t<int32_t> PixelArray(const std::vector<EdgePixelXY>& px) {
@@ -697,13 +699,23 @@ void BindError(py::module_& m) {
       "A handdb library error: str(e) is the one-line message `handdb` prints after "
       "'handdb <command>: ' (it names the file and the problem); e.code is the status code name, "
       "e.g. 'kChecksumMismatch', 'kNotFound', 'kNoHand'.";
+  py::object bases = py::make_tuple(*error_type, py::handle(PyExc_ValueError));
+  argument_error_type = new py::object(py::reinterpret_steal<py::object>(
+      PyErr_NewException("handdb._handdb.ArgumentError", bases.ptr(), nullptr)));
+  if (!*argument_error_type) throw py::error_already_set();
+  argument_error_type->attr("__doc__") =
+      "A handdb.Error that is also a ValueError: what the library was given cannot be used (code "
+      "'kInvalidArgument'), e.g. a picture too thin to hold a hand.";
+  m.attr("ArgumentError") = *argument_error_type;
   py::register_exception_translator([](std::exception_ptr p) {
     try {
       if (p) std::rethrow_exception(p);
     } catch (const StatusError& e) {
-      py::object exc = (*error_type)(e.status.message());
+      const py::object& type =
+          e.status.code() == StatusCode::kInvalidArgument ? *argument_error_type : *error_type;
+      py::object exc = type(e.status.message());
       exc.attr("code") = StatusCodeName(e.status.code());
-      PyErr_SetObject(error_type->ptr(), exc.ptr());
+      PyErr_SetObject(type.ptr(), exc.ptr());
     }
   });
 }
@@ -821,14 +833,14 @@ void BindQueryEdges(py::module_& m) {
 
   m.def(
       "query_edges",
-      [](const fs::path& image, py::object database, const py::kwargs& kw) {
+      [](py::object image, py::object database, const py::kwargs& kw) {
         std::optional<fs::path> db_dir;
         if (py::isinstance<PyDatabase>(database)) {
           db_dir = py::cast<const PyDatabase&>(database).path();
         } else if (!database.is_none()) {
           db_dir = PathArg(database, "database");
         }
-        return LoadEdges(image, PictureOptionsFromKwargs(kw), db_dir);
+        return LoadEdges(PathArg(image, "image"), PictureOptionsFromKwargs(kw), db_dir);
       },
       py::arg("image"),
       py::arg("database") = py::none(),
@@ -1017,7 +1029,9 @@ void BindDatabase(py::module_& m) {
       "A sequence of canonical views: len(db), db[i] / db.view(i) -> View, db[a:b] -> list of "
       "View, iteration; db.read(start, stop) -> every field as numpy columns. Pickling "
       "reopens the path, so each worker process of a data loader maps the shards itself.")
-      .def(py::init<fs::path, bool, const std::string&>(),
+      .def(py::init([](py::object path, bool verify, const std::string& search) {
+             return PyDatabase(PathArg(path, "path"), verify, search);
+           }),
            py::arg("path"),
            py::arg("verify") = false,
            py::arg("search") = "auto")
@@ -1190,15 +1204,18 @@ void BindDatabase(py::module_& m) {
 
 // validate(): `handdb validate` as a list of problems.
 void BindValidate(py::module_& m) {
-  m.def("validate",
-        &Validate,
-        py::arg("path"),
-        py::arg("verify_checksums") = true,
-        py::arg("max_problems") = ValidateOptions{}.max_problems_per_check,
-        "Checks a shard file or a database directory completely (`handdb validate`) and returns "
-        "the problems as dicts {code, file, offset, message} (the --json report's); [] when it "
-        "is valid. max_problems per file and kind of check, 0 = all (if more were found, a last "
-        "entry with code 'kSuppressed' counts them).");
+  m.def(
+      "validate",
+      [](py::object path, bool verify_checksums, size_t max_problems) {
+        return Validate(PathArg(path, "path"), verify_checksums, max_problems);
+      },
+      py::arg("path"),
+      py::arg("verify_checksums") = true,
+      py::arg("max_problems") = ValidateOptions{}.max_problems_per_check,
+      "Checks a shard file or a database directory completely (`handdb validate`) and returns "
+      "the problems as dicts {code, file, offset, message} (the --json report's); [] when it "
+      "is valid. max_problems per file and kind of check, 0 = all (if more were found, a last "
+      "entry with code 'kSuppressed' counts them).");
 }
 
 }  // namespace
