@@ -835,6 +835,15 @@ TEST_F(HardeningCli, BadLandmarkModelsAreExitOneNamingTheFile) {
       EXPECT_EQ(r.err, prefix + problem + "\n");
     }
   }
+  // `handdb evaluate --photos` shares the flag and its exit code.
+  const fs::path no_photos = *dir_ / "no-photos";
+  fs::create_directories(no_photos);
+  const CliRun r = Handdb("evaluate " + Db() + " --photos " + no_photos.string() +
+                          " -q --landmarks " + (models / "random.tflite").string());
+  EXPECT_EQ(r.code, 1) << r.err;
+  EXPECT_EQ(r.err.rfind("handdb evaluate: --landmarks: " + (models / "random.tflite").string(), 0),
+            0u)
+      << r.err;
 }
 
 // A flag CLI11 rejects is bad usage in one line naming the command and the flag (exit 2), like
