@@ -729,7 +729,8 @@ Result<WristCut> CutArmOfWholeHand(const std::string& what,
   const WristCut wrist = CutArm(options, 0, &work->hand);
   const Status whole = CheckNotCutByBorder(what, *work, picture, wrist, options);
   if (whole.ok()) return wrist;
-  // With no arm found CutArm left the region as it was.
+  // Only a refusal for want of an arm is looked at again; finding none, the first look cut
+  // nothing, so the second starts from the same region.
   if (!options.cut_forearm || wrist.arm) return whole;
   WorkingHand banded = *work;
   banded.hand = work->hand.clone();
