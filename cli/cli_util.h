@@ -21,7 +21,10 @@ inline int ParseArgs(CLI::App& app, int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e) == 0 ? kExitOk : kExitUsage;
+    // --help prints and succeeds; bad usage is one line naming the command, like every error.
+    if (e.get_exit_code() == 0) return app.exit(e) == 0 ? kExitOk : kExitUsage;
+    std::fprintf(stderr, "%s: %s\n", app.get_name().c_str(), e.what());
+    return kExitUsage;
   }
   return -1;
 }

@@ -10,6 +10,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <span>
 #include <string>
 #include <string_view>
 #include <utility>
@@ -366,8 +367,15 @@ int RunShow(int argc, char** argv) {
   }
   const auto v = static_cast<view_id_t>(view);
   const float angle = RollAngle(static_cast<roll_id_t>(roll), db->num_rolls());
+  std::span<const PointQ> points;
+  try {
+    points = db->points(v);
+  } catch (const CodedViewError& e) {
+    // A coded view damaged past what Open checks: its shard and view, like validate says it.
+    return Fail("show", e.status());
+  }
   std::vector<Point2f> pts;
-  RollPoints(db->points(v), angle, &pts);
+  RollPoints(points, angle, &pts);
   const ViewLabel label = RollLabel(db->label(v), angle);
 
   // The normalised frame's points lie within 192 * sqrt(3) / 2 = 166 px of the origin.
@@ -384,7 +392,7 @@ int RunShow(int argc, char** argv) {
   const std::string caption = "view " + std::to_string(view) + " roll " + std::to_string(roll) +
                               "/" + std::to_string(db->num_rolls()) +
                               (shape.empty() ? "" : "  " + shape) + "  " +
-                              std::to_string(db->points(v).size()) + " pts";
+                              std::to_string(points.size()) + " pts";
   // An anti-aliased caption in the pixels would make `query` take the image for a photo (and
   // with --input edges the caption would become edges), so the tool's own output would not
   // find its own view. By default the pixels are the edges only (one grey level on black, what

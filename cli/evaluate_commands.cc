@@ -426,7 +426,9 @@ int RunEvaluate(int argc, char** argv) {
     // --input is this command's own option: a test view's input, or with --photos the kind of
     // picture (default auto, not clean).
     if (app.get_option("--input")->count() > 0) photos.flags.picture.input = flags.input;
-    if (!photos.flags.Finish("evaluate", flags.options.num_threads, quiet)) return kExitUsage;
+    if (!photos.flags.Finish("evaluate", flags.options.num_threads, quiet)) {
+      return photos.flags.picture.failure_exit_code;
+    }
     if (!slurm.enabled && (request.tasks != 0 || !request.work.empty())) {
       std::fprintf(stderr, "handdb evaluate: --tasks and --work need --slurm\n");
       return kExitUsage;

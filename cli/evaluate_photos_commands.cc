@@ -326,7 +326,7 @@ int UnitEvaluatePhotosCommands::Run() {
   const std::string cmd_name = merge ? "unit evaluate-photos-merge" : "unit evaluate-photos";
   const char* cmd = cmd_name.c_str();
   const int threads = merge ? 1 : (threads_ == -1 ? TaskThreads() : threads_);
-  if (!flags_.Finish(cmd_name, threads, quiet_)) return kExitUsage;
+  if (!flags_.Finish(cmd_name, threads, quiet_)) return flags_.picture.failure_exit_code;
   if (!merge && task_ >= tasks_) {
     std::fprintf(stderr, "handdb %s: --task %u: must be below --tasks %u\n", cmd, task_, tasks_);
     return kExitUsage;

@@ -3,6 +3,7 @@
 #include <cstdio>
 #include <exception>
 
+#include "cli/cli_util.h"
 #include "edges/view_conversion.h"
 #include "format/manifest.h"
 
@@ -148,6 +149,7 @@ bool PhotoInputFlags::Finish(const std::string& cmd) {
   if (options.picture.edges.kind != QueryInputKind::kEdges &&
       options.picture.edges.kind != QueryInputKind::kLabels &&
       !ResolveLandmarker(landmarks, cmd, &options.picture.landmarker)) {
+    failure_exit_code = kExitError;
     return false;
   }
   options.landmark_rank.enabled = options.picture.landmarker != nullptr;

@@ -41,6 +41,9 @@ struct PhotoInputFlags {
   // Completes `options.picture` from the text flags and opens the landmark model; false (one line
   // "handdb <cmd>: ..." on stderr) on bad usage or a model that cannot be loaded.
   bool Finish(const std::string& cmd);
+  // After Finish failed: the exit code it means. A model file that cannot be loaded is a user
+  // error (1), like any other file; the rest is bad usage (2).
+  int failure_exit_code = 2;
   // Label EXRs become queries exactly like the database's views: the edge options its manifest
   // records (from the manifest `db` was opened with; a convert may have replaced the file since).
   Status UseDatabaseConversion(const Database& db, const std::filesystem::path& db_dir);

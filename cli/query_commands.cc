@@ -409,7 +409,7 @@ int RunQuery(int argc, char** argv) {
   flags.picture.options.search.progress_since = std::chrono::steady_clock::now();
   flags.Add(app);
   if (int rc = ParseArgs(app, argc, argv); rc >= 0) return rc;
-  if (!flags.Finish()) return kExitUsage;
+  if (!flags.Finish()) return flags.picture.failure_exit_code;
   const std::string& db_dir = flags.db_dir;
 
   // Open the database first: a broken database is reported before any image work. Its index is

@@ -60,8 +60,8 @@ struct ShardReader::Impl {
     const uint64_t at = static_cast<uint64_t>(code.data() - bytes.data());
     if (!s.ok()) {
       return Status(s.code(),
-                    name + ": offset " + std::to_string(at) + ": view " + std::to_string(i) +
-                        ": point code: " + s.message());
+                    name + ": offset " + std::to_string(at) + ": view " + std::to_string(i) + ": " +
+                        s.message());
     }
     const uint32_t want = LoadLittleEndian<uint32_t>(r + kViewOffPointCount);
     if (out->size() != want) {
@@ -262,7 +262,7 @@ Status ShardReader::PeekPoints(size_t i, ViewPointsExtent* extent) const {
                                   extent);
   const std::string where = r.name + ": offset " + std::to_string(code.data() - r.bytes.data()) +
                             ": view " + std::to_string(i) + ": ";
-  if (!s.ok()) return Status(s.code(), where + "point code: " + s.message());
+  if (!s.ok()) return Status(s.code(), where + s.message());
   const uint32_t want = LoadLittleEndian<uint32_t>(rec + kViewOffPointCount);
   if (extent->peeked && extent->count != want) {
     return Status(StatusCode::kSizeMismatch,

@@ -374,8 +374,24 @@ using FileBytes = std::vector<uint8_t, nn::HugePageAllocator<uint8_t>>;
 Result<FileBytes> ReadModelFile(const std::filesystem::path& path) {
   const std::string what = path.string();
   std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec)) {
-    return Status(StatusCode::kNotFound, what + ": no such model file");
+  const std::filesystem::file_status st = std::filesystem::status(path, ec);
+  switch (st.type()) {
+    case std::filesystem::file_type::regular:
+      break;
+    case std::filesystem::file_type::not_found:
+      return Status(StatusCode::kNotFound, what + ": no such model file");
+    case std::filesystem::file_type::directory:
+      return Status(StatusCode::kInvalidArgument, what + ": a directory, not a model file");
+    case std::filesystem::file_type::fifo:
+      return Status(StatusCode::kInvalidArgument, what + ": a FIFO, not a model file");
+    case std::filesystem::file_type::character:
+    case std::filesystem::file_type::block:
+      return Status(StatusCode::kInvalidArgument, what + ": a device, not a model file");
+    case std::filesystem::file_type::socket:
+      return Status(StatusCode::kInvalidArgument, what + ": a socket, not a model file");
+    default:
+      return Status(StatusCode::kIoError,
+                    what + ": cannot read the model file" + (ec ? ": " + ec.message() : ""));
   }
   const auto file_size = std::filesystem::file_size(path, ec);
   if (ec) return Status(StatusCode::kIoError, what + ": " + ec.message());

@@ -10,6 +10,7 @@
 #include <string_view>
 #include <system_error>
 #include <utility>
+#include <vector>
 
 #include "base/image_file.h"
 #include "edges/edges.h"
@@ -47,6 +48,13 @@ Status Fill(const std::string& what,
     return Status(
         StatusCode::kNoHand,
         what + ": no hand found (the edges span only " + std::to_string(norm.diameter) + " px)");
+  }
+  // Every kind of picture passes here: the one place the points that size a search are bounded.
+  if (points.size() > kMaxQueryPoints) {
+    return Status(StatusCode::kInvalidArgument,
+                  what + ": " + std::to_string(points.size()) + " edge points, more than the " +
+                      std::to_string(kMaxQueryPoints) +
+                      " a query may have (a hand's outline and creases have a few thousand)");
   }
   out->centre_x = norm.centre_x;
   out->centre_y = norm.centre_y;
@@ -122,6 +130,14 @@ Result<QueryEdges> FromEdgeImage(const std::filesystem::path& path, const cv::Ma
     cv::split(any, ch);
     nonzero = ch[0] != 0;
     for (size_t c = 1; c < std::min<size_t>(ch.size(), 3); ++c) nonzero |= ch[c] != 0;
+  }
+  // Counted before they are listed: a filled area given as an edge image (--input edges) would
+  // otherwise cost its lists before the points are refused.
+  if (const int on = cv::countNonZero(nonzero); on > kMaxEdgeImagePixels) {
+    return Status(StatusCode::kInvalidArgument,
+                  path.string() + ": " + std::to_string(on) + " edge pixels, more than the " +
+                      std::to_string(kMaxEdgeImagePixels) +
+                      " an edge image may have (edges are lines, not filled areas)");
   }
   const std::vector<EdgePixel> edges = NonZeroPixels(nonzero);
   HANDDB_RETURN_IF_ERROR(Finish(path.string(), edges, edges, &out));
@@ -235,13 +251,16 @@ double RegionDiameter(const cv::Mat& region) {
 
 struct BorderRun {
   int length = 0;        // px along the border, bridged gaps included
-  cv::Point2d centroid;  // of the run's region pixels (pixel centres at +0.5)
+  int contact = 0;       // of them, px where the contact mask is set
+  cv::Point2d centroid;  // of those contact px (pixel centres at +0.5)
 };
 
 // Runs of the region's pixels along the picture's border, walked once around it (top left to
 // right, right side down, bottom right to left, left side up); runs separated by fewer than
-// `gap` background pixels are one run (a dark band across a forearm, a strap).
-std::vector<BorderRun> BorderRuns(const cv::Mat& region, int gap) {
+// `gap` background pixels are one run (a dark band across a forearm, a strap). A run's centroid
+// and contact count are those of its pixels set in `contact` (the region itself, or the region
+// a border reach was taken of).
+std::vector<BorderRun> BorderRuns(const cv::Mat& region, int gap, const cv::Mat& contact) {
   const int w = region.cols;
   const int h = region.rows;
   std::vector<cv::Point> ring;
@@ -260,18 +279,22 @@ std::vector<BorderRun> BorderRuns(const cv::Mat& region, int gap) {
   }
   std::vector<BorderRun> runs;
   BorderRun run;
-  int pixels = 0, bg = 0;
+  int bg = 0;
   const auto close_run = [&] {
     if (run.length > 0) {
-      run.centroid /= std::max(1, pixels);
+      run.centroid /= std::max(1, run.contact);
       runs.push_back(run);
     }
     run = {};
-    pixels = 0;
+  };
+  const auto add = [&](int i) {
+    ++run.length;
+    if (contact.at<uint8_t>(ring[i]) == 0) return;
+    ++run.contact;
+    run.centroid += cv::Point2d(ring[i].x + 0.5, ring[i].y + 0.5);
   };
   if (start < 0) {
-    for (int i = 0; i < n; ++i) run.centroid += cv::Point2d(ring[i].x + 0.5, ring[i].y + 0.5);
-    run.length = pixels = n;
+    for (int i = 0; i < n; ++i) add(i);
     close_run();
     return runs;
   }
@@ -284,15 +307,37 @@ std::vector<BorderRun> BorderRuns(const cv::Mat& region, int gap) {
         close_run();
       }
       bg = 0;
-      ++run.length;
-      ++pixels;
-      run.centroid += cv::Point2d(ring[i].x + 0.5, ring[i].y + 0.5);
+      add(i);
     } else if (run.length > 0) {
       ++bg;
     }
   }
   close_run();
   return runs;
+}
+
+std::vector<BorderRun> BorderRuns(const cv::Mat& region, int gap) {
+  return BorderRuns(region, gap, region);
+}
+
+// The region seen from the picture's border through a strip `depth` px deep: a border pixel is
+// set when the region has a pixel within `depth` of it, straight inwards.
+cv::Mat BorderReach(const cv::Mat& region, int depth) {
+  const int w = region.cols;
+  const int h = region.rows;
+  cv::Mat reach = cv::Mat::zeros(h, w, CV_8U);
+  const int dy = std::clamp(depth, 1, h);
+  const int dx = std::clamp(depth, 1, w);
+  const auto any = [&](cv::Rect r) { return cv::countNonZero(region(r)) > 0 ? 255 : 0; };
+  for (int x = 0; x < w; ++x) {
+    reach.at<uint8_t>(0, x) |= any({x, 0, 1, dy});
+    reach.at<uint8_t>(h - 1, x) |= any({x, h - dy, 1, dy});
+  }
+  for (int y = 0; y < h; ++y) {
+    reach.at<uint8_t>(y, 0) |= any({0, y, dx, 1});
+    reach.at<uint8_t>(y, w - 1) |= any({w - dx, y, dx, 1});
+  }
+  return reach;
 }
 
 struct WristCut {
@@ -307,6 +352,13 @@ struct WristCut {
 // A wrist is 1.2-2 palm radii wide (a fist has the largest radius); one finger is about half a
 // radius to one radius (fingers leaving the picture side by side are separate runs).
 constexpr double kArmRadii = 0.8;
+// How deep a strip along the border the arm's run is seen through, in palm radii, when the
+// region's own runs hold no arm and the hand would be refused as cut by the border. A bracelet, a
+// strap or a watch band across the forearm where it leaves the picture (or a speckled skin edge
+// there) breaks the region's own run along the border into pieces too short for an arm, but the
+// arm lies just inside them; the notch between two fingers that leave the picture is deeper than
+// half a palm radius, so their runs stay apart.
+constexpr double kArmReachRadii = 0.5;
 // Where it leaves the picture after the wrist cut, an arm's run along the border is at most 2.15
 // palm radii on the 200 development photos and 2.04 on 745 photo-like renders with a forearm;
 // the rest of a longer run is hand cut by the border.
@@ -315,11 +367,14 @@ constexpr double kArmRunRadii = 2.5;
 // The palm is the region's largest inscribed circle (distance-transform maximum; the picture's
 // border counts as background, so an arm running out of the picture does not look wide). The arm
 // is the region's widest run along the picture's border, if it is at least kArmRadii palm radii
-// long (fingers that leave the picture are narrower, and are not an arm); it leaves in the
-// direction from the palm centre to that run's centroid. Everything farther than `radii` palm
-// radii from the palm centre along that direction is the forearm and is removed. A region that
-// does not touch the border, or only with narrow runs, is left alone.
-WristCut CutForearm(cv::Mat* region, double radii) {
+// long (fingers that leave the picture are narrower, and are not an arm); with `reach_radii` > 0
+// the runs are those of the region seen through a strip that many palm radii deep along the
+// border (BorderReach), each counted only where the region itself touches the border. The arm
+// leaves in the direction from the palm centre to the centroid of the region's own border pixels
+// in its run. Everything farther than `radii` palm radii from the palm centre along that
+// direction is the forearm and is removed. A region that does not touch the border, or only with
+// narrow runs, is left alone.
+WristCut CutForearm(cv::Mat* region, double radii, double reach_radii) {
   WristCut out;
   cv::Mat padded;
   cv::copyMakeBorder(*region, padded, 1, 1, 1, 1, cv::BORDER_CONSTANT, 0);
@@ -333,7 +388,16 @@ WristCut CutForearm(cv::Mat* region, double radii) {
   out.palm_radius = max_dt;
   const int w = region->cols;
   const int h = region->rows;
-  const std::vector<BorderRun> runs = BorderRuns(*region, 1);
+  std::vector<BorderRun> runs;
+  if (reach_radii > 0) {
+    const int depth = std::max(1, static_cast<int>(std::lround(reach_radii * out.palm_radius)));
+    runs = BorderRuns(BorderReach(*region, depth), 1, *region);
+    // Only the region's own border contact leaves the picture: a run that merely comes near it
+    // is no arm.
+    std::erase_if(runs, [](const BorderRun& r) { return r.contact == 0; });
+  } else {
+    runs = BorderRuns(*region, 1);
+  }
   const auto widest =
       std::max_element(runs.begin(), runs.end(), [](const BorderRun& a, const BorderRun& b) {
         return a.length < b.length;
@@ -488,7 +552,14 @@ Result<FoundHand> FindHand(const std::string& what,
   cv::Mat small = cand;
   if (!keep.empty()) small = cand & keep;
   if (out.find_scale < 1) {
-    cv::resize(small, small, cv::Size(), out.find_scale, out.find_scale, cv::INTER_AREA);
+    // A long thin picture would round its short side to no pixels: one at least.
+    const int cols = cvRound(cand.cols * out.find_scale),
+              rows = cvRound(cand.rows * out.find_scale);
+    if (cols > 0 && rows > 0) {
+      cv::resize(small, small, cv::Size(), out.find_scale, out.find_scale, cv::INTER_AREA);
+    } else {
+      cv::resize(small, small, {std::max(1, cols), std::max(1, rows)}, 0, 0, cv::INTER_AREA);
+    }
     small = small > 127;
   }
   if (!use_mask) CleanMask(&small, 1.0);
@@ -589,11 +660,12 @@ Result<WorkingHand> CropToWorkingSize(const std::string& what,
   return out;
 }
 
-// Step 4a: the hand, not the arm (CutForearm), keeping the largest piece left.
-WristCut CutArm(const ImageEdgeOptions& options, cv::Mat* hand) {
+// Step 4a: the hand, not the arm (CutForearm, its runs seen `reach_radii` deep), keeping the
+// largest piece left.
+WristCut CutArm(const ImageEdgeOptions& options, double reach_radii, cv::Mat* hand) {
   WristCut wrist;
   if (!options.cut_forearm) return wrist;
-  wrist = CutForearm(hand, options.wrist_cut_radii);
+  wrist = CutForearm(hand, options.wrist_cut_radii, reach_radii);
   if (wrist.cut) {
     const Regions kept = LargestRegions(*hand);
     *hand = kept.labels == kept.largest;
@@ -643,6 +715,29 @@ Status CheckNotCutByBorder(const std::string& what,
                       "); the search needs the whole hand: use a picture with a margin around it");
   }
   return Status::Ok();
+}
+
+// Step 4: the arm cut off (4a) and the hand checked whole (4b). When the region's own runs along
+// the border hold no arm and the hand would be refused as cut by the border, the arm is looked
+// for once more through a strip along the border (kArmReachRadii): a band across the forearm
+// where it leaves the picture breaks its run into pieces. Only a hand refused by the first look
+// can change, and the second look's answer is kept only when it is not refused either.
+Result<WristCut> CutArmOfWholeHand(const std::string& what,
+                                   WorkingHand* work,
+                                   cv::Size picture,
+                                   const ImageEdgeOptions& options) {
+  const WristCut wrist = CutArm(options, 0, &work->hand);
+  const Status whole = CheckNotCutByBorder(what, *work, picture, wrist, options);
+  if (whole.ok()) return wrist;
+  // Only a refusal for want of an arm is looked at again; finding none, the first look cut
+  // nothing, so the second starts from the same region.
+  if (!options.cut_forearm || wrist.arm) return whole;
+  WorkingHand banded = *work;
+  banded.hand = work->hand.clone();
+  const WristCut seen = CutArm(options, kArmReachRadii, &banded.hand);
+  if (!seen.arm || !CheckNotCutByBorder(what, banded, picture, seen, options).ok()) return whole;
+  *work = std::move(banded);
+  return seen;
 }
 
 // Step 5: the silhouette contour with the converter's rule (a one-link label image).
@@ -765,6 +860,14 @@ Result<QueryEdges> FromPhoto(const std::filesystem::path& path,
                              cv::Size source,
                              const ImageEdgeOptions& options) {
   const std::string what = path.string();
+  // The clean-up, the crop and Canny need some room: a picture a few px high or wide is a strip,
+  // not a photo of a hand.
+  if (source.width < kMinPhotoSide || source.height < kMinPhotoSide) {
+    return Status(StatusCode::kInvalidArgument,
+                  what + ": a " + std::to_string(source.width) + "x" +
+                      std::to_string(source.height) + " picture is too thin to hold a hand (" +
+                      std::to_string(kMinPhotoSide) + " px each way at least)");
+  }
   const bool use_mask = !options.mask.empty();
   auto cand = HandCandidates(what, bgr, source, options);
   if (!cand.ok()) return cand.status();
@@ -774,8 +877,9 @@ Result<QueryEdges> FromPhoto(const std::filesystem::path& path,
   if (!found.ok()) return found.status();
   auto work = CropToWorkingSize(what, bgr, *cand, *keep, use_mask, *found, options);
   if (!work.ok()) return work.status();
-  const WristCut wrist = CutArm(options, &work->hand);
-  HANDDB_RETURN_IF_ERROR(CheckNotCutByBorder(what, *work, bgr.size(), wrist, options));
+  auto cut = CutArmOfWholeHand(what, &*work, bgr.size(), options);
+  if (!cut.ok()) return cut.status();
+  const WristCut wrist = *cut;
   const EdgeResult silhouette = Silhouette(work->hand);
   const cv::Mat edges = HandEdges(*work, silhouette, options);
   QueryEdges out;

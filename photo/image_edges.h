@@ -84,8 +84,10 @@ struct ImageEdgeOptions {
   // ends ~1.8 radii from its palm centre (its short wrist stub); 2.6 cuts only arms clearly
   // longer than that. The arm is the widest run of the region along the picture's border if it
   // is at least 0.8 palm radii long; narrower runs are fingers leaving the picture (and the
-  // picture is refused as a cut hand). Failure case: four fingers held together that leave the
-  // picture look like an arm. false: keep the whole region.
+  // picture is refused as a cut hand), unless the region seen through a strip half a palm radius
+  // deep along the border has an arm's run and is not refused (a band across the forearm breaks
+  // the region's own run). Failure case: four fingers held together that leave the picture look
+  // like an arm. false: keep the whole region.
   bool cut_forearm = true;
   double wrist_cut_radii = 2.6;
   // Canny edges inside the hand region only (the database's views have no background edges).
@@ -116,6 +118,19 @@ struct ImageEdgeOptions {
 // 5x5 closing, OpenCV's 5x5 Gaussian before Canny, 2 px contour clearance (the development
 // photos, 100 x 100 px JPEGs of hands ~96 px across, were the reference).
 constexpr double kReferenceHandDiameterPx = 96;
+
+// What a picture may hold (docs/conventions.md, "Limits"); past them it is refused in one line
+// naming it (kInvalidArgument).
+// Edge points of a query after normalisation (one per 1/16 px at most). The search keeps each
+// point once per roll and hand (~20 bytes each, ~0.6 KB a point with 16 rolls), so this bounds a
+// search's memory; a hand's outline and creases give a few thousand.
+constexpr size_t kMaxQueryPoints = 65536;
+// Non-zero pixels of an edge image, counted before any list of them is made: edges are lines,
+// and an 8192 px hand drawn with 3 px lines has ~100,000.
+constexpr int kMaxEdgeImagePixels = 1 << 20;
+// Sides of a photo: the clean-up, the crop and Canny need room, and a picture a few px high or
+// wide (a 2000 x 1 strip) holds no hand.
+constexpr int kMinPhotoSide = 16;
 
 struct EdgePixelXY {
   int32_t x = 0;  // column

@@ -8,6 +8,7 @@
 #include <memory>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <optional>
 #include <random>
 #include <string>
 
@@ -281,6 +282,56 @@ TEST_F(ImageEdgesTest, ForearmIsCutOffAtTheWrist) {
   EXPECT_GT(cut->arm_dir_x * u.x + cut->arm_dir_y * u.y, std::cos(0.35));  // within 20 deg
 }
 
+// A forearm leaving the picture with a dark band across it (a bracelet worn at a slant) that
+// crosses the bottom border: the region's own run along the border is only the stretch on the
+// hand's side of the band, narrower than an arm, yet the arm lies just inside the band. It is an
+// arm: cut off at the wrist and the picture accepted. Fingers cut by the border are still refused.
+TEST_F(ImageEdgesTest, AForearmWithABandAcrossItIsStillAnArm) {
+  const SyntheticHand h = Hand(0);
+  const LabelImage with_arm = WithForearm(h);
+  const double palm_radius = PalmRadius(h.image);
+  const cv::Point2d u = ArmDirection(h);
+  ASSERT_GT(u.y, 0.9);  // the arm leaves by the bottom
+  const auto& wrist = h.keypoints_px[0];
+  const double bottom = with_arm.height - 1;
+  const double arm_x = wrist[0] + (bottom - wrist[1]) * u.x / u.y;  // where the arm leaves
+  const double arm_width = 1.7 * palm_radius;
+  // The band meets the border a third of the arm's width from its right side and rises, at 15
+  // degrees, to the left across the arm.
+  const cv::Point2d meet(arm_x + 0.5 * arm_width - arm_width / 3, bottom + 2);
+  const cv::Point2d dir(-std::cos(0.26), -std::sin(0.26));
+  const fs::path path = WritePhoto(with_arm, "band.png");
+  cv::Mat img = cv::imread(path.string());
+  cv::line(img,
+           cv::Point(meet),
+           cv::Point(meet + 3 * arm_width * dir),
+           cv::Scalar(25, 25, 25),
+           std::max(3, static_cast<int>(0.3 * palm_radius)));
+  ASSERT_TRUE(cv::imwrite(path.string(), img));
+  auto hand = LoadQueryEdges(WritePhoto(h.image, "hand.png"), ImageEdgeOptions{});
+  auto band = LoadQueryEdges(path, ImageEdgeOptions{});
+  ASSERT_TRUE(hand.ok()) << hand.status().ToString();
+  ASSERT_TRUE(band.ok()) << band.status().ToString();
+  EXPECT_TRUE(band->arm_found);
+  EXPECT_TRUE(band->forearm_cut);
+  EXPECT_GT(band->arm_dir_x * u.x + band->arm_dir_y * u.y, std::cos(0.35));  // within 20 deg
+  EXPECT_NEAR(band->diameter_px, hand->diameter_px, 0.15 * hand->diameter_px);
+
+  // Spread fingers that leave the picture at the top are no arm, band or not.
+  SyntheticHandParams p;
+  p.width = 320;
+  p.height = 200;
+  p.centre_x = 160;
+  p.centre_y = 85;
+  p.bend = {0.3, -0.25, 0, 0.25, 0.45};
+  auto cut =
+      LoadQueryEdges(WritePhoto(RenderSyntheticHand(p).image, "cut.png"), ImageEdgeOptions{});
+  EXPECT_EQ(cut.status().code(), StatusCode::kNoHand);
+  EXPECT_NE(cut.status().message().find("cut.png: the hand is cut by the picture's border"),
+            std::string::npos)
+      << cut.status().message();
+}
+
 TEST_F(ImageEdgesTest, PicturesTheSearchCannotUseAreRefusedInOneLine) {
   const SyntheticHand h = Hand(0);
   ImageEdgeOptions o;
@@ -349,6 +400,62 @@ TEST_F(ImageEdgesTest, PicturesTheSearchCannotUseAreRefusedInOneLine) {
   ASSERT_TRUE(cv::imwrite((dir_ / "mask.png").string(), HandMask(h.image)));
   o.mask = dir_ / "mask.png";
   EXPECT_TRUE(LoadQueryEdges(dir_ / "grey.png", o).ok());
+}
+
+// Degenerate shapes: a skin-coloured strip a pixel high or wide, or a few px, is refused in one
+// line naming the file, not an OpenCV assertion; a hand-sized region too thin to crop too.
+TEST_F(ImageEdgesTest, ThinPicturesAreRefusedNamingTheFile) {
+  const cv::Vec3b skin(120, 150, 210);  // BGR, inside the default skin box
+  for (const cv::Size size : {cv::Size(2000, 1),
+                              cv::Size(1, 2000),
+                              cv::Size(3000, 4),
+                              cv::Size(900, 15),
+                              cv::Size(2000, 30),
+                              cv::Size(60000, 16)}) {
+    const std::string name =
+        "strip-" + std::to_string(size.width) + "x" + std::to_string(size.height) + ".png";
+    const fs::path path = dir_ / name;
+    ASSERT_TRUE(cv::imwrite(path.string(), cv::Mat(size, CV_8UC3, cv::Scalar(skin))));
+    std::optional<Result<QueryEdges>> r;
+    ASSERT_NO_THROW(r.emplace(LoadQueryEdges(path, ImageEdgeOptions{}))) << name;
+    ASSERT_FALSE(r->ok()) << name;
+    EXPECT_EQ(r->status().message().rfind(path.string() + ": ", 0), 0u) << r->status().message();
+  }
+  auto strip = LoadQueryEdges(dir_ / "strip-2000x1.png", ImageEdgeOptions{});
+  EXPECT_EQ(strip.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(strip.status().message(),
+            (dir_ / "strip-2000x1.png").string() +
+                ": a 2000x1 picture is too thin to hold a hand (16 px each way at least)");
+}
+
+// A query's points size the search (each kept once per roll and hand): past kMaxQueryPoints the
+// picture is refused naming it, whatever its kind; an edge image's pixels are counted before any
+// list of them is made.
+TEST_F(ImageEdgesTest, EdgePointsPastTheLimitAreRefused) {
+  ImageEdgeOptions edges;
+  edges.kind = QueryInputKind::kEdges;
+  const fs::path filled = dir_ / "filled-600.png";
+  ASSERT_TRUE(cv::imwrite(filled.string(), cv::Mat(600, 600, CV_8U, cv::Scalar(255))));
+  auto r = LoadQueryEdges(filled, edges);
+  EXPECT_EQ(r.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(r.status().message(),
+            filled.string() +
+                ": 360000 edge points, more than the 65536 a query may have (a "
+                "hand's outline and creases have a few thousand)");
+  const fs::path huge = dir_ / "filled-1100.png";
+  ASSERT_TRUE(cv::imwrite(huge.string(), cv::Mat(1100, 1100, CV_8U, cv::Scalar(255))));
+  r = LoadQueryEdges(huge, edges);
+  EXPECT_EQ(r.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(r.status().message(),
+            huge.string() +
+                ": 1210000 edge pixels, more than the 1048576 an edge image may have "
+                "(edges are lines, not filled areas)");
+  // A 250 x 250 filled square stays a query (62,500 points), as before.
+  const fs::path fits = dir_ / "filled-250.png";
+  ASSERT_TRUE(cv::imwrite(fits.string(), cv::Mat(250, 250, CV_8U, cv::Scalar(255))));
+  r = LoadQueryEdges(fits, edges);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(r->points.size(), 62500u);
 }
 
 TEST_F(ImageEdgesTest, AHugeJpegIsDecodedReducedNotRefused) {

@@ -68,6 +68,9 @@ T Unwrap(Result<T> r) {
 }
 
 py::object* error_type = nullptr;  // handdb.Error, created in the module init (never freed)
+// handdb.ArgumentError: a handdb.Error that is also a ValueError, for the library's
+// kInvalidArgument (a picture or value the library cannot take), so both handlers catch it.
+py::object* argument_error_type = nullptr;
 
 // Marks a fresh array read-only (it views the mapping, or is shared by every caller).
 template <typename A>
@@ -134,6 +137,17 @@ py::object JsonToPython(const json& doc) {
 struct PyQueryEdges {
   PictureEvidence picture;
 };
+
+// A path argument (str, bytes or os.PathLike), encoded as the file system wants it (os.fsencode,
+// as pybind11's own path conversion does). No file name holds a NUL character: that is a bad
+// value (ValueError naming the argument), not a failed cast.
+fs::path PathArg(py::handle value, const char* name) {
+  const std::string bytes = py::module_::import("os").attr("fsencode")(value).cast<std::string>();
+  if (bytes.find('\0') != std::string::npos) {
+    throw py::value_error(std::string(name) + ": a path may not contain a NUL character");
+  }
+  return fs::path(bytes);
+}
 
 py::array_t<int32_t> PixelArray(const std::vector<EdgePixelXY>& px) {
   py::array_t<int32_t> out({static_cast<py::ssize_t>(px.size()), py::ssize_t{2}});
@@ -224,7 +238,7 @@ PictureOptions PictureOptionsFromKwargs(const py::kwargs& kw) {
       if (!kind.ok()) throw py::value_error("input must be auto, photo, edges or labels");
       o.kind = *kind;
     } else if (key == "mask") {
-      if (!value.is_none()) o.mask = py::cast<fs::path>(value);
+      if (!value.is_none()) o.mask = PathArg(value, "mask");
     } else if (key == "roi") {
       if (!value.is_none()) {
         const auto v = IntList(value, 4, "roi (x, y, w, h)");
@@ -599,6 +613,14 @@ py::object Search(const PyDatabase& self,
   if (threads == 0 || threads < -1 || threads > MaxNumThreads()) {
     throw py::value_error("threads must be -1 or 1.." + std::to_string(MaxNumThreads()));
   }
+  // The grids the distance transform supports (as `handdb query --dt-cell` checks): one message
+  // naming the argument, not the option check's source lines.
+  bool dt_cell_ok = false;
+  for (int k = 0; k <= 4; ++k) dt_cell_ok |= dt_cell_px == 1.0f / static_cast<float>(1 << k);
+  if (!dt_cell_ok) {
+    throw py::value_error("dt_cell_px " + py::str(py::float_(dt_cell_px)).cast<std::string>() +
+                          ": must be 1, 0.5, 0.25, 0.125 or 0.0625 (px)");
+  }
   LandmarkRankOptions landmark_rank;
   landmark_rank.weight = landmark_weight;
   if (!landmark_rank.Check()) throw py::value_error("landmark_weight must be >= 0");
@@ -617,7 +639,7 @@ py::object Search(const PyDatabase& self,
     if (edge_kwargs.size()) throw py::type_error("image options given with a QueryEdges query");
     picture = py::cast<const PyQueryEdges&>(query).picture;
   } else if (py::isinstance<py::str>(query) || py::hasattr(query, "__fspath__")) {
-    picture_file = py::cast<fs::path>(query);
+    picture_file = PathArg(query, "query");
     picture_search.picture = PictureOptionsFromKwargs(edge_kwargs);
     picture_search.search = options;
     picture_search.landmark_rank = landmark_rank;
@@ -712,13 +734,23 @@ void BindError(py::module_& m) {
       "A handdb library error: str(e) is the one-line message `handdb` prints after "
       "'handdb <command>: ' (it names the file and the problem); e.code is the status code name, "
       "e.g. 'kChecksumMismatch', 'kNotFound', 'kNoHand'.";
+  py::object bases = py::make_tuple(*error_type, py::handle(PyExc_ValueError));
+  argument_error_type = new py::object(py::reinterpret_steal<py::object>(
+      PyErr_NewException("handdb._handdb.ArgumentError", bases.ptr(), nullptr)));
+  if (!*argument_error_type) throw py::error_already_set();
+  argument_error_type->attr("__doc__") =
+      "A handdb.Error that is also a ValueError: what the library was given cannot be used (code "
+      "'kInvalidArgument'), e.g. a picture too thin to hold a hand.";
+  m.attr("ArgumentError") = *argument_error_type;
   py::register_exception_translator([](std::exception_ptr p) {
     try {
       if (p) std::rethrow_exception(p);
     } catch (const StatusError& e) {
-      py::object exc = (*error_type)(e.status.message());
+      const py::object& type =
+          e.status.code() == StatusCode::kInvalidArgument ? *argument_error_type : *error_type;
+      py::object exc = type(e.status.message());
       exc.attr("code") = StatusCodeName(e.status.code());
-      PyErr_SetObject(error_type->ptr(), exc.ptr());
+      PyErr_SetObject(type.ptr(), exc.ptr());
     }
   });
 }
@@ -836,14 +868,14 @@ void BindQueryEdges(py::module_& m) {
 
   m.def(
       "query_edges",
-      [](const fs::path& image, py::object database, const py::kwargs& kw) {
+      [](py::object image, py::object database, const py::kwargs& kw) {
         std::optional<fs::path> db_dir;
         if (py::isinstance<PyDatabase>(database)) {
           db_dir = py::cast<const PyDatabase&>(database).path();
         } else if (!database.is_none()) {
-          db_dir = py::cast<fs::path>(database);
+          db_dir = PathArg(database, "database");
         }
-        return LoadEdges(image, PictureOptionsFromKwargs(kw), db_dir);
+        return LoadEdges(PathArg(image, "image"), PictureOptionsFromKwargs(kw), db_dir);
       },
       py::arg("image"),
       py::arg("database") = py::none(),
@@ -1041,7 +1073,9 @@ void BindDatabase(py::module_& m) {
       "A sequence of canonical views: len(db), db[i] / db.view(i) -> View, db[a:b] -> list of "
       "View, iteration; db.read(start, stop) -> every field as numpy columns. Pickling "
       "reopens the path, so each worker process of a data loader maps the shards itself.")
-      .def(py::init<fs::path, bool, const std::string&>(),
+      .def(py::init([](py::object path, bool verify, const std::string& search) {
+             return PyDatabase(PathArg(path, "path"), verify, search);
+           }),
            py::arg("path"),
            py::arg("verify") = false,
            py::arg("search") = "auto")
@@ -1133,23 +1167,39 @@ void BindDatabase(py::module_& m) {
           "view_theta, view_phi, camera_roll, keypoints (n, 21, 3), source_diameter_px, scale, "
           "source_centre_px (n, 2)).")
       .def("__len__", [](const PyDatabase& d) { return d.db().num_views(); })
-      .def("__getitem__",
-           [](py::object self, py::object key) -> py::object {
-             const auto& d = py::cast<const PyDatabase&>(self);
-             if (py::isinstance<py::slice>(key)) {
-               size_t start = 0, stop = 0, step = 0, length = 0;
-               if (!py::cast<py::slice>(key).compute(
-                       d.db().num_views(), &start, &stop, &step, &length)) {
-                 throw py::error_already_set();
-               }
-               py::list out;
-               for (size_t k = 0; k < length; ++k) {
-                 out.append(d.View(self, static_cast<py::ssize_t>(start + k * step)));
-               }
-               return out;
-             }
-             return py::cast(d.View(self, py::cast<py::ssize_t>(key)));
-           })
+      .def(
+          "__getitem__",
+          [](py::object self, py::object key) -> py::object {
+            const auto& d = py::cast<const PyDatabase&>(self);
+            if (py::isinstance<py::slice>(key)) {
+              size_t start = 0, stop = 0, step = 0, length = 0;
+              if (!py::cast<py::slice>(key).compute(
+                      d.db().num_views(), &start, &stop, &step, &length)) {
+                throw py::error_already_set();
+              }
+              py::list out;
+              for (size_t k = 0; k < length; ++k) {
+                out.append(d.View(self, static_cast<py::ssize_t>(start + k * step)));
+              }
+              return out;
+            }
+            // An index is an int (or has __index__); one too large for the platform's index
+            // type is out of range, not a failed cast.
+            if (!PyIndex_Check(key.ptr())) {
+              throw py::type_error("database indices must be integers or slices, not " +
+                                   py::str(py::type::of(key).attr("__name__")).cast<std::string>());
+            }
+            const Py_ssize_t i = PyNumber_AsSsize_t(key.ptr(), PyExc_OverflowError);
+            if (i == -1 && PyErr_Occurred()) {
+              if (!PyErr_ExceptionMatches(PyExc_OverflowError)) throw py::error_already_set();
+              PyErr_Clear();
+              throw py::index_error(d.path().string() + ": view " +
+                                    py::str(key).cast<std::string>() +
+                                    " out of range (database has " +
+                                    std::to_string(d.db().num_views()) + " canonical views)");
+            }
+            return py::cast(d.View(self, i));
+          })
       .def(
           "search",
           &Search,
@@ -1202,15 +1252,18 @@ void BindDatabase(py::module_& m) {
 
 // validate(): `handdb validate` as a list of problems.
 void BindValidate(py::module_& m) {
-  m.def("validate",
-        &Validate,
-        py::arg("path"),
-        py::arg("verify_checksums") = true,
-        py::arg("max_problems") = ValidateOptions{}.max_problems_per_check,
-        "Checks a shard file or a database directory completely (`handdb validate`) and returns "
-        "the problems as dicts {code, file, offset, message} (the --json report's); [] when it "
-        "is valid. max_problems per file and kind of check, 0 = all (if more were found, a last "
-        "entry with code 'kSuppressed' counts them).");
+  m.def(
+      "validate",
+      [](py::object path, bool verify_checksums, size_t max_problems) {
+        return Validate(PathArg(path, "path"), verify_checksums, max_problems);
+      },
+      py::arg("path"),
+      py::arg("verify_checksums") = true,
+      py::arg("max_problems") = ValidateOptions{}.max_problems_per_check,
+      "Checks a shard file or a database directory completely (`handdb validate`) and returns "
+      "the problems as dicts {code, file, offset, message} (the --json report's); [] when it "
+      "is valid. max_problems per file and kind of check, 0 = all (if more were found, a last "
+      "entry with code 'kSuppressed' counts them).");
 }
 
 }  // namespace

@@ -305,7 +305,7 @@ TEST_F(HardeningCli, BadPhotoAndSearchFlagsAreOneLineNamingTheFlag) {
   };
   for (const auto& [model, problem] : models) {
     const CliRun r = Handdb(query + "--landmarks " + model.string());
-    EXPECT_EQ(r.code, 2) << model;
+    EXPECT_EQ(r.code, 1) << model;  // a bad file, not bad usage
     EXPECT_EQ(r.err, "handdb query: --landmarks: " + model.string() + ": " + problem + "\n");
   }
 }
@@ -788,6 +788,166 @@ TEST_F(HardeningCli, StdoutOnFullDiskNamesNoSpaceLeft) {
     EXPECT_EQ(full.code, 1) << full.err;
     EXPECT_EQ(full.err, "handdb " + name + ": cannot write to stdout: No space left on device\n");
   }
+}
+
+// A landmark model that cannot be loaded is a bad file, not bad usage: exit 1 and one line naming
+// the file and the problem, whatever is wrong with it; a directory, a FIFO or a device is named
+// as what it is, not as a missing file (and a FIFO is not opened, so nothing blocks).
+TEST_F(HardeningCli, BadLandmarkModelsAreExitOneNamingTheFile) {
+  const std::string query = "query " + Db() + " " + (*dir_ / "q.pgm").string() + " --landmarks ";
+  const fs::path real = fs::path(HANDDB_SOURCE_DIR) / "third_party" / "assets" / "mediapipe-hands" /
+                        "hand_landmark_full.tflite";
+  const fs::path models = *dir_ / "models";
+  fs::create_directories(models / "a-directory.tflite");
+  const fs::path fifo = models / "fifo.tflite";
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0) << std::strerror(errno);
+  std::ofstream(models / "empty.tflite");
+  std::string random(4096, '\0');
+  for (size_t i = 0; i < random.size(); ++i) random[i] = static_cast<char>((i * 2654435761u) >> 13);
+  std::ofstream(models / "random.tflite", std::ios::binary) << random;
+  // The TFL3 identifier after a root offset that points far outside the file.
+  const std::string header = std::string("\xfc\xff\xff\x0fTFL3", 8) + std::string(56, '\xff');
+  std::ofstream(models / "header.tflite", std::ios::binary) << header;
+  std::vector<std::pair<fs::path, std::string>> cases = {
+      {models / "a-directory.tflite", "a directory, not a model file"},
+      {fifo, "a FIFO, not a model file"},
+      {"/dev/zero", "a device, not a model file"},
+      {models / "empty.tflite", ""},
+      {models / "random.tflite", ""},
+      {models / "header.tflite", ""},
+  };
+  if (fs::exists(real)) {
+    std::ifstream in(real, std::ios::binary);
+    const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    for (const size_t keep : {size_t{16}, size_t{1000}, bytes.size() / 2, bytes.size() - 1}) {
+      const fs::path cut = models / ("cut-" + std::to_string(keep) + ".tflite");
+      std::ofstream(cut, std::ios::binary) << bytes.substr(0, keep);
+      cases.emplace_back(cut, "");
+    }
+  }
+  for (const auto& [model, problem] : cases) {
+    const CliRun r = Handdb(query + model.string());
+    EXPECT_EQ(r.code, 1) << model << ": " << r.err;
+    EXPECT_EQ(Lines(r.err), 1) << r.err;
+    const std::string prefix = "handdb query: --landmarks: " + model.string() + ": ";
+    EXPECT_EQ(r.err.rfind(prefix, 0), 0u) << r.err;
+    if (!problem.empty()) {
+      EXPECT_EQ(r.err, prefix + problem + "\n");
+    }
+  }
+  // `handdb evaluate --photos` shares the flag and its exit code.
+  const fs::path no_photos = *dir_ / "no-photos";
+  fs::create_directories(no_photos);
+  const CliRun r = Handdb("evaluate " + Db() + " --photos " + no_photos.string() +
+                          " -q --landmarks " + (models / "random.tflite").string());
+  EXPECT_EQ(r.code, 1) << r.err;
+  EXPECT_EQ(r.err.rfind("handdb evaluate: --landmarks: " + (models / "random.tflite").string(), 0),
+            0u)
+      << r.err;
+}
+
+// A flag CLI11 rejects is bad usage in one line naming the command and the flag (exit 2), like
+// every other error, not CLI11's two lines without the command.
+TEST_F(HardeningCli, RejectedFlagsAreOneLineNamingTheCommand) {
+  const std::string query = "query " + Db() + " " + (*dir_ / "q.pgm").string() + " ";
+  for (const std::string flags : {"--top 0", "--top x", "--per-shape -1", "--no-such-flag"}) {
+    const CliRun r = Handdb(query + flags);
+    EXPECT_EQ(r.code, 2) << flags;
+    EXPECT_EQ(Lines(r.err), 1) << r.err;
+    EXPECT_EQ(r.err.rfind("handdb query: ", 0), 0u) << r.err;
+  }
+  EXPECT_EQ(Handdb(query + "--top 0").err.rfind("handdb query: --top: ", 0), 0u);
+  EXPECT_EQ(Handdb("query --help").code, 0);
+}
+
+// A coded view damaged past what Open checks: `show` says which shard and view in one line (not
+// "internal error", not "point code: point code"), exit 1.
+TEST_F(HardeningCli, ShowOfADamagedCodedViewNamesTheShardAndView) {
+  const fs::path db = *dir_ / "coded-db";
+  fs::create_directories(db);
+  const fs::path shard_path = db / "shard-00000.hdb";
+  ShardWriterOptions options;
+  options.coded = true;
+  ShardWriter w;
+  ASSERT_TRUE(w.Open(shard_path, options).ok());
+  for (uint32_t v = 0; v < 4; ++v) {
+    ASSERT_TRUE(
+        w.AddView(testing::SyntheticViewLabel(v, 4), testing::SyntheticEdgeSet(v, 300)).ok());
+  }
+  auto summary = w.Finish();
+  ASSERT_TRUE(summary.ok());
+  Manifest manifest;
+  manifest.tool_version = "hardening_cli_test";
+  manifest.rolls = 12;
+  manifest.AddShard(*summary);
+  ASSERT_TRUE(WriteManifest(db, manifest).ok());
+  ASSERT_EQ(Handdb("show " + db.string() + " --view 0 -o " + (*dir_ / "coded.png").string()).code,
+            0);
+
+  std::ifstream in(shard_path, std::ios::binary);
+  std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)),
+                             std::istreambuf_iterator<char>());
+  in.close();
+  const shard::RawHeader h = shard::RawHeader::DecodeFrom(bytes);
+  for (uint32_t i = 0; i < h.section_count; ++i) {
+    const shard::RawSection sec = shard::RawSection::DecodeFrom(
+        bytes.data() + h.section_table_offset + i * h.section_entry_size);
+    // View 0's chains, past the header its open reads.
+    if (sec.type == shard::kSectionPointCodes) {
+      for (size_t k = 20; k < 40; ++k) bytes[sec.offset + k] = 0xff;
+    }
+  }
+  ASSERT_TRUE(shard::RewriteChecksums(bytes));
+  std::ofstream(shard_path, std::ios::binary | std::ios::trunc)
+      .write(reinterpret_cast<const char*>(bytes.data()),
+             static_cast<std::streamsize>(bytes.size()));
+  summary->checksum = shard::ChecksumHex(shard::Checksum(bytes.data(), bytes.size()));
+  Manifest damaged;
+  damaged.tool_version = "hardening_cli_test";
+  damaged.rolls = 12;
+  damaged.AddShard(*summary);
+  ASSERT_TRUE(WriteManifest(db, damaged).ok());
+
+  const CliRun r = Handdb("show " + db.string() + " --view 0 -o " + (*dir_ / "bad.png").string());
+  EXPECT_EQ(r.code, 1) << r.err;
+  EXPECT_EQ(Lines(r.err), 1) << r.err;
+  EXPECT_EQ(r.err.rfind("handdb show: " + shard_path.string() + ": offset ", 0), 0u) << r.err;
+  EXPECT_NE(r.err.find(": view 0: point code: "), std::string::npos) << r.err;
+  EXPECT_EQ(r.err.find("point code: point code"), std::string::npos) << r.err;
+  EXPECT_EQ(r.err.find("internal error"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(*dir_ / "bad.png"));
+}
+
+// An edge image whose edges are a filled area, and a picture too thin to hold a hand: one line
+// naming the picture and the limit, exit 1, before any search (and quickly: the 2000 x 2000 white
+// edge image took 2.6 GB and many seconds).
+TEST_F(HardeningCli, EdgeImagesPastTheLimitsAndThinPicturesAreOneLine) {
+  const std::string query = "query " + Db() + " ";
+  const fs::path white = *dir_ / "white-2000.png";
+  ASSERT_TRUE(cv::imwrite(white.string(), cv::Mat(2000, 2000, CV_8U, cv::Scalar(255))));
+  CliRun r = Handdb(query + white.string() + " --input edges");
+  EXPECT_EQ(r.code, 1) << r.err;
+  EXPECT_EQ(r.err,
+            "handdb query: " + white.string() +
+                ": 4000000 edge pixels, more than the 1048576 an edge image may have (edges are "
+                "lines, not filled areas)\n");
+  const fs::path square = *dir_ / "white-600.png";
+  ASSERT_TRUE(cv::imwrite(square.string(), cv::Mat(600, 600, CV_8U, cv::Scalar(255))));
+  r = Handdb(query + square.string() + " --input edges");
+  EXPECT_EQ(r.code, 1) << r.err;
+  EXPECT_EQ(Lines(r.err), 1) << r.err;
+  EXPECT_NE(r.err.find("handdb query: " + square.string() +
+                       ": 360000 edge points, more than the "
+                       "65536 a query may have"),
+            std::string::npos)
+      << r.err;
+  const fs::path strip = *dir_ / "strip-2000x1.png";
+  ASSERT_TRUE(cv::imwrite(strip.string(), cv::Mat(1, 2000, CV_8UC3, cv::Scalar(120, 150, 210))));
+  r = Handdb(query + strip.string());
+  EXPECT_EQ(r.code, 1) << r.err;
+  EXPECT_EQ(r.err,
+            "handdb query: " + strip.string() +
+                ": a 2000x1 picture is too thin to hold a hand (16 px each way at least)\n");
 }
 
 }  // namespace

@@ -21,6 +21,7 @@ from ._handdb import (  # noqa: F401
     NUM_JOINT_ANGLES,
     NUM_KEYPOINTS,
     POINT_SCALE,
+    ArgumentError,
     Database,
     Error,
     Match,
@@ -34,6 +35,7 @@ from ._handdb import (  # noqa: F401
 __all__ = [
     "Database",
     "Error",
+    "ArgumentError",
     "Match",
     "QueryEdges",
     "View",
