@@ -13,6 +13,7 @@ PACKAGES=(
   openimageio-tools libopenexr-dev libopencv-dev libeigen3-dev
   libpcl-dev libnanoflann-dev libcli11-dev nlohmann-json3-dev libzstd-dev libxxhash-dev
   libssl-dev libboost-dev libfaiss-dev libpng-dev libjpeg62-turbo-dev libceres-dev
+  libtinygltf-dev
   python3-dev pybind11-dev python3-pybind11
   libgtest-dev libgmock-dev libbenchmark-dev clang libclang-rt-14-dev clang-format clang-tidy
   slurm-wlm munge xxhash
