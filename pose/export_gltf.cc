@@ -290,6 +290,41 @@ void AddCamera(const Mat3d& cam_from_hand,
   }
 }
 
+// The mirror image across the plane through `point` normal to `normal` (both in the hand frame):
+// a node between the armature (or the scene, without one) and the rig's root joints. A skinned
+// mesh follows its joints' world transforms only, so the whole hand turns left.
+void AddMirror(const Vec3d& normal,
+               const Vec3d& point,
+               int armature,
+               const std::vector<int>& root_joints,
+               std::vector<int>* parent,
+               tinygltf::Model* model) {
+  const Eigen::Matrix3d c = HandFromGltf().topLeftCorner<3, 3>();
+  const Eigen::Vector3d n = c.transpose() * Eigen::Vector3d(normal.data()).normalized();
+  const Eigen::Vector3d p = c.transpose() * Eigen::Vector3d(point.data());
+  const Eigen::Matrix3d reflection = Eigen::Matrix3d::Identity() - 2 * n * n.transpose();
+  // reflection = rotation * diag(-1, 1, 1), glTF's rotation-then-scale order.
+  const Eigen::Quaterniond q(Eigen::Matrix3d(reflection * Eigen::Vector3d(-1, 1, 1).asDiagonal()));
+  const Eigen::Vector3d t = 2 * n.dot(p) * n;
+
+  tinygltf::Node node;
+  node.name = "left hand (mirror)";
+  node.rotation = {q.x(), q.y(), q.z(), q.w()};
+  node.scale = {-1, 1, 1};
+  node.translation = {t.x(), t.y(), t.z()};
+  model->nodes.push_back(node);
+  const int index = static_cast<int>(model->nodes.size()) - 1;
+  parent->push_back(armature);
+  if (armature >= 0) {
+    model->nodes[armature].children.push_back(index);
+  } else {
+    const int scene = std::max(model->defaultScene, 0);
+    if (model->scenes.empty()) model->scenes.emplace_back();
+    model->scenes[scene].nodes.push_back(index);
+  }
+  for (const int joint : root_joints) Reparent(joint, index, parent, model);
+}
+
 }  // namespace
 
 bool PosedHandGlbOptions::Check() const {
@@ -389,6 +424,26 @@ Status WritePosedHandGlb(const fs::path& out,
     }
     SetRigidLocal(parent_in_armature.inverse() * target, &model.nodes[node]);
     written[b] = parent_in_armature * NodeLocal(model.nodes[node]);
+  }
+  if (options.left_hand) {
+    std::vector<int> root_joints;
+    for (const int b : order) {
+      if (bone_parent[b] < 0) root_joints.push_back(node_of[b]);
+    }
+    Vec3d normal;
+    if (options.cam_from_hand) {
+      normal = (*options.cam_from_hand)[0];
+    } else {
+      const Vec3d& f = rig.forward_axis();
+      const Vec3d& m = rig.palm_normal();
+      normal = {f[1] * m[2] - f[2] * m[1], f[2] * m[0] - f[0] * m[2], f[0] * m[1] - f[1] * m[0]};
+      if (!(std::hypot(normal[0], normal[1], normal[2]) > 1e-9)) {
+        return Error(StatusCode::kSchemaViolation,
+                     hand.path,
+                     "forward_axis and palm_normal are parallel: no thumb side to mirror across");
+      }
+    }
+    AddMirror(normal, rig.look_at(), armature, root_joints, &parent, &model);
   }
   // A joint parented under its own descendant would make a file no viewer can pose.
   for (const int node : node_of) {

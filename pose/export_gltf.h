@@ -30,6 +30,13 @@ struct PosedHandGlbOptions {
   // That camera's width across its square image, in hand-frame units; 0: the hand model's
   // ortho_scale.
   double ortho_scale = 0;
+  // The right hand's mirror image, a left hand (a match of query/searcher.h's Hand::kLeft, which
+  // searched the mirrored picture). With a camera the mirror plane passes through look_at normal
+  // to the camera's image x axis, so the camera sees the picture's hand as it is (the search
+  // mirrored x of the query's frame); without, it is normal to the hand's thumb side
+  // (forward_axis x palm_normal). Written as a node between the armature and the root joint with
+  // scale (-1, 1, 1), so the joints' own transforms stay rotations.
+  bool left_hand = false;
   // ortho_scale finite and >= 0; cam_from_hand, if set, a rotation (orthonormal within 1e-6,
   // determinant +1).
   bool Check() const;

@@ -101,6 +101,15 @@ double MaxDiff(const Mat4& transform, const BonePose& bone) {
   return d;
 }
 
+Mat4 ToMat4ForTest(const BonePose& bone) {
+  Mat4 m = Mat4::Identity();
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) m(r, c) = bone.rotation[r][c];
+    m(r, 3) = bone.head[r];
+  }
+  return m;
+}
+
 JointVector RandomJoints(const HandRig& rig, uint32_t seed) {
   std::mt19937 rng(seed);
   JointVector joints;
@@ -257,6 +266,73 @@ TEST(WritePosedHandGlb, CameraSeesTheHandAsTheRenderCamera) {
     const Vec3d px = ProjectToRenderPx(points[kp.index], rig.look_at(), *cam_from_hand, render);
     // glTF's camera: +x right, +y up, looking along -z.
     EXPECT_NEAR(render.resolution / 2.0 + in_camera.x() * px_per_unit, px[0], 1e-3) << kp.name;
+    EXPECT_NEAR(render.resolution / 2.0 - in_camera.y() * px_per_unit, px[1], 1e-3) << kp.name;
+    EXPECT_NEAR((-in_camera.z() - 1.0) * px_per_unit, px[2], 1e-3) << kp.name;
+  }
+}
+
+// The reflection across the plane through `point` normal to `normal`, in the hand frame.
+Mat4 Mirror(const Vec3d& normal, const Vec3d& point) {
+  const Eigen::Vector3d n = Eigen::Vector3d(normal.data()).normalized();
+  Mat4 m = Mat4::Identity();
+  m.topLeftCorner<3, 3>() -= 2 * n * n.transpose();
+  m.col(3).head<3>() = 2 * n.dot(Eigen::Vector3d(point.data())) * n;
+  return m;
+}
+
+TEST(WritePosedHandGlb, LeftHandIsTheMirrorImageAcrossTheThumbSide) {
+  const HandRig rig = ShippedRig();
+  const JointVector joints = RandomJoints(rig, 13);
+  PosedHandGlbOptions options;
+  options.left_hand = true;
+  const fs::path out = testing::TempDir("export_gltf_left") / "left.glb";
+  ASSERT_TRUE(WritePosedHandGlb(out, rig, joints, options).ok());
+  const tinygltf::Model model = ReadGlb(out);
+  const std::vector<Mat4> world = Worlds(model);
+  const std::vector<BonePose> posed = rig.PoseBones(joints);
+  // The hand frame's +y points to the thumb (docs/hand_model.md).
+  const Mat4 mirror = Mirror({0, 1, 0}, rig.look_at());
+  for (size_t b = 0; b < posed.size(); ++b) {
+    const Mat4 expected = mirror * ToMat4ForTest(posed[b]);
+    const Mat4 got = GltfToHand(world[NodeNamed(model, rig.model().bones[b].name)]);
+    EXPECT_LE((got - expected).cwiseAbs().maxCoeff(), kTolerance) << rig.model().bones[b].name;
+  }
+}
+
+TEST(WritePosedHandGlb, LeftHandThroughTheCameraIsTheMirroredImage) {
+  const HandRig rig = ShippedRig();
+  const JointVector joints = RandomJoints(rig, 17);
+  auto cam_from_hand = CamFromHand(rig, {-0.2, 0.4, 0.9}, 2.1);
+  ASSERT_TRUE(cam_from_hand.ok());
+  PosedHandGlbOptions options;
+  options.cam_from_hand = *cam_from_hand;
+  options.left_hand = true;
+  const fs::path out = testing::TempDir("export_gltf_left_camera") / "left.glb";
+  ASSERT_TRUE(WritePosedHandGlb(out, rig, joints, options).ok());
+  const tinygltf::Model model = ReadGlb(out);
+  const std::vector<Mat4> world = Worlds(model);
+  int camera_node = -1;
+  for (size_t i = 0; i < model.nodes.size(); ++i) {
+    if (model.nodes[i].camera == 0) camera_node = static_cast<int>(i);
+  }
+  ASSERT_GE(camera_node, 0);
+  // The camera itself is not mirrored: a rotation.
+  const double camera_determinant = world[camera_node].topLeftCorner<3, 3>().determinant();
+  EXPECT_NEAR(camera_determinant, 1.0, 1e-9);
+  const Mat4 camera_from_world = world[camera_node].inverse();
+
+  RenderSettings render;
+  render.resolution = 256;
+  render.ortho_scale = rig.model().ortho_scale;
+  const double px_per_unit = render.resolution / render.ortho_scale;
+  const HandKeypoints3d points = rig.Keypoints3d(joints);
+  for (const HandKeypoint& kp : rig.model().keypoints) {
+    const Eigen::Vector4d in_camera = camera_from_world * world[NodeNamed(model, kp.bone)].col(3);
+    const Vec3d px = ProjectToRenderPx(points[kp.index], rig.look_at(), *cam_from_hand, render);
+    // The right hand's image mirrored left to right about the image centre.
+    EXPECT_NEAR(
+        render.resolution / 2.0 + in_camera.x() * px_per_unit, render.resolution - px[0], 1e-3)
+        << kp.name;
     EXPECT_NEAR(render.resolution / 2.0 - in_camera.y() * px_per_unit, px[1], 1e-3) << kp.name;
     EXPECT_NEAR((-in_camera.z() - 1.0) * px_per_unit, px[2], 1e-3) << kp.name;
   }

@@ -1,6 +1,7 @@
 // The posed hand (pose/export_gltf.h) as Blender opens it: Blender's own glTF importer
 // (tests/blender/import_posed_glb.py) reads the exported .glb, and every pose bone's head must lie
-// where HandRig puts it, the camera where the render camera stands. This is the check that the
+// where HandRig puts it (a left hand: in an armature that is the mirror), the camera where the
+// render camera stands. This is the check that the
 // file means to a real importer what pose/export_gltf_test.cc computes from the glTF alone.
 #include <gtest/gtest.h>
 
@@ -77,6 +78,7 @@ TEST(ExportGlbBlender, ImportedBonesAndCameraAreTheRigs) {
     ASSERT_TRUE(cam_from_hand.ok());
     PosedHandGlbOptions options;
     options.cam_from_hand = *cam_from_hand;
+    options.left_hand = seed == 2;
     const fs::path glb = dir / ("pose" + std::to_string(seed) + ".glb");
     ASSERT_TRUE(WritePosedHandGlb(glb, rig, joints, options).ok());
 
@@ -95,9 +97,22 @@ TEST(ExportGlbBlender, ImportedBonesAndCameraAreTheRigs) {
       }
     }
     std::cout << "seed " << seed << ": largest head difference " << worst << "\n";
+    // The heads are in the armature's space; a left hand's armature is the mirror across the
+    // plane through look_at normal to the image x axis.
+    double armature_world[4][4] = {{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}, {0, 0, 0, 1}};
+    if (options.left_hand) {
+      const Vec3d& n = (*cam_from_hand)[0];
+      const Vec3d& p = rig.look_at();
+      const double np = n[0] * p[0] + n[1] * p[1] + n[2] * p[2];
+      for (int r = 0; r < 3; ++r) {
+        for (int c = 0; c < 3; ++c) armature_world[r][c] -= 2 * n[r] * n[c];
+        armature_world[r][3] = 2 * np * n[r];
+      }
+    }
     for (int r = 0; r < 4; ++r) {
       for (int c = 0; c < 4; ++c) {
-        EXPECT_NEAR(imported["armature_world"][r][c].get<double>(), r == c ? 1.0 : 0.0, 1e-6);
+        EXPECT_NEAR(imported["armature_world"][r][c].get<double>(), armature_world[r][c], 1e-5)
+            << "seed " << seed;
       }
     }
 
