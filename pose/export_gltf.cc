@@ -453,15 +453,18 @@ Status WritePosedHandGlb(const fs::path& out,
   if (options.cam_from_hand) {
     AddCamera(*options.cam_from_hand, rig.look_at(), ortho_scale, armature, &model);
   }
-  model.asset.generator = std::string("handdb ") + HANDDB_VERSION + " (posed " +
-                          asset.filename().string() + ", " + model.asset.generator + ")";
+  // Who made the file, and from what: the asset's own generator stays in the record.
+  std::string made_by =
+      std::string("handdb ") + HANDDB_VERSION + " (posed " + asset.filename().string();
+  if (!model.asset.generator.empty()) made_by += ", made by " + model.asset.generator;
+  model.asset.generator = made_by + ")";
 
   std::ostringstream bytes;
   tinygltf::TinyGLTF writer;
   if (!writer.WriteGltfSceneToStream(&model, bytes, /*prettyPrint=*/false, /*writeBinary=*/true)) {
     return Error(StatusCode::kIoError, out, "tinygltf could not serialise the posed asset");
   }
-  const Status saved = WriteFileAtomic(out, bytes.str());
+  Status saved = WriteFileAtomic(out, bytes.str());
   // The writer names what failed, which may be a directory above the output.
   if (!saved.ok() && saved.message().find(out.string()) == std::string::npos) {
     return Error(saved.code(), out, saved.message());
