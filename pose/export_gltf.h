@@ -35,7 +35,9 @@ struct PosedHandGlbOptions {
   // to the camera's image x axis, so the camera sees the picture's hand as it is (the search
   // mirrored x of the query's frame); without, it is normal to the hand's thumb side
   // (forward_axis x palm_normal). Written as a node between the armature and the root joint with
-  // scale (-1, 1, 1), so the joints' own transforms stay rotations.
+  // scale (-1, 1, 1), so the joints' own transforms stay rotations. cam_from_hand stays the
+  // right hand's camera, whose image mirrored left to right is the picture: for a left Match,
+  // that of MirrorLabel(match.label), not of the label in the left hand's frame.
   bool left_hand = false;
   // ortho_scale finite and >= 0; cam_from_hand, if set, a rotation (orthonormal within 1e-6,
   // determinant +1).
