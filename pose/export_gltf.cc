@@ -290,39 +290,119 @@ void AddCamera(const Mat3d& cam_from_hand,
   }
 }
 
-// The mirror image across the plane through `point` normal to `normal` (both in the hand frame):
-// a node between the armature (or the scene, without one) and the rig's root joints. A skinned
-// mesh follows its joints' world transforms only, so the whole hand turns left.
-void AddMirror(const Vec3d& normal,
-               const Vec3d& point,
-               int armature,
-               const std::vector<int>& root_joints,
-               std::vector<int>* parent,
-               tinygltf::Model* model) {
-  const Eigen::Matrix3d c = HandFromGltf().topLeftCorner<3, 3>();
-  const Eigen::Vector3d n = c.transpose() * Eigen::Vector3d(normal.data()).normalized();
-  const Eigen::Vector3d p = c.transpose() * Eigen::Vector3d(point.data());
-  const Eigen::Matrix3d reflection = Eigen::Matrix3d::Identity() - 2 * n * n.transpose();
-  // reflection = rotation * diag(-1, 1, 1), glTF's rotation-then-scale order.
-  const Eigen::Quaterniond q(Eigen::Matrix3d(reflection * Eigen::Vector3d(-1, 1, 1).asDiagonal()));
-  const Eigen::Vector3d t = 2 * n.dot(p) * n;
+// The reflection across the plane through `point` normal to `normal` (hand frame), in the glTF
+// armature's axes.
+Mat4 MirrorInArmature(const Vec3d& normal, const Vec3d& point) {
+  const Eigen::Vector3d n = Eigen::Vector3d(normal.data()).normalized();
+  Mat4 m = Mat4::Identity();
+  m.topLeftCorner<3, 3>() -= 2 * n * n.transpose();
+  m.col(3).head<3>() = 2 * n.dot(Eigen::Vector3d(point.data())) * n;
+  return HandFromGltf().transpose() * m * HandFromGltf();
+}
 
-  tinygltf::Node node;
-  node.name = "left hand (mirror)";
-  node.rotation = {q.x(), q.y(), q.z(), q.w()};
-  node.scale = {-1, 1, 1};
-  node.translation = {t.x(), t.y(), t.z()};
-  model->nodes.push_back(node);
-  const int index = static_cast<int>(model->nodes.size()) - 1;
-  parent->push_back(armature);
-  if (armature >= 0) {
-    model->nodes[armature].children.push_back(index);
-  } else {
-    const int scene = std::max(model->defaultScene, 0);
-    if (model->scenes.empty()) model->scenes.emplace_back();
-    model->scenes[scene].nodes.push_back(index);
+// Element `i` of `accessor` as `count` floats, or null when its bytes are not there.
+float* AccessorFloats(tinygltf::Model* model, const tinygltf::Accessor& accessor, size_t i) {
+  if (accessor.bufferView < 0 ||
+      accessor.bufferView >= static_cast<int>(model->bufferViews.size())) {
+    return nullptr;
   }
-  for (const int joint : root_joints) Reparent(joint, index, parent, model);
+  const tinygltf::BufferView& view = model->bufferViews[accessor.bufferView];
+  const int size = tinygltf::GetComponentSizeInBytes(accessor.componentType) *
+                   tinygltf::GetNumComponentsInType(accessor.type);
+  const size_t stride = view.byteStride > 0 ? view.byteStride : static_cast<size_t>(size);
+  const size_t offset = view.byteOffset + accessor.byteOffset + i * stride;
+  if (view.buffer < 0 || view.buffer >= static_cast<int>(model->buffers.size()) || size <= 0 ||
+      offset + size > model->buffers[view.buffer].data.size()) {
+    return nullptr;
+  }
+  return reinterpret_cast<float*>(model->buffers[view.buffer].data.data() + offset);
+}
+
+// The skin's data mirrored in bind space, x -> -x: vertex positions, normals and tangents (whose
+// w, the bitangent's handedness, turns too), the triangles' winding, and the inverse bind
+// matrices conjugated by diag(-1, 1, 1). With each joint posed at mirror * pose * diag(-1, 1, 1),
+// joint world x inverse bind x vertex is then the mirror of the right hand's skinned vertex, and
+// every transform in the file stays a rotation: no viewer has to handle a negative scale.
+Status MirrorSkinData(int skin, const fs::path& asset, tinygltf::Model* model) {
+  auto unsupported = [&](const std::string& what) {
+    return Error(StatusCode::kSchemaViolation, asset, "cannot mirror " + what + " for a left hand");
+  };
+  std::vector<bool> done(model->accessors.size(), false);
+  auto mirror = [&](int index, int type, const std::string& what) -> Status {
+    if (index < 0 || index >= static_cast<int>(model->accessors.size())) {
+      return unsupported(what + " (no such accessor)");
+    }
+    if (done[index]) return Status::Ok();
+    done[index] = true;
+    tinygltf::Accessor& accessor = model->accessors[index];
+    if (accessor.componentType != TINYGLTF_COMPONENT_TYPE_FLOAT || accessor.type != type ||
+        accessor.sparse.isSparse) {
+      return unsupported(what + " that is not plain float data");
+    }
+    for (size_t i = 0; i < accessor.count; ++i) {
+      float* v = AccessorFloats(model, accessor, i);
+      if (v == nullptr) return unsupported(what + " whose bytes lie outside its buffer");
+      if (type == TINYGLTF_TYPE_MAT4) {
+        for (int k = 0; k < 16; ++k) {
+          if ((k % 4 == 0) != (k / 4 == 0)) v[k] = -v[k];  // column-major (row 0) xor (col 0)
+        }
+      } else {
+        v[0] = -v[0];
+        if (type == TINYGLTF_TYPE_VEC4) v[3] = -v[3];
+      }
+    }
+    if (what == "POSITION" && accessor.minValues.size() == 3 && accessor.maxValues.size() == 3) {
+      const double min_x = accessor.minValues[0];
+      accessor.minValues[0] = -accessor.maxValues[0];
+      accessor.maxValues[0] = -min_x;
+    }
+    return Status::Ok();
+  };
+  auto flip_winding = [&](int index) -> Status {
+    if (done[index]) return Status::Ok();
+    done[index] = true;
+    const tinygltf::Accessor& accessor = model->accessors[index];
+    const int size = tinygltf::GetComponentSizeInBytes(accessor.componentType);
+    if (accessor.bufferView < 0 || accessor.sparse.isSparse || accessor.count % 3 != 0 ||
+        (size != 1 && size != 2 && size != 4)) {
+      return unsupported("triangle indices of this kind");
+    }
+    const tinygltf::BufferView& view = model->bufferViews.at(accessor.bufferView);
+    const size_t offset = view.byteOffset + accessor.byteOffset;
+    std::vector<unsigned char>& bytes = model->buffers.at(view.buffer).data;
+    if (view.byteStride > 0 && view.byteStride != static_cast<size_t>(size)) {
+      return unsupported("strided triangle indices");
+    }
+    if (offset + accessor.count * size > bytes.size()) {
+      return unsupported("triangle indices outside their buffer");
+    }
+    for (size_t t = 0; t < accessor.count; t += 3) {
+      std::swap_ranges(bytes.begin() + offset + (t + 1) * size,
+                       bytes.begin() + offset + (t + 2) * size,
+                       bytes.begin() + offset + (t + 2) * size);
+    }
+    return Status::Ok();
+  };
+
+  for (const tinygltf::Node& node : model->nodes) {
+    if (node.skin != skin || node.mesh < 0) continue;
+    for (const tinygltf::Primitive& primitive : model->meshes.at(node.mesh).primitives) {
+      if (primitive.mode != TINYGLTF_MODE_TRIANGLES || primitive.indices < 0) {
+        return unsupported("a primitive that is not indexed triangles");
+      }
+      if (!primitive.targets.empty()) return unsupported("morph targets");
+      HANDDB_RETURN_IF_ERROR(flip_winding(primitive.indices));
+      for (const auto& [name, index] : primitive.attributes) {
+        if (name == "POSITION" || name == "NORMAL") {
+          HANDDB_RETURN_IF_ERROR(mirror(index, TINYGLTF_TYPE_VEC3, name));
+        } else if (name == "TANGENT") {
+          HANDDB_RETURN_IF_ERROR(mirror(index, TINYGLTF_TYPE_VEC4, name));
+        }
+      }
+    }
+  }
+  return mirror(
+      model->skins[skin].inverseBindMatrices, TINYGLTF_TYPE_MAT4, "inverse bind matrices");
 }
 
 }  // namespace
@@ -408,28 +488,11 @@ Status WritePosedHandGlb(const fs::path& out,
   // what a reader composes is the target up to rounding, not up to errors summed down a finger.
   const std::vector<BonePose> posed = rig.PoseBones(joints);
   const Mat4 c = HandFromGltf();
-  std::vector<Mat4> written(hand.bones.size(), Mat4::Identity());
-  for (const int b : order) {
-    const int node = node_of[b];
-    const Mat4 target = c.transpose() * ToMat4(posed[b].rotation, posed[b].head) * c;
-    Mat4 parent_in_armature = Mat4::Identity();
-    if (bone_parent[b] >= 0) {
-      Reparent(node, node_of[bone_parent[b]], &parent, &model);
-      parent_in_armature = written[bone_parent[b]];
-    } else if (parent[node] != armature) {
-      return Error(StatusCode::kSchemaViolation,
-                   asset,
-                   "root joint '" + hand.bones[b].name + "' is not under the armature of '" +
-                       hand.bones[order[0]].name + "'");
-    }
-    SetRigidLocal(parent_in_armature.inverse() * target, &model.nodes[node]);
-    written[b] = parent_in_armature * NodeLocal(model.nodes[node]);
-  }
+  // A left hand: each joint at mirror * pose * diag(-1, 1, 1), a rotation, with the skin's data
+  // mirrored to match (MirrorSkinData).
+  Mat4 mirror = Mat4::Identity();
+  Mat4 joint_flip = Mat4::Identity();
   if (options.left_hand) {
-    std::vector<int> root_joints;
-    for (const int b : order) {
-      if (bone_parent[b] < 0) root_joints.push_back(node_of[b]);
-    }
     Vec3d normal;
     if (options.cam_from_hand) {
       normal = (*options.cam_from_hand)[0];
@@ -443,7 +506,35 @@ Status WritePosedHandGlb(const fs::path& out,
                      "forward_axis and palm_normal are parallel: no thumb side to mirror across");
       }
     }
-    AddMirror(normal, rig.look_at(), armature, root_joints, &parent, &model);
+    mirror = MirrorInArmature(normal, rig.look_at());
+    joint_flip(0, 0) = -1;
+    int skin = -1;
+    for (size_t i = 0; i < model.skins.size() && skin < 0; ++i) {
+      const std::vector<int>& skin_joints = model.skins[i].joints;
+      if (std::find(skin_joints.begin(), skin_joints.end(), node_of[order[0]]) !=
+          skin_joints.end()) {
+        skin = static_cast<int>(i);
+      }
+    }
+    HANDDB_RETURN_IF_ERROR(MirrorSkinData(skin, asset, &model));
+  }
+  std::vector<Mat4> written(hand.bones.size(), Mat4::Identity());
+  for (const int b : order) {
+    const int node = node_of[b];
+    const Mat4 target =
+        mirror * c.transpose() * ToMat4(posed[b].rotation, posed[b].head) * c * joint_flip;
+    Mat4 parent_in_armature = Mat4::Identity();
+    if (bone_parent[b] >= 0) {
+      Reparent(node, node_of[bone_parent[b]], &parent, &model);
+      parent_in_armature = written[bone_parent[b]];
+    } else if (parent[node] != armature) {
+      return Error(StatusCode::kSchemaViolation,
+                   asset,
+                   "root joint '" + hand.bones[b].name + "' is not under the armature of '" +
+                       hand.bones[order[0]].name + "'");
+    }
+    SetRigidLocal(parent_in_armature.inverse() * target, &model.nodes[node]);
+    written[b] = parent_in_armature * NodeLocal(model.nodes[node]);
   }
   // A joint parented under its own descendant would make a file no viewer can pose.
   for (const int node : node_of) {

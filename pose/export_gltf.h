@@ -5,8 +5,9 @@
 // not move its children. The export therefore parents the joint nodes as the rig does (wrist ->
 // metacarpals -> phalanges -> tips) and gives each the local transform that makes its world
 // transform the rig's posed bone (HandRig::PoseBones) in the asset's frame. The mesh, the skin's
-// inverse bind matrices and every buffer are written unchanged, so a viewer's skinning (joint
-// world matrix times inverse bind matrix) deforms the mesh exactly as the renders' Blender did.
+// inverse bind matrices and every buffer are written unchanged (but for a left hand, below), so a
+// viewer's skinning (joint world matrix times inverse bind matrix) deforms the mesh exactly as the
+// renders' Blender did.
 #pragma once
 
 #include <filesystem>
@@ -34,8 +35,9 @@ struct PosedHandGlbOptions {
   // searched the mirrored picture). With a camera the mirror plane passes through look_at normal
   // to the camera's image x axis, so the camera sees the picture's hand as it is (the search
   // mirrored x of the query's frame); without, it is normal to the hand's thumb side
-  // (forward_axis x palm_normal). Written as a node between the armature and the root joint with
-  // scale (-1, 1, 1), so the joints' own transforms stay rotations. cam_from_hand stays the
+  // (forward_axis x palm_normal). The skin's vertices, normals, winding and inverse bind matrices
+  // are mirrored with it, so every transform in the file stays a rotation (no negative scale for
+  // a viewer to get wrong) and the faces keep their outside out. cam_from_hand stays the
   // right hand's camera, whose image mirrored left to right is the picture: for a left Match,
   // that of MirrorLabel(match.label), not of the label in the left hand's frame.
   bool left_hand = false;

@@ -280,23 +280,129 @@ Mat4 Mirror(const Vec3d& normal, const Vec3d& point) {
   return m;
 }
 
+// Element i of a float accessor.
+const float* Floats(const tinygltf::Model& model, int accessor_index, size_t i) {
+  const tinygltf::Accessor& accessor = model.accessors.at(accessor_index);
+  THROW_CHECK(accessor.componentType == TINYGLTF_COMPONENT_TYPE_FLOAT);
+  const tinygltf::BufferView& view = model.bufferViews.at(accessor.bufferView);
+  const size_t size = 4 * tinygltf::GetNumComponentsInType(accessor.type);
+  const size_t stride = view.byteStride > 0 ? view.byteStride : size;
+  return reinterpret_cast<const float*>(model.buffers.at(view.buffer).data.data() +
+                                        view.byteOffset + accessor.byteOffset + i * stride);
+}
+
+uint32_t Index(const tinygltf::Model& model, int accessor_index, size_t i) {
+  const tinygltf::Accessor& accessor = model.accessors.at(accessor_index);
+  const tinygltf::BufferView& view = model.bufferViews.at(accessor.bufferView);
+  const int size = tinygltf::GetComponentSizeInBytes(accessor.componentType);
+  const int count = tinygltf::GetNumComponentsInType(accessor.type);
+  const unsigned char* p =
+      model.buffers.at(view.buffer).data.data() + view.byteOffset + accessor.byteOffset +
+      (i / count) * (view.byteStride > 0 ? view.byteStride : size * count) + (i % count) * size;
+  return size == 1   ? *p
+         : size == 2 ? *reinterpret_cast<const uint16_t*>(p)
+                     : *reinterpret_cast<const uint32_t*>(p);
+}
+
+// The mesh as a viewer draws it: glTF skinning (sum of weight x joint world x inverse bind) of
+// every vertex and normal, and the triangles; positions and normals in the hand frame.
+struct SkinnedMesh {
+  std::vector<Eigen::Vector3d> positions, normals;
+  std::vector<uint32_t> triangles;
+};
+
+SkinnedMesh Skin(const tinygltf::Model& model) {
+  const std::vector<Mat4> world = Worlds(model);
+  const tinygltf::Skin& skin = model.skins.at(0);
+  const tinygltf::Primitive& primitive = model.meshes.at(0).primitives.at(0);
+  SkinnedMesh mesh;
+  const int positions = primitive.attributes.at("POSITION");
+  const int normals = primitive.attributes.at("NORMAL");
+  const int joints = primitive.attributes.at("JOINTS_0");
+  const int weights = primitive.attributes.at("WEIGHTS_0");
+  for (size_t v = 0; v < model.accessors[positions].count; ++v) {
+    Mat4 blend = Mat4::Zero();
+    for (int k = 0; k < 4; ++k) {
+      const uint32_t j = Index(model, joints, 4 * v + k);
+      Mat4 inverse_bind;
+      const float* m = Floats(model, skin.inverseBindMatrices, j);
+      for (int i = 0; i < 16; ++i) inverse_bind(i % 4, i / 4) = m[i];
+      blend += Floats(model, weights, v)[k] * world[skin.joints[j]] * inverse_bind;
+    }
+    const float* p = Floats(model, positions, v);
+    const float* n = Floats(model, normals, v);
+    // GltfToHand(T) = C T C^T, so C T x = GltfToHand(T) (C x), with C x = (x, -z, y).
+    const Mat4 hand = GltfToHand(blend);
+    const Eigen::Vector4d in_hand = hand * Eigen::Vector4d(p[0], -p[2], p[1], 1.0);
+    mesh.positions.push_back(in_hand.head<3>());
+    mesh.normals.push_back(
+        (hand.topLeftCorner<3, 3>() * Eigen::Vector3d(n[0], -n[2], n[1])).normalized());
+  }
+  for (size_t i = 0; i < model.accessors.at(primitive.indices).count; ++i) {
+    mesh.triangles.push_back(Index(model, primitive.indices, i));
+  }
+  return mesh;
+}
+
+// The fraction of triangles whose winding (counter-clockwise from the front) agrees with their
+// vertices' normals: the outside is out.
+double OutwardFraction(const SkinnedMesh& mesh) {
+  int outward = 0;
+  for (size_t t = 0; t < mesh.triangles.size(); t += 3) {
+    const Eigen::Vector3d& a = mesh.positions[mesh.triangles[t]];
+    const Eigen::Vector3d& b = mesh.positions[mesh.triangles[t + 1]];
+    const Eigen::Vector3d& c = mesh.positions[mesh.triangles[t + 2]];
+    const Eigen::Vector3d n = mesh.normals[mesh.triangles[t]] +
+                              mesh.normals[mesh.triangles[t + 1]] +
+                              mesh.normals[mesh.triangles[t + 2]];
+    if ((b - a).cross(c - a).dot(n) > 0) ++outward;
+  }
+  return outward / (mesh.triangles.size() / 3.0);
+}
+
 TEST(WritePosedHandGlb, LeftHandIsTheMirrorImageAcrossTheThumbSide) {
   const HandRig rig = ShippedRig();
   const JointVector joints = RandomJoints(rig, 13);
+  const fs::path dir = testing::TempDir("export_gltf_left");
   PosedHandGlbOptions options;
+  ASSERT_TRUE(WritePosedHandGlb(dir / "right.glb", rig, joints, options).ok());
   options.left_hand = true;
-  const fs::path out = testing::TempDir("export_gltf_left") / "left.glb";
-  ASSERT_TRUE(WritePosedHandGlb(out, rig, joints, options).ok());
-  const tinygltf::Model model = ReadGlb(out);
-  const std::vector<Mat4> world = Worlds(model);
+  ASSERT_TRUE(WritePosedHandGlb(dir / "left.glb", rig, joints, options).ok());
+  const tinygltf::Model right = ReadGlb(dir / "right.glb");
+  const tinygltf::Model left = ReadGlb(dir / "left.glb");
+
+  // Every joint: the mirrored bone with its x axis turned, a rotation again.
+  const std::vector<Mat4> world = Worlds(left);
   const std::vector<BonePose> posed = rig.PoseBones(joints);
   // The hand frame's +y points to the thumb (docs/hand_model.md).
   const Mat4 mirror = Mirror({0, 1, 0}, rig.look_at());
+  const Mat4 flip_x = Eigen::Vector4d(-1, 1, 1, 1).asDiagonal();
   for (size_t b = 0; b < posed.size(); ++b) {
-    const Mat4 expected = mirror * ToMat4ForTest(posed[b]);
-    const Mat4 got = GltfToHand(world[NodeNamed(model, rig.model().bones[b].name)]);
-    EXPECT_LE((got - expected).cwiseAbs().maxCoeff(), kTolerance) << rig.model().bones[b].name;
+    const Mat4 got = GltfToHand(world[NodeNamed(left, rig.model().bones[b].name)]);
+    EXPECT_LE((got - mirror * ToMat4ForTest(posed[b]) * flip_x).cwiseAbs().maxCoeff(), kTolerance)
+        << rig.model().bones[b].name;
+    const double determinant = got.topLeftCorner<3, 3>().determinant();
+    EXPECT_NEAR(determinant, 1.0, 1e-6) << rig.model().bones[b].name;
   }
+
+  // The skinned mesh: every vertex and normal the mirror of the right hand's, the faces still
+  // wound with their outside out.
+  const SkinnedMesh right_mesh = Skin(right);
+  const SkinnedMesh left_mesh = Skin(left);
+  ASSERT_EQ(left_mesh.positions.size(), right_mesh.positions.size());
+  double worst = 0;
+  for (size_t v = 0; v < right_mesh.positions.size(); ++v) {
+    const Eigen::Vector3d mirrored = (mirror * right_mesh.positions[v].homogeneous()).head<3>();
+    worst = std::max(worst, (left_mesh.positions[v] - mirrored).cwiseAbs().maxCoeff());
+    worst = std::max(worst,
+                     (left_mesh.normals[v] - mirror.topLeftCorner<3, 3>() * right_mesh.normals[v])
+                         .cwiseAbs()
+                         .maxCoeff());
+  }
+  EXPECT_LE(worst, kTolerance);
+  const double right_outward = OutwardFraction(right_mesh);
+  EXPECT_GT(right_outward, 0.9);
+  EXPECT_NEAR(OutwardFraction(left_mesh), right_outward, 1e-9);
 }
 
 TEST(WritePosedHandGlb, LeftHandThroughTheCameraIsTheMirroredImage) {
