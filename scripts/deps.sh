@@ -14,7 +14,7 @@ PACKAGES=(
   libpcl-dev libnanoflann-dev libcli11-dev nlohmann-json3-dev libzstd-dev libxxhash-dev
   libssl-dev libboost-dev libfaiss-dev libpng-dev libjpeg62-turbo-dev libceres-dev
   # xnnpack.h includes pthreadpool.h, which libxnnpack-dev does not pull in.
-  libxnnpack-dev libpthreadpool-dev
+  libxnnpack-dev libpthreadpool-dev libtinygltf-dev
   python3-dev pybind11-dev python3-pybind11
   libgtest-dev libgmock-dev libbenchmark-dev clang libclang-rt-14-dev clang-format clang-tidy
   slurm-wlm munge xxhash
