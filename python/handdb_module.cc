@@ -544,19 +544,15 @@ std::vector<Point2f> QueryPoints(const py::array& a) {
   return out;
 }
 
-py::object Search(const PyDatabase& self,
-                  py::object query,
-                  int top_k,
-                  int threads,
-                  const std::string& hand,
-                  bool brute_force,
-                  const std::string& kdtree,
-                  float dt_cell_px,
-                  bool coarse_bound,
-                  bool return_stats,
-                  int per_shape,
-                  double landmark_weight,
-                  const py::kwargs& edge_kwargs) {
+// The keyword options search() and search_many() share, checked (ValueError).
+SearchOptions SearchOptionsFromArgs(int top_k,
+                                    int threads,
+                                    const std::string& hand,
+                                    bool brute_force,
+                                    const std::string& kdtree,
+                                    float dt_cell_px,
+                                    bool coarse_bound,
+                                    int per_shape) {
   SearchOptions options;
   options.top_k = top_k;
   options.max_per_shape = per_shape;
@@ -575,9 +571,54 @@ py::object Search(const PyDatabase& self,
   if (threads == 0 || threads < -1 || threads > MaxNumThreads()) {
     throw py::value_error("threads must be -1 or 1.." + std::to_string(MaxNumThreads()));
   }
+  return options;
+}
+
+LandmarkRankOptions LandmarkRankFromArgs(double landmark_weight) {
   LandmarkRankOptions landmark_rank;
   landmark_rank.weight = landmark_weight;
   if (!landmark_rank.Check()) throw py::value_error("landmark_weight must be >= 0");
+  return landmark_rank;
+}
+
+// A search's matches as Match objects, with their keypoints in the picture when there is one.
+py::list MatchList(std::vector<Match> matches, std::optional<PictureEvidence> picture) {
+  const std::shared_ptr<const QueryEdges> query_edges =
+      picture ? std::make_shared<const QueryEdges>(std::move(picture->edges)) : nullptr;
+  py::list out;
+  int rank = 1;
+  for (Match& m : matches) {
+    PyMatch pm;
+    pm.rank = rank++;
+    if (query_edges) {
+      pm.query = query_edges;
+      pm.keypoints_image.emplace();
+      for (const auto& kp : m.label.keypoints) {
+        pm.keypoints_image->push_back(query_edges->ImageFromNormalised({kp[0], kp[1]}));
+      }
+    }
+    pm.match = std::move(m);
+    out.append(py::cast(std::move(pm)));
+  }
+  return out;
+}
+
+py::object Search(const PyDatabase& self,
+                  py::object query,
+                  int top_k,
+                  int threads,
+                  const std::string& hand,
+                  bool brute_force,
+                  const std::string& kdtree,
+                  float dt_cell_px,
+                  bool coarse_bound,
+                  bool return_stats,
+                  int per_shape,
+                  double landmark_weight,
+                  const py::kwargs& edge_kwargs) {
+  const SearchOptions options = SearchOptionsFromArgs(
+      top_k, threads, hand, brute_force, kdtree, dt_cell_px, coarse_bound, per_shape);
+  const LandmarkRankOptions landmark_rank = LandmarkRankFromArgs(landmark_weight);
 
   std::optional<PictureEvidence> picture;
   std::vector<Point2f> points;
@@ -616,27 +657,87 @@ py::object Search(const PyDatabase& self,
     }
   }
   if (!matches->ok()) throw StatusError(matches->status());
-  const std::shared_ptr<const QueryEdges> query_edges =
-      picture ? std::make_shared<const QueryEdges>(std::move(picture->edges)) : nullptr;
-  py::list out;
-  int rank = 1;
-  for (Match& m : **matches) {
-    PyMatch pm;
-    pm.rank = rank++;
-    if (query_edges) {
-      pm.query = query_edges;
-      pm.keypoints_image.emplace();
-      for (const auto& kp : m.label.keypoints) {
-        pm.keypoints_image->push_back(query_edges->ImageFromNormalised({kp[0], kp[1]}));
-      }
-    }
-    pm.match = std::move(m);
-    out.append(py::cast(std::move(pm)));
-  }
+  py::list out = MatchList(std::move(matches->value()), std::move(picture));
   if (!return_stats) return out;
   py::dict st = StatsDict(stats, self.db());
   st["threads"] = ResolveNumThreads(threads);
   return py::make_tuple(out, st);
+}
+
+// handdb.Error for a library error, as the exception translator raises it (BindError).
+py::object ErrorObject(const Status& status) {
+  py::object exc = (*error_type)(status.message());
+  exc.attr("code") = StatusCodeName(status.code());
+  return exc;
+}
+
+// Many pictures with one call: the options (and the landmark model) are resolved once, and the
+// pictures are searched in parallel with the GIL released, each as search() would.
+py::list SearchMany(const PyDatabase& self,
+                    const py::iterable& pictures,
+                    int top_k,
+                    int threads,
+                    const std::string& hand,
+                    bool brute_force,
+                    const std::string& kdtree,
+                    float dt_cell_px,
+                    bool coarse_bound,
+                    bool return_stats,
+                    int per_shape,
+                    double landmark_weight,
+                    bool return_exceptions,
+                    const py::kwargs& edge_kwargs) {
+  std::vector<fs::path> paths;
+  for (const py::handle item : pictures) {
+    if (!py::isinstance<py::str>(item) && !py::hasattr(item, "__fspath__")) {
+      throw py::type_error(
+          "search_many takes picture paths (str or os.PathLike); search() takes QueryEdges and "
+          "point arrays");
+    }
+    paths.push_back(py::cast<fs::path>(item));
+  }
+  PictureSearchOptions options;
+  options.search = SearchOptionsFromArgs(
+      top_k, threads, hand, brute_force, kdtree, dt_cell_px, coarse_bound, per_shape);
+  options.landmark_rank = LandmarkRankFromArgs(landmark_weight);
+  options.picture = PictureOptionsFromKwargs(edge_kwargs);
+  const Searcher& searcher = self.searcher();
+  const size_t n = paths.size();
+  std::vector<std::optional<Result<PictureMatches>>> found(n);
+  std::vector<SearchStats> stats(n);
+  {
+    py::gil_scoped_release release;
+    if (n > 0) UseDatabaseConversion(self.path(), &options.picture);
+    // Pictures in parallel first (reading and the landmark network are one thread each), the
+    // threads left over shared by each picture's search; the results do not depend on the split.
+    const int total = ResolveNumThreads(threads);
+    const int workers = static_cast<int>(std::min<size_t>(static_cast<size_t>(total), n));
+    options.search.num_threads = std::max(1, total / std::max(workers, 1));
+    ParallelFor(n, workers, [&](size_t i, int) {
+      found[i].emplace(SearchPicture(searcher, paths[i], options, &stats[i]));
+      return true;
+    });
+  }
+  py::list out;
+  for (size_t i = 0; i < n; ++i) {
+    Result<PictureMatches>& r = *found[i];
+    if (!r.ok()) {
+      // Every picture has run; without return_exceptions the first failure (in input order)
+      // is raised as search() would raise it.
+      if (!return_exceptions) throw StatusError(r.status());
+      out.append(ErrorObject(r.status()));
+      continue;
+    }
+    py::list matches = MatchList(std::move(r->matches), std::move(r->evidence));
+    if (!return_stats) {
+      out.append(matches);
+      continue;
+    }
+    py::dict st = StatsDict(stats[i], self.db());
+    st["threads"] = ResolveNumThreads(threads);
+    out.append(py::make_tuple(matches, st));
+  }
+  return out;
 }
 
 py::list Validate(const fs::path& path, bool verify_checksums, size_t max_problems) {
@@ -1133,6 +1234,29 @@ void BindDatabase(py::module_& m) {
           "whose QueryEdges carry hand landmarks (query_edges(landmarks='auto'), the default) is "
           "re-ranked by them as `handdb query` does (Match.score; landmark_weight as "
           "--landmark-weight).")
+      .def("search_many",
+           &SearchMany,
+           py::arg("pictures"),
+           py::arg("top_k") = 10,
+           py::arg("threads") = -1,
+           py::arg("hand") = "either",
+           py::arg("brute_force") = false,
+           py::arg("kdtree") = "nanoflann",
+           py::arg("dt_cell_px") = 1.0f,
+           py::arg("coarse_bound") = true,
+           py::arg("return_stats") = false,
+           py::arg("per_shape") = 0,
+           py::arg("landmark_weight") = LandmarkRankOptions{}.weight,
+           py::arg("return_exceptions") = false,
+           "search() for many picture paths in one call, as `handdb query DB IMAGE...`: the "
+           "image options and the landmark model are resolved once and the pictures searched "
+           "in parallel (threads bounds the whole call, -1: all cores) with the GIL released. "
+           "Returns a list in the order of `pictures`, each item what search() returns for that "
+           "picture (a list of Match, or (matches, stats) with return_stats=True).\n\n"
+           "A picture that fails (no hand, an unreadable file) does not stop the others: every "
+           "picture runs, then the first failure in order raises its handdb.Error; with "
+           "return_exceptions=True (as asyncio.gather) its handdb.Error takes its place in the "
+           "list instead. Keyword options as in search() and query_edges().")
       .def("__repr__",
            [](const PyDatabase& d) {
              return "<handdb.Database '" + d.path().string() +
