@@ -300,19 +300,24 @@ TEST_F(QueryCli, BatchKeepsOrderAndReportsBadPictures) {
   EXPECT_EQ(lines[1]["picture"], bad.string());
   EXPECT_EQ(lines[2]["picture"], c.string());
 
-  // A list on stdin, in its order (empty lines skipped); all good: exit 0.
+  // A list on stdin, in its order (empty lines skipped); all good: exit 0. Four pictures: the
+  // batch prepares the exact search's centre fields, and the answers stay the single query's.
   const fs::path list = *dir_ / "list.txt";
   {
     std::ofstream f(list);
-    f << c.string() << "\n\n" << a.string() << "\r\n";
+    f << c.string() << "\n\n" << a.string() << "\r\n" << c.string() << "\n" << a.string() << "\n";
   }
-  r = Handdb(db + " - --json --top 1 < " + list.string());
+  r = Handdb(db + " - --json --top 3 --threads 2 < " + list.string());
   EXPECT_EQ(r.code, 0) << r.err;
   EXPECT_EQ(r.err, "");
   lines = JsonLines(r.out);
-  ASSERT_EQ(lines.size(), 2u) << r.out;
-  EXPECT_EQ(lines[0]["picture"], c.string());
+  ASSERT_EQ(lines.size(), 4u) << r.out;
+  for (size_t i : {0u, 2u}) {
+    EXPECT_EQ(lines[i]["picture"], c.string());
+    EXPECT_EQ(lines[i]["matches"], doc["matches"]);
+  }
   EXPECT_EQ(lines[1]["picture"], a.string());
+  EXPECT_EQ(lines[3]["picture"], a.string());
 
   // Tables under a header line naming each picture; --batch makes one picture a batch.
   r = Handdb(db + " " + a.string() + " " + c.string() + " --top 2");
