@@ -412,6 +412,13 @@ def main():
             "`--hand right` (latency median / p90 / max, share of the searched pairs refined, view "
             "kd-trees), brute force on the first `--brute-queries` of each set.")
     md += [QUERY_SETS_HOWTO, ""]
+    section("The photo path and batches", "picture",
+            "`bench/picture_bench` on the paper database and the real photos: start-up "
+            "(`handdb --help`), then each stage of a photo in one process, cold (the first call) and "
+            "warm (median): open, landmark model load, decode, segmentation and edges, landmark "
+            "network, search, the re-ranking's pool search and re-rank; then photos/s of one "
+            "`handdb query` process per photo against one batch `handdb query DB PHOTO...` over the "
+            "same photos.")
     section("Test sets", "testset_paper",
             "`handdb testset configs/testset-paper.json` (200 views: 100 basic shapes, 100 PCA samples; "
             "uniform directions and rolls) with plain photos; the cluttered set renders the same views.")

@@ -25,6 +25,8 @@
 #             the query sets users send: real photos, the test set's photo-like and
 #             clean label renders, the perturbed views; latency median/p90/max with --hand either
 #             and right, share refined, brute force on 3 of each (after testset: it reads ts-paper)
+#   picture   bench/picture_bench on the paper database and the real photos: start-up, each stage
+#             of a photo cold and warm, photos/s of a batch against one process per photo
 #   evaluate  handdb evaluate: clean labels, plain photos, cluttered photos (Table 1,
 #             success@(d,n) with the chance baseline, keypoint error, queries/s)
 #   photos    handdb evaluate --photos: the real-photo development set (../shared/photos/asl-digits)
@@ -52,7 +54,7 @@ cd "$here"
 work="${HANDDB_BENCH_DIR:-/tmp/handdb-bench}"
 build="${HANDDB_BENCH_BUILD:-$here/build-bench}"
 jobs="${HANDDB_BENCH_JOBS:-$(nproc)}"
-steps="${HANDDB_BENCH_STEPS:-build format landmark render generate convert query testset evaluate photos index codec report}"
+steps="${HANDDB_BENCH_STEPS:-build format landmark render generate convert query picture testset evaluate photos index codec report}"
 if [ "${HANDDB_BENCH_PCA_LARGE:-0}" = 1 ] && [ -z "${HANDDB_BENCH_STEPS:-}" ]; then
   steps="$steps pca_large_generate pca_large_query pca_large_evaluate"
 fi
@@ -95,7 +97,7 @@ if want build; then
   cmake -S "$here" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=Release -DHANDDB_BUILD_TESTS=OFF \
     >"$out/build.txt" 2>&1
   cmake --build "$build" -j "$jobs" --target handdb format_bench convert_bench query_bench \
-    index_bench synth_db point_codec_bench landmark_bench \
+    index_bench synth_db point_codec_bench landmark_bench picture_bench \
     >>"$out/build.txt" 2>&1
 fi
 
@@ -135,6 +137,12 @@ if want query; then
   # 20 queries per set (--set-queries), spread over the photo folders and the test views.
   run query "$build/bench/query_bench" --db "$work/db-paper" --threads "$jobs" "${sets[@]}" \
     --set-queries 20
+fi
+
+if want picture; then
+  # 24 photos spread over the folders: the stages of one, then batch against one process each.
+  run picture "$build/bench/picture_bench" --db "$work/db-paper" --photos "$photos" \
+    --threads "$jobs" --handdb "$handdb"
 fi
 
 evaluate() {  # NAME DB TESTSET INPUT [extra evaluate options]

@@ -8,7 +8,6 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <span>
 #include <string>
@@ -18,6 +17,7 @@
 
 #include "base/atomic_file.h"
 #include "base/directory_lock.h"
+#include "base/image_encode.h"
 #include "base/json_schema.h"
 #include "base/thread_pool.h"
 #include "cli/cli_util.h"
@@ -407,10 +407,13 @@ int RunShow(int argc, char** argv) {
                 1,
                 cv::LINE_AA);
   }
-  std::vector<uint8_t> png;
-  if (!cv::imencode(".png", img, png)) {
-    return Fail("show", Status(StatusCode::kIoError, out_path.string() + ": PNG encoding failed"));
+  auto encoded = EncodePng({img.data, img.cols, img.rows, img.channels(), img.step[0]});
+  if (!encoded.ok()) {
+    return Fail("show",
+                Status(StatusCode::kIoError,
+                       out_path.string() + ": PNG encoding failed: " + encoded.status().message()));
   }
+  std::vector<uint8_t>& png = *encoded;
   AddPngText(&png, "Description", "handdb show " + db_dir.string() + ": " + caption);
   Status s = WriteFileAtomic(
       out_path, std::string_view(reinterpret_cast<const char*>(png.data()), png.size()));

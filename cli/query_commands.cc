@@ -1,18 +1,28 @@
-// `handdb query DB IMAGE`: the top-k database views for a picture of a hand.
+// `handdb query DB IMAGE...`: the top-k database views for a picture of a hand, or for each of a
+// batch of pictures searched with one open database.
+#include <unistd.h>
+
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdarg>
 #include <cstdio>
 #include <filesystem>
+#include <iostream>
+#include <mutex>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "base/json_schema.h"
+#include "base/progress.h"
 #include "base/thread_pool.h"
 #include "cli/cli_util.h"
 #include "cli/commands.h"
 #include "cli/photo_input_flags.h"
+#include "cli/query_batch.h"
 #include "format/roll.h"
 #include "generator/hand/database_rig.h"
 #include "handdb_version.h"
@@ -30,13 +40,34 @@ namespace fs = std::filesystem;
 using json = nlohmann::json;
 
 constexpr double kDeg = 180.0 / M_PI;
+// Pictures up to which a batch opens the database as a single query does (few_queries).
+constexpr size_t kFewPictures = 4;
 
-void PrintTable(const std::vector<Match>& matches,
-                const PictureEvidence& picture,
-                const SearchStats& st,
-                const Database& db) {
+// printf into a string: a batch formats pictures on many threads and prints them in order.
+[[gnu::format(printf, 2, 3)]] void Appendf(std::string* out, const char* format, ...) {
+  va_list args;
+  va_start(args, format);
+  va_list again;
+  va_copy(again, args);
+  const int n = std::vsnprintf(nullptr, 0, format, args);
+  va_end(args);
+  if (n > 0) {
+    const size_t old = out->size();
+    out->resize(old + static_cast<size_t>(n) + 1);
+    std::vsnprintf(out->data() + old, static_cast<size_t>(n) + 1, format, again);
+    out->resize(old + static_cast<size_t>(n));
+  }
+  va_end(again);
+}
+
+std::string FormatTable(const std::vector<Match>& matches,
+                        const PictureEvidence& picture,
+                        const SearchStats& st,
+                        const Database& db) {
+  std::string out;
   const QueryEdges& q = picture.edges;
-  std::printf(
+  Appendf(
+      &out,
       "query: %zu edge points (%s, %dx%d, hand diameter %.1f px%s)%s\n",
       q.points.size(),
       std::string(QueryInputKindName(q.kind)).c_str(),
@@ -47,42 +78,44 @@ void PrintTable(const std::vector<Match>& matches,
       q.touches_border && !q.forearm_cut ? "  [warning: the hand touches the image border]" : "");
   if (picture.landmarks) {
     const bool used = !matches.empty() && matches.front().score >= 0;
-    std::printf("hand landmarks: presence %.3f, %s\n",
-                static_cast<double>(picture.landmarks->presence),
-                used ? "the nearest views re-ranked by D_c / best D_c + weight x landmark error "
-                       "(column lm, in hand radii)"
-                     : "below the 0.9 the ranking needs: ranked by D_c alone");
+    Appendf(&out,
+            "hand landmarks: presence %.3f, %s\n",
+            static_cast<double>(picture.landmarks->presence),
+            used ? "the nearest views re-ranked by D_c / best D_c + weight x landmark error "
+                   "(column lm, in hand radii)"
+                 : "below the 0.9 the ranking needs: ranked by D_c alone");
   }
-  std::printf(
-      "database: %zu views x %u rolls = %llu virtual views; exact D_c for %llu (%.2f%%), "
-      "%.1f ms\n\n",
-      db.num_views(),
-      db.num_rolls(),
-      static_cast<unsigned long long>(st.virtual_views),
-      static_cast<unsigned long long>(st.refined),
-      st.virtual_views
-          ? 100.0 * static_cast<double>(st.refined) / static_cast<double>(st.virtual_views)
-          : 0.0,
-      st.seconds_total * 1e3);
+  Appendf(&out,
+          "database: %zu views x %u rolls = %llu virtual views; exact D_c for %llu (%.2f%%), "
+          "%.1f ms\n\n",
+          db.num_views(),
+          db.num_rolls(),
+          static_cast<unsigned long long>(st.virtual_views),
+          static_cast<unsigned long long>(st.refined),
+          st.virtual_views
+              ? 100.0 * static_cast<double>(st.refined) / static_cast<double>(st.virtual_views)
+              : 0.0,
+          st.seconds_total * 1e3);
   if (st.candidates > 0) {
-    std::printf(
-        "indexed search: %llu candidate pairs from the index (%.1f ms), the top %s exact "
-        "among them (--search exact: every pair)\n\n",
-        static_cast<unsigned long long>(st.candidates),
-        st.seconds_index * 1e3,
-        "k");
+    Appendf(&out,
+            "indexed search: %llu candidate pairs from the index (%.1f ms), the top %s exact "
+            "among them (--search exact: every pair)\n\n",
+            static_cast<unsigned long long>(st.candidates),
+            st.seconds_index * 1e3,
+            "k");
   }
   // Key joint angles: the flexion of each finger's base joint (thumb CMC, index..pinky MCP).
-  std::printf("%4s  %8s  %5s  %-16s  %-5s  %7s %7s  %6s  %29s\n",
-              "rank",
-              "D_c",
-              "lm",
-              "shape",
-              "hand",
-              "theta",
-              "phi",
-              "roll",
-              "base flexion T/I/M/R/P (deg)");
+  Appendf(&out,
+          "%4s  %8s  %5s  %-16s  %-5s  %7s %7s  %6s  %29s\n",
+          "rank",
+          "D_c",
+          "lm",
+          "shape",
+          "hand",
+          "theta",
+          "phi",
+          "roll",
+          "base flexion T/I/M/R/P (deg)");
   int rank = 1;
   for (const Match& m : matches) {
     const ViewLabel& l = m.label;
@@ -90,50 +123,59 @@ void PrintTable(const std::vector<Match>& matches,
         m.shape_name.empty() ? "#" + std::to_string(l.shape_id) : m.shape_name;
     char lm[16] = "-";
     if (m.landmark_error >= 0) std::snprintf(lm, sizeof(lm), "%.3f", m.landmark_error);
-    std::printf(
-        "%4d  %8.3f  %5s  %-16.16s  %-5s  %7.1f %7.1f  %6.1f  %5.0f %5.0f %5.0f %5.0f %5.0f\n",
-        rank++,
-        m.distance,
-        lm,
-        shape.c_str(),
-        std::string(HandName(m.hand)).c_str(),
-        l.view_theta * kDeg,
-        l.view_phi * kDeg,
-        RollDegrees0To360(m.roll_angle),
-        l.joint_angles[0] * kDeg,
-        l.joint_angles[4] * kDeg,
-        l.joint_angles[8] * kDeg,
-        l.joint_angles[12] * kDeg,
-        l.joint_angles[16] * kDeg);
+    Appendf(&out,
+            "%4d  %8.3f  %5s  %-16.16s  %-5s  %7.1f %7.1f  %6.1f  %5.0f %5.0f %5.0f %5.0f %5.0f\n",
+            rank++,
+            m.distance,
+            lm,
+            shape.c_str(),
+            std::string(HandName(m.hand)).c_str(),
+            l.view_theta * kDeg,
+            l.view_phi * kDeg,
+            RollDegrees0To360(m.roll_angle),
+            l.joint_angles[0] * kDeg,
+            l.joint_angles[4] * kDeg,
+            l.joint_angles[8] * kDeg,
+            l.joint_angles[12] * kDeg,
+            l.joint_angles[16] * kDeg);
   }
+  return out;
 }
 
 // The fitted pose under the table: from which match, how far the keypoints moved towards the
 // landmarks, and the solver's verdict.
-void PrintFit(const PictureFit& fit) {
-  if (fit.fits.empty()) return;
+std::string FormatFit(const PictureFit& fit) {
+  if (fit.fits.empty()) return "";
+  char line[256];
   if (fit.best < 0) {
-    std::printf("\npose fit: none (%s)\n", fit.fits.front().reason.c_str());
-    return;
+    std::snprintf(line, sizeof(line), "\npose fit: none (%s)\n", fit.fits.front().reason.c_str());
+    return line;
   }
   const MatchFit& f = fit.fits[fit.best];
-  std::printf(
-      "\nfitted pose (from match %d of %zu fitted): landmark error %.2f -> %.2f px (normalised), "
-      "%s after %d iterations\n",
-      fit.best + 1,
-      fit.fits.size(),
-      f.landmark_error_start_px,
-      f.landmark_error_px,
-      f.fit.termination.c_str(),
-      f.fit.iterations);
-  std::printf("  joints (deg):");
-  for (double a : f.fit.joints) std::printf(" %.0f", a * kDeg);
-  std::printf("\n");
+  std::snprintf(line,
+                sizeof(line),
+                "\nfitted pose (from match %d of %zu fitted): landmark error %.2f -> %.2f px "
+                "(normalised), %s after %d iterations\n  joints (deg):",
+                fit.best + 1,
+                fit.fits.size(),
+                f.landmark_error_start_px,
+                f.landmark_error_px,
+                f.fit.termination.c_str(),
+                f.fit.iterations);
+  std::string out = line;
+  for (double a : f.fit.joints) {
+    std::snprintf(line, sizeof(line), " %.0f", a * kDeg);
+    out += line;
+  }
+  return out + "\n";
 }
 
 // The flags of `handdb query`, bound to the option structs they set.
 struct QueryFlags {
-  std::string db_dir, image, sheet;
+  std::string db_dir, sheet;
+  // One picture, or a batch (IsBatch): several, a directory's pictures, "-" (a list on stdin).
+  std::vector<std::string> images;
+  bool batch = false;  // --batch, or IsBatch(images): set by Finish
   HandFlag hand;
   std::string search_mode = "auto";  // IndexUse: auto attaches the index the manifest lists
   std::string kdtree = std::string(KdTreeBackendName(SearchOptions{}.kdtree));
@@ -150,7 +192,12 @@ struct QueryFlags {
 void QueryFlags::Add(CLI::App& app) {
   SearchOptions& search = picture.options.search;
   app.add_option("DB", db_dir, "database directory (manifest.json + shards)")->required();
-  app.add_option("IMAGE", image, "query image: photo, edge image or label EXR")->required();
+  app.add_option("IMAGE",
+                 images,
+                 "query image: photo, edge image or label EXR; several, a directory (its picture "
+                 "files, sorted) or - (paths on stdin, one per line) search them all with one "
+                 "database open")
+      ->required();
   app.add_option("--top", search.top_k, "number of matches")
       ->check(CLI::Range(1, 100000))
       ->capture_default_str();
@@ -160,9 +207,21 @@ void QueryFlags::Add(CLI::App& app) {
                  "the --top nearest shapes, each by its best view")
       ->check(CLI::Range(0, 100000))
       ->capture_default_str();
-  app.add_flag("--json", as_json, "print the result as JSON (schemas/query_result.schema.json)");
-  app.add_option("--sheet", sheet, "write a contact sheet PNG: input, its edges, the top matches");
-  app.add_option("--threads", search.num_threads, "worker threads (-1: all cores)")
+  app.add_flag("--json",
+               as_json,
+               "print the result as JSON (schemas/query_result.schema.json); a batch prints one "
+               "line per picture (JSON Lines, schemas/query_batch_line.schema.json)");
+  app.add_flag("--batch",
+               batch,
+               "print as a batch even for one picture: JSON Lines with --json, a header line "
+               "naming the picture above each table");
+  app.add_option("--sheet",
+                 sheet,
+                 "write a contact sheet PNG: input, its edges, the top matches (one picture only)");
+  app.add_option("--threads",
+                 search.num_threads,
+                 "worker threads (-1: all cores); a batch searches its pictures in parallel "
+                 "within this bound")
       ->capture_default_str();
   hand.Add(app, "IMAGE");
   app.add_flag("--bruteforce",
@@ -215,7 +274,7 @@ void QueryFlags::Add(CLI::App& app) {
   app.add_flag("--quiet,-q",
                quiet,
                "no progress line (otherwise one on stderr once a search runs 1 s on a "
-               "terminal, 5 s otherwise)");
+               "terminal, 5 s otherwise; for a batch, once it runs 1 s on a terminal)");
 }
 
 bool QueryFlags::Finish() {
@@ -226,6 +285,16 @@ bool QueryFlags::Finish() {
                  "handdb query: --threads %d: must be -1 or 1..%d (4x the cores, at most 256)\n",
                  search.num_threads,
                  MaxNumThreads());
+    return false;
+  }
+  batch = batch || IsBatch(images);
+  if (batch && !sheet.empty()) {
+    std::fprintf(stderr,
+                 "handdb query: --sheet writes the contact sheet of one picture: give one IMAGE\n");
+    return false;
+  }
+  if (batch && !picture.mask.empty()) {
+    std::fprintf(stderr, "handdb query: --mask belongs to one photo: give one IMAGE\n");
     return false;
   }
   if (!picture.Finish("query")) return false;
@@ -250,6 +319,7 @@ bool QueryFlags::Finish() {
 
 // The contact sheet of --sheet: the input, its edges and each match's edges at its roll.
 Status WriteSheet(const QueryFlags& flags,
+                  const std::string& image,
                   const PictureEvidence& picture,
                   const std::vector<Match>& matches,
                   const PictureFit& fit,
@@ -294,12 +364,12 @@ Status WriteSheet(const QueryFlags& flags,
       skeleton.push_back(picture.edges.ImageFromNormalised({k[0], k[1]}));
     }
   }
-  return WriteContactSheet(
-      flags.sheet, flags.image, picture, tiles, ContactSheetOptions{}, skeleton);
+  return WriteContactSheet(flags.sheet, image, picture, tiles, ContactSheetOptions{}, skeleton);
 }
 
 // The --json document (schemas/query_result.schema.json).
 json ResultJson(const QueryFlags& flags,
+                const std::string& image,
                 const PictureEvidence& picture,
                 const std::vector<Match>& matches,
                 const PictureFit& fit,
@@ -353,7 +423,7 @@ json ResultJson(const QueryFlags& flags,
               {"version", 1},
               {"tool_version", HANDDB_VERSION},
               {"database", flags.db_dir},
-              {"image", flags.image},
+              {"image", image},
               {"input_kind", std::string(QueryInputKindName(query.kind))},
               {"query", query_json},
               {"options",
@@ -394,6 +464,125 @@ json ResultJson(const QueryFlags& flags,
   return doc;
 }
 
+// One picture's answer: its evidence, its ranked matches and the search's counters.
+struct PictureQuery {
+  PictureMatches found;
+  SearchStats stats;
+};
+
+// The whole work of one picture, the same in the single and the batch form: read it, search its
+// edges, re-rank by its landmarks and write the contact sheet --sheet asks for. `search_threads`
+// is the picture's share of --threads (a batch searches several pictures at once).
+Result<PictureQuery> QueryOnePicture(const Searcher& searcher,
+                                     const QueryFlags& flags,
+                                     const std::string& image,
+                                     int search_threads) {
+  PictureSearchOptions options = flags.picture.options;
+  options.search.num_threads = search_threads;
+  PictureQuery q;
+  auto found = SearchPicture(searcher, image, options, &q.stats);
+  if (!found.ok()) return found.status();
+  q.found = std::move(found).value();
+  if (!flags.sheet.empty()) {
+    const Status st = WriteSheet(
+        flags, image, q.found.evidence, q.found.matches, q.found.fit, searcher.database());
+    if (!st.ok()) return st;
+  }
+  return q;
+}
+
+// What a batch prints for one picture: its JSON line or its headed table on stdout, or its
+// error line on stderr (and, in JSON Lines, an error line on stdout so every picture has one).
+struct BatchAnswer {
+  std::string out;
+  std::string err;
+  bool failed = false;
+};
+
+BatchAnswer AnswerOnePicture(const Searcher& searcher,
+                             const QueryFlags& flags,
+                             const std::string& image,
+                             int search_threads) {
+  BatchAnswer a;
+  auto q = QueryOnePicture(searcher, flags, image, search_threads);
+  Status status = q.ok() ? Status() : q.status();
+  if (q.ok() && flags.as_json) {
+    json doc = ResultJson(flags,
+                          image,
+                          q->found.evidence,
+                          q->found.matches,
+                          q->found.fit,
+                          q->stats,
+                          searcher.database());
+    doc["picture"] = image;
+    status = ValidateJson(doc, "query_batch_line.schema.json", "query result");
+    // A bug, but never print JSON that breaks the schema: the picture fails instead.
+    if (status.ok()) a.out = doc.dump() + "\n";
+  } else if (q.ok()) {
+    a.out = "picture: " + image + "\n" +
+            FormatTable(q->found.matches, q->found.evidence, q->stats, searcher.database()) +
+            FormatFit(q->found.fit) + "\n";
+  }
+  if (!status.ok()) {
+    a.failed = true;
+    std::string message = status.message();
+    if (message.find(image) == std::string::npos) message = image + ": " + message;
+    a.err = "handdb query: " + message + "\n";
+    if (flags.as_json) {
+      const json line = {
+          {"picture", image}, {"error", message}, {"code", StatusCodeName(status.code())}};
+      a.out = line.dump() + "\n";
+    }
+  }
+  return a;
+}
+
+// The batch form: every picture searched with the one open Searcher and landmark model, several
+// at once within --threads, printed in input order as each one's turn comes. Exit 1 when any
+// picture failed.
+int RunBatch(const Searcher& searcher,
+             QueryFlags& flags,
+             const std::vector<std::string>& pictures) {
+  SearchOptions& search = flags.picture.options.search;
+  const auto start = search.progress_since;
+  // The batch's own progress line (pictures done) replaces each search's.
+  search.progress = false;
+  const size_t n = pictures.size();
+  // Pictures in parallel first (reading and the landmark network are one thread each), the
+  // threads left over shared by each picture's search; the results do not depend on the split.
+  const int threads = ResolveNumThreads(search.num_threads);
+  const int workers = static_cast<int>(std::min<size_t>(static_cast<size_t>(threads), n));
+  const int search_threads = std::max(1, threads / workers);
+  const bool show_progress = !flags.quiet && ::isatty(STDERR_FILENO) != 0;
+  Progress progress("query", n, show_progress, "pictures");
+  progress.QuietUnlessSlow(start);
+
+  std::vector<std::optional<BatchAnswer>> answers(n);
+  std::mutex mu;
+  size_t next = 0;
+  size_t failed = 0;
+  ParallelFor(n, workers, [&](size_t i, int) {
+    BatchAnswer a = AnswerOnePicture(searcher, flags, pictures[i], search_threads);
+    std::lock_guard<std::mutex> lock(mu);
+    answers[i] = std::move(a);
+    for (; next < n && answers[next]; ++next) {
+      BatchAnswer& ready = *answers[next];
+      if (ready.failed) {
+        ++failed;
+        // Clear a progress line drawn on the terminal, so the error starts its own line.
+        std::fprintf(stderr, "%s%s", show_progress ? "\r\033[K" : "", ready.err.c_str());
+      }
+      std::fputs(ready.out.c_str(), stdout);
+      std::fflush(stdout);
+      answers[next] = BatchAnswer{};
+    }
+    progress.Add();
+    return true;
+  });
+  progress.Finish();
+  return failed > 0 ? kExitError : kExitOk;
+}
+
 }  // namespace
 
 int RunQuery(int argc, char** argv) {
@@ -401,7 +590,9 @@ int RunQuery(int argc, char** argv) {
       "Finds the database views most similar to a picture of a hand: exact top-k by the undirected "
       "chamfer distance D_c over every (view, roll), pruned with distance-transform lower bounds "
       "(docs/query.md). IMAGE is a photo (PNG/JPEG: skin-colour segmentation, or --mask), an "
-      "edge image (non-zero pixels are edges) or a Blender label EXR.",
+      "edge image (non-zero pixels are edges) or a Blender label EXR. Several IMAGEs, a "
+      "directory or - (paths on stdin) are searched as a batch: the database is opened and the "
+      "landmark model loaded once, pictures run in parallel and print in input order.",
       "handdb query"};
   QueryFlags flags;
   // A long query shows progress counted from here: opening the database and loading the image
@@ -411,6 +602,16 @@ int RunQuery(int argc, char** argv) {
   if (int rc = ParseArgs(app, argc, argv); rc >= 0) return rc;
   if (!flags.Finish()) return flags.picture.failure_exit_code;
   const std::string& db_dir = flags.db_dir;
+  std::vector<std::string> pictures = flags.images;
+  if (flags.batch) {
+    auto listed = ListPictures(flags.images, std::cin);
+    if (!listed.ok()) return Fail("query", listed.status());
+    if (listed->empty()) {
+      return Fail("query",
+                  Status(StatusCode::kInvalidArgument, "no pictures (the list on stdin is empty)"));
+    }
+    pictures = std::move(listed).value();
+  }
 
   // Open the database first: a broken database is reported before any image work. Its index is
   // attached when the manifest lists one (--search auto), and searched (SearchMode::kAuto).
@@ -420,7 +621,10 @@ int RunQuery(int argc, char** argv) {
   open.use_index = flags.picture.options.search.brute_force
                        ? IndexUse::kExact
                        : ParseIndexUse(flags.search_mode).value();
-  open.few_queries = true;
+  // One picture or a few: the stored box fields, quick to prepare. A batch of more prepares the
+  // tighter centre fields once and searches each picture faster (docs/decisions/0010); the
+  // answers are the same either way.
+  open.few_queries = pictures.size() < kFewPictures;
   auto searcher = Searcher::Open(db_dir, open);
   if (!searcher.ok()) return Fail("query", searcher.status());
   const Database& db = (*searcher)->database();
@@ -441,26 +645,23 @@ int RunQuery(int argc, char** argv) {
   // A label EXR is converted with the edge options the database was made with.
   const Status recorded = flags.picture.UseDatabaseConversion(db, db_dir);
   if (!recorded.ok()) return Fail("query", recorded);
-  SearchStats stats;
-  auto result = SearchPicture(**searcher, flags.image, flags.picture.options, &stats);
-  if (!result.ok()) return Fail("query", result.status());
-  const PictureEvidence& query = result->evidence;
-  const std::vector<Match>& matches = result->matches;
+  if (flags.batch) return RunBatch(**searcher, flags, pictures);
 
-  if (!flags.sheet.empty()) {
-    const Status st = WriteSheet(flags, query, matches, result->fit, db);
-    if (!st.ok()) return Fail("query", st);
-  }
+  const std::string& image = pictures.front();
+  auto result = QueryOnePicture(**searcher, flags, image, flags.picture.options.search.num_threads);
+  if (!result.ok()) return Fail("query", result.status());
+  const PictureEvidence& query = result->found.evidence;
+  const std::vector<Match>& matches = result->found.matches;
 
   if (flags.as_json) {
-    const json doc = ResultJson(flags, query, matches, result->fit, stats, db);
+    const json doc = ResultJson(flags, image, query, matches, result->found.fit, result->stats, db);
     const Status valid = ValidateJson(doc, "query_result.schema.json", "query result");
     // A bug, but never print JSON that breaks the schema.
     if (!valid.ok()) return Fail("query", valid);
     std::printf("%s\n", doc.dump(2).c_str());
   } else {
-    PrintTable(matches, query, stats, db);
-    PrintFit(result->fit);
+    std::fputs(FormatTable(matches, query, result->stats, db).c_str(), stdout);
+    std::fputs(FormatFit(result->found.fit).c_str(), stdout);
     if (!flags.sheet.empty()) std::printf("\ncontact sheet: %s\n", flags.sheet.c_str());
   }
   return kExitOk;

@@ -9,6 +9,7 @@
 #include <optional>
 
 #include "base/atomic_file.h"
+#include "base/image_encode.h"
 #include "base/image_file.h"
 #include "format/skeleton.h"
 #include "photo/image_read.h"
@@ -23,12 +24,14 @@ const cv::Scalar kDarkGrey(110, 110, 110);
 constexpr int kFont = cv::FONT_HERSHEY_SIMPLEX;
 
 Status WritePng(const std::filesystem::path& path, const cv::Mat& image) {
-  std::vector<uint8_t> bytes;
-  if (!cv::imencode(".png", image, bytes)) {
-    return Status(StatusCode::kIoError, path.string() + ": PNG encoding failed");
+  THROW_CHECK_EQ(image.depth(), CV_8U);
+  auto bytes = EncodePng({image.data, image.cols, image.rows, image.channels(), image.step[0]});
+  if (!bytes.ok()) {
+    return Status(StatusCode::kIoError,
+                  path.string() + ": PNG encoding failed: " + bytes.status().message());
   }
   return WriteFileAtomic(
-      path, std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
+      path, std::string_view(reinterpret_cast<const char*>(bytes->data()), bytes->size()));
 }
 
 void Text(cv::Mat& image,

@@ -1,9 +1,11 @@
 #include "photo/image_read.h"
 
+#include <dlfcn.h>
 #include <fcntl.h>
 #include <unistd.h>
 
 #include <cstring>
+#include <mutex>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -40,6 +42,32 @@ DecodeOptions OptionsFor(int imread_flags) {
   return o;
 }
 
+// PNM and BMP, rare inputs, are read by OpenCV's imgcodecs, which handdb does not link: it pulls
+// ~120 shared libraries (GDAL, codecs of formats handdb never reads) into the start of every
+// process, `handdb --help` included. It is loaded on the first PNM or BMP picture instead.
+using ImreadFn = decltype(&cv::imread);
+
+Result<ImreadFn> LoadImread() {
+  static std::once_flag once;
+  static ImreadFn imread = nullptr;
+  static std::string error;
+  std::call_once(once, [] {
+    void* lib = ::dlopen(HANDDB_OPENCV_IMGCODECS_SONAME, RTLD_NOW | RTLD_LOCAL);
+    if (lib != nullptr) {
+      // cv::imread(const std::string&, int), as the C++ ABI names it (OpenCV 4).
+      imread = reinterpret_cast<ImreadFn>(
+          ::dlsym(lib, "_ZN2cv6imreadERKNSt7__cxx1112basic_stringIcSt11char_traitsIcESaIcEEEi"));
+    }
+    if (imread == nullptr) error = ::dlerror();
+  });
+  if (imread == nullptr) {
+    return Status(StatusCode::kBadImage,
+                  std::string("PNM and BMP pictures are read with OpenCV's imgcodecs (") +
+                      HANDDB_OPENCV_IMGCODECS_SONAME + "), which cannot be loaded: " + error);
+  }
+  return imread;
+}
+
 // The file's first bytes, enough for SniffImageFormat.
 Result<std::vector<uint8_t>> Head(const std::filesystem::path& path) {
   if (Status s = CheckRegularFile(path); !s.ok()) return s;
@@ -62,7 +90,10 @@ Result<cv::Mat> ReadImage(const std::filesystem::path& path, int imread_flags) {
   if (!head.ok()) return head.status();
   const ImageFormat format = SniffImageFormat(*head);
   if (format == ImageFormat::kPnm || format == ImageFormat::kBmp) {
-    cv::Mat m = cv::imread(path.string(), imread_flags);
+    Result<ImreadFn> imread = LoadImread();
+    if (!imread.ok())
+      return Status(StatusCode::kBadImage, path.string() + ": " + imread.status().message());
+    cv::Mat m = (*imread)(path.string(), imread_flags);
     if (m.empty()) {
       return Status(
           StatusCode::kBadImage,

@@ -6,6 +6,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "base/atomic_file.h"
+#include "base/image_encode.h"
 #include "base/image_file.h"
 #include "format/skeleton.h"
 #include "photo/image_read.h"
@@ -164,12 +165,13 @@ Status WriteContactSheet(const std::filesystem::path& out_png,
     const int c = static_cast<int>(i) % cols;
     tiles[i].copyTo(sheet(cv::Rect(4 + c * (t + 4), 4 + r * (th + 4), t, th)));
   }
-  std::vector<uchar> png;
-  if (!cv::imencode(".png", sheet, png)) {
-    return Status(StatusCode::kIoError, out_png.string() + ": PNG encoding failed");
+  auto png = EncodePng({sheet.data, sheet.cols, sheet.rows, sheet.channels(), sheet.step[0]});
+  if (!png.ok()) {
+    return Status(StatusCode::kIoError,
+                  out_png.string() + ": PNG encoding failed: " + png.status().message());
   }
   return WriteFileAtomic(out_png,
-                         std::string_view(reinterpret_cast<const char*>(png.data()), png.size()));
+                         std::string_view(reinterpret_cast<const char*>(png->data()), png->size()));
 }
 
 }  // namespace handdb

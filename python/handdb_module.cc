@@ -580,21 +580,15 @@ std::vector<Point2f> QueryPoints(const py::array& a) {
   return out;
 }
 
-py::object Search(const PyDatabase& self,
-                  py::object query,
-                  int top_k,
-                  int threads,
-                  const std::string& hand,
-                  bool brute_force,
-                  const std::string& kdtree,
-                  float dt_cell_px,
-                  bool coarse_bound,
-                  bool return_stats,
-                  int per_shape,
-                  double landmark_weight,
-                  const std::string& fit,
-                  int fit_matches,
-                  const py::kwargs& edge_kwargs) {
+// The keyword options search() and search_many() share, checked (ValueError).
+SearchOptions SearchOptionsFromArgs(int top_k,
+                                    int threads,
+                                    const std::string& hand,
+                                    bool brute_force,
+                                    const std::string& kdtree,
+                                    float dt_cell_px,
+                                    bool coarse_bound,
+                                    int per_shape) {
   SearchOptions options;
   options.top_k = top_k;
   options.max_per_shape = per_shape;
@@ -621,13 +615,75 @@ py::object Search(const PyDatabase& self,
     throw py::value_error("dt_cell_px " + py::str(py::float_(dt_cell_px)).cast<std::string>() +
                           ": must be 1, 0.5, 0.25, 0.125 or 0.0625 (px)");
   }
+  return options;
+}
+
+LandmarkRankOptions LandmarkRankFromArgs(double landmark_weight) {
   LandmarkRankOptions landmark_rank;
   landmark_rank.weight = landmark_weight;
   if (!landmark_rank.Check()) throw py::value_error("landmark_weight must be >= 0");
+  return landmark_rank;
+}
+
+// The fit options search() and search_many() share: the database's rig unless fit is 'off'.
+void FitFromArgs(const PyDatabase& self,
+                 const std::string& fit,
+                 int fit_matches,
+                 PictureSearchOptions* options) {
   if (fit != "auto" && fit != "on" && fit != "off") {
     throw py::value_error("fit must be auto, on or off");
   }
   if (fit_matches < 1) throw py::value_error("fit_matches must be >= 1");
+  options->fit.max_matches = fit_matches;
+  if (fit != "off") options->rig = self.rig(fit == "on");
+}
+
+// A search's matches as Match objects, with their keypoints in the picture and their pose fits
+// when there are.
+py::list MatchList(std::vector<Match> matches,
+                   std::optional<PictureEvidence> picture,
+                   PictureFit fitted = {}) {
+  const std::shared_ptr<const QueryEdges> query_edges =
+      picture ? std::make_shared<const QueryEdges>(std::move(picture->edges)) : nullptr;
+  py::list out;
+  int rank = 1;
+  for (Match& m : matches) {
+    PyMatch pm;
+    pm.rank = rank++;
+    if (query_edges) {
+      pm.query = query_edges;
+      pm.keypoints_image.emplace();
+      for (const auto& kp : m.label.keypoints) {
+        pm.keypoints_image->push_back(query_edges->ImageFromNormalised({kp[0], kp[1]}));
+      }
+    }
+    if (static_cast<size_t>(pm.rank - 1) < fitted.fits.size()) {
+      pm.fit = std::move(fitted.fits[pm.rank - 1]);
+    }
+    pm.match = std::move(m);
+    out.append(py::cast(std::move(pm)));
+  }
+  return out;
+}
+
+py::object Search(const PyDatabase& self,
+                  py::object query,
+                  int top_k,
+                  int threads,
+                  const std::string& hand,
+                  bool brute_force,
+                  const std::string& kdtree,
+                  float dt_cell_px,
+                  bool coarse_bound,
+                  bool return_stats,
+                  int per_shape,
+                  double landmark_weight,
+                  const std::string& fit,
+                  int fit_matches,
+                  const py::kwargs& edge_kwargs) {
+  const SearchOptions options = SearchOptionsFromArgs(
+      top_k, threads, hand, brute_force, kdtree, dt_cell_px, coarse_bound, per_shape);
+  const LandmarkRankOptions landmark_rank = LandmarkRankFromArgs(landmark_weight);
 
   std::optional<PictureEvidence> picture;
   std::vector<Point2f> points;
@@ -643,8 +699,7 @@ py::object Search(const PyDatabase& self,
     picture_search.picture = PictureOptionsFromKwargs(edge_kwargs);
     picture_search.search = options;
     picture_search.landmark_rank = landmark_rank;
-    picture_search.fit.max_matches = fit_matches;
-    if (fit != "off") picture_search.rig = self.rig(fit == "on");
+    FitFromArgs(self, fit, fit_matches, &picture_search);
   } else {
     if (edge_kwargs.size()) throw py::type_error("image options given with a points query");
     points = QueryPoints(py::array::ensure(query));
@@ -670,30 +725,90 @@ py::object Search(const PyDatabase& self,
     }
   }
   if (!matches->ok()) throw StatusError(matches->status());
-  const std::shared_ptr<const QueryEdges> query_edges =
-      picture ? std::make_shared<const QueryEdges>(std::move(picture->edges)) : nullptr;
-  py::list out;
-  int rank = 1;
-  for (Match& m : **matches) {
-    PyMatch pm;
-    pm.rank = rank++;
-    if (query_edges) {
-      pm.query = query_edges;
-      pm.keypoints_image.emplace();
-      for (const auto& kp : m.label.keypoints) {
-        pm.keypoints_image->push_back(query_edges->ImageFromNormalised({kp[0], kp[1]}));
-      }
-    }
-    if (static_cast<size_t>(pm.rank - 1) < fitted.fits.size()) {
-      pm.fit = std::move(fitted.fits[pm.rank - 1]);
-    }
-    pm.match = std::move(m);
-    out.append(py::cast(std::move(pm)));
-  }
+  py::list out = MatchList(std::move(matches->value()), std::move(picture), std::move(fitted));
   if (!return_stats) return out;
   py::dict st = StatsDict(stats, self.db());
   st["threads"] = ResolveNumThreads(threads);
   return py::make_tuple(out, st);
+}
+
+// handdb.Error for a library error, as the exception translator raises it (BindError).
+py::object ErrorObject(const Status& status) {
+  py::object exc = (*error_type)(status.message());
+  exc.attr("code") = StatusCodeName(status.code());
+  return exc;
+}
+
+// Many pictures with one call: the options (and the landmark model) are resolved once, and the
+// pictures are searched in parallel with the GIL released, each as search() would.
+py::list SearchMany(const PyDatabase& self,
+                    const py::iterable& pictures,
+                    int top_k,
+                    int threads,
+                    const std::string& hand,
+                    bool brute_force,
+                    const std::string& kdtree,
+                    float dt_cell_px,
+                    bool coarse_bound,
+                    bool return_stats,
+                    int per_shape,
+                    double landmark_weight,
+                    const std::string& fit,
+                    int fit_matches,
+                    bool return_exceptions,
+                    const py::kwargs& edge_kwargs) {
+  std::vector<fs::path> paths;
+  for (const py::handle item : pictures) {
+    if (!py::isinstance<py::str>(item) && !py::hasattr(item, "__fspath__")) {
+      throw py::type_error(
+          "search_many takes picture paths (str or os.PathLike); search() takes QueryEdges and "
+          "point arrays");
+    }
+    paths.push_back(PathArg(item, "pictures"));
+  }
+  PictureSearchOptions options;
+  options.search = SearchOptionsFromArgs(
+      top_k, threads, hand, brute_force, kdtree, dt_cell_px, coarse_bound, per_shape);
+  options.landmark_rank = LandmarkRankFromArgs(landmark_weight);
+  options.picture = PictureOptionsFromKwargs(edge_kwargs);
+  FitFromArgs(self, fit, fit_matches, &options);
+  const Searcher& searcher = self.searcher();
+  const size_t n = paths.size();
+  std::vector<std::optional<Result<PictureMatches>>> found(n);
+  std::vector<SearchStats> stats(n);
+  {
+    py::gil_scoped_release release;
+    if (n > 0) UseDatabaseConversion(self.path(), &options.picture);
+    // Pictures in parallel first (reading and the landmark network are one thread each), the
+    // threads left over shared by each picture's search; the results do not depend on the split.
+    const int total = ResolveNumThreads(threads);
+    const int workers = static_cast<int>(std::min<size_t>(static_cast<size_t>(total), n));
+    options.search.num_threads = std::max(1, total / std::max(workers, 1));
+    ParallelFor(n, workers, [&](size_t i, int) {
+      found[i].emplace(SearchPicture(searcher, paths[i], options, &stats[i]));
+      return true;
+    });
+  }
+  py::list out;
+  for (size_t i = 0; i < n; ++i) {
+    Result<PictureMatches>& r = *found[i];
+    if (!r.ok()) {
+      // Every picture has run; without return_exceptions the first failure (in input order)
+      // is raised as search() would raise it.
+      if (!return_exceptions) throw StatusError(r.status());
+      out.append(ErrorObject(r.status()));
+      continue;
+    }
+    py::list matches = MatchList(std::move(r->matches), std::move(r->evidence), std::move(r->fit));
+    if (!return_stats) {
+      out.append(matches);
+      continue;
+    }
+    py::dict st = StatsDict(stats[i], self.db());
+    st["threads"] = ResolveNumThreads(threads);
+    out.append(py::make_tuple(matches, st));
+  }
+  return out;
 }
 
 py::list Validate(const fs::path& path, bool verify_checksums, size_t max_problems) {
@@ -1231,6 +1346,31 @@ void BindDatabase(py::module_& m) {
           "--landmark-weight). fit: for an image path, 'auto' (default) fits the pose of the "
           "first fit_matches matches to the photo's landmarks as `handdb query --fit` does "
           "(Match.fit; 'on' raises if the database carries no rig, 'off' skips it).")
+      .def("search_many",
+           &SearchMany,
+           py::arg("pictures"),
+           py::arg("top_k") = 10,
+           py::arg("threads") = -1,
+           py::arg("hand") = "either",
+           py::arg("brute_force") = false,
+           py::arg("kdtree") = "nanoflann",
+           py::arg("dt_cell_px") = 1.0f,
+           py::arg("coarse_bound") = true,
+           py::arg("return_stats") = false,
+           py::arg("per_shape") = 0,
+           py::arg("landmark_weight") = LandmarkRankOptions{}.weight,
+           py::arg("fit") = "auto",
+           py::arg("fit_matches") = MatchFitOptions{}.max_matches,
+           py::arg("return_exceptions") = false,
+           "search() for many picture paths in one call, as `handdb query DB IMAGE...`: the "
+           "image options and the landmark model are resolved once and the pictures searched "
+           "in parallel (threads bounds the whole call, -1: all cores) with the GIL released. "
+           "Returns a list in the order of `pictures`, each item what search() returns for that "
+           "picture (a list of Match, or (matches, stats) with return_stats=True).\n\n"
+           "A picture that fails (no hand, an unreadable file) does not stop the others: every "
+           "picture runs, then the first failure in order raises its handdb.Error; with "
+           "return_exceptions=True (as asyncio.gather) its handdb.Error takes its place in the "
+           "list instead. Keyword options as in search() and query_edges().")
       .def("__repr__",
            [](const PyDatabase& d) {
              return "<handdb.Database '" + d.path().string() +

@@ -14,6 +14,7 @@
 #include <opencv2/imgproc.hpp>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "base/json_schema.h"
 #include "format/manifest.h"
@@ -228,6 +229,116 @@ TEST_F(QueryCli, MirroredImageIsALeftHandWithKeypointsInTheImage) {
   ASSERT_EQ(table.code, 0) << table.err;
   EXPECT_NE(table.out.find("left"), std::string::npos);
   EXPECT_EQ(Handdb(db + " " + left_png.string() + " --hand both").code, 2);
+}
+
+// Lines of a JSON Lines output, parsed.
+std::vector<nlohmann::json> JsonLines(const std::string& text) {
+  std::vector<nlohmann::json> lines;
+  std::istringstream in(text);
+  for (std::string line; std::getline(in, line);) lines.push_back(nlohmann::json::parse(line));
+  return lines;
+}
+
+// A batch: the database opened once for several pictures, a directory or a list on stdin; the
+// answers in input order, each the single query's; a bad picture in the middle reported on one
+// line (and in its place in JSON Lines) without stopping the others; exit 1 when any failed.
+TEST_F(QueryCli, BatchKeepsOrderAndReportsBadPictures) {
+  const fs::path dir = *dir_ / "batch";
+  fs::create_directories(dir);
+  const fs::path a = dir / "a.png", bad = dir / "bad.jpg", c = dir / "c.PNG";
+  ASSERT_TRUE(cv::imwrite(a.string(), Draw(9, 4, false)));
+  ASSERT_TRUE(cv::imwrite((*dir_ / "c.png").string(), Draw(17, 2, false)));
+  fs::rename(*dir_ / "c.png", c);  // an upper-case extension is a picture too
+  {
+    std::ofstream f(bad);
+    f << "not a jpeg";
+    std::ofstream notes(dir / "notes.txt");
+    notes << "not a picture: a directory's listing skips it";
+  }
+  const std::string db = (*dir_ / "db").string();
+  auto one_error_line = [](const CliRun& r, const fs::path& file) {
+    return r.err.rfind("handdb query: ", 0) == 0 && r.err.find('\n') == r.err.size() - 1 &&
+           r.err.find(file.filename().string()) != std::string::npos;
+  };
+
+  CliRun r = Handdb(db + " " + a.string() + " " + bad.string() + " " + c.string() +
+                    " --json --top 3 --threads 2");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_TRUE(one_error_line(r, bad)) << r.err;
+  auto lines = JsonLines(r.out);
+  ASSERT_EQ(lines.size(), 3u) << r.out;
+  for (const auto& line : lines) {
+    const Status valid = ValidateJson(line, "query_batch_line.schema.json", "line");
+    EXPECT_TRUE(valid.ok()) << valid.message();
+  }
+  EXPECT_EQ(lines[0]["picture"], a.string());
+  EXPECT_EQ(lines[0]["image"], a.string());
+  EXPECT_EQ(lines[0]["matches"][0]["view_id"], 9);
+  EXPECT_EQ(lines[0]["matches"][0]["roll"], 4);
+  EXPECT_EQ(lines[1]["picture"], bad.string());
+  EXPECT_NE(lines[1]["error"].get<std::string>().find("bad.jpg"), std::string::npos);
+  EXPECT_FALSE(lines[1].contains("matches"));
+  EXPECT_EQ(lines[2]["picture"], c.string());
+  EXPECT_EQ(lines[2]["matches"][0]["view_id"], 17);
+  EXPECT_EQ(lines[2]["matches"][0]["roll"], 2);
+  // Each answer is the single query's.
+  CliRun single = Handdb(db + " " + c.string() + " --json --top 3 --threads 2");
+  ASSERT_EQ(single.code, 0) << single.err;
+  const auto doc = nlohmann::json::parse(single.out);
+  EXPECT_FALSE(doc.contains("picture"));
+  EXPECT_EQ(lines[2]["matches"], doc["matches"]);
+  EXPECT_EQ(lines[2]["query"], doc["query"]);
+  EXPECT_EQ(lines[2]["options"], doc["options"]);
+
+  // A directory: its pictures sorted by name, not notes.txt.
+  r = Handdb(db + " " + dir.string() + " --json --top 1 --threads 1");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_TRUE(one_error_line(r, bad)) << r.err;
+  lines = JsonLines(r.out);
+  ASSERT_EQ(lines.size(), 3u) << r.out;
+  EXPECT_EQ(lines[0]["picture"], a.string());
+  EXPECT_EQ(lines[1]["picture"], bad.string());
+  EXPECT_EQ(lines[2]["picture"], c.string());
+
+  // A list on stdin, in its order (empty lines skipped); all good: exit 0. Four pictures: the
+  // batch prepares the exact search's centre fields, and the answers stay the single query's.
+  const fs::path list = *dir_ / "list.txt";
+  {
+    std::ofstream f(list);
+    f << c.string() << "\n\n" << a.string() << "\r\n" << c.string() << "\n" << a.string() << "\n";
+  }
+  r = Handdb(db + " - --json --top 3 --threads 2 < " + list.string());
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_EQ(r.err, "");
+  lines = JsonLines(r.out);
+  ASSERT_EQ(lines.size(), 4u) << r.out;
+  for (size_t i : {0u, 2u}) {
+    EXPECT_EQ(lines[i]["picture"], c.string());
+    EXPECT_EQ(lines[i]["matches"], doc["matches"]);
+  }
+  EXPECT_EQ(lines[1]["picture"], a.string());
+  EXPECT_EQ(lines[3]["picture"], a.string());
+
+  // Tables under a header line naming each picture; --batch makes one picture a batch.
+  r = Handdb(db + " " + a.string() + " " + c.string() + " --top 2");
+  EXPECT_EQ(r.code, 0) << r.err;
+  const size_t head_a = r.out.find("picture: " + a.string() + "\n");
+  const size_t head_c = r.out.find("picture: " + c.string() + "\n");
+  ASSERT_NE(head_a, std::string::npos) << r.out;
+  ASSERT_NE(head_c, std::string::npos) << r.out;
+  EXPECT_LT(head_a, head_c);
+  EXPECT_NE(r.out.find("rank", head_c), std::string::npos);
+  r = Handdb(db + " " + a.string() + " --batch --json --top 1");
+  EXPECT_EQ(r.code, 0) << r.err;
+  ASSERT_EQ(JsonLines(r.out).size(), 1u);
+  EXPECT_EQ(JsonLines(r.out)[0]["picture"], a.string());
+
+  // One contact sheet and one mask belong to one picture; an empty list is an error.
+  EXPECT_EQ(Handdb(db + " " + dir.string() + " --sheet " + (*dir_ / "s.png").string()).code, 2);
+  EXPECT_EQ(Handdb(db + " " + a.string() + " " + c.string() + " --mask " + a.string()).code, 2);
+  r = Handdb(db + " - < /dev/null");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("no pictures"), std::string::npos) << r.err;
 }
 
 TEST_F(QueryCli, ErrorsAreOneLineWithExitCodes) {

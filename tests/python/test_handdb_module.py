@@ -292,6 +292,58 @@ def test_search_releases_the_gil(db):
     assert results[3:] == [expected] * 2
 
 
+def test_search_many_is_search_per_picture_in_order(handdb, db, db_dir, view_image, tmp_path):
+    """search_many: what search() returns for each picture, in order; a bad picture does not stop
+    the others, then raises (the first in order), or takes its place with
+    return_exceptions=True."""
+    other = tmp_path / "view11-roll7.png"
+    run_handdb("show", db_dir, "--view", 11, "--roll", 7, "-o", other)
+    bad = tmp_path / "bad.jpg"
+    bad.write_bytes(b"not a jpeg")
+    pictures = [view_image, other, view_image]
+    many = db.search_many(pictures, top_k=5, threads=2)
+    assert len(many) == 3
+    for picture, got in zip(pictures, many):
+        want = db.search(picture, top_k=5, threads=2)
+        assert [m.to_dict() for m in got] == [m.to_dict() for m in want]
+    assert (many[0][0].view_id, many[0][0].roll) == (5, 3)
+    assert many[1][0].to_dict() != many[0][0].to_dict()
+    assert many[1][0].keypoints_image_px.shape == (21, 2)
+    with_stats = db.search_many([other], top_k=2, threads=1, hand="right", return_stats=True)
+    (matches, stats), = with_stats
+    assert len(matches) == 2 and stats["searches"] == 1 and stats["threads"] == 1
+
+    with pytest.raises(handdb.Error) as e:
+        db.search_many([view_image, bad, str(bad) + ".missing", other], top_k=1)
+    assert "bad.jpg" in str(e.value) and ".missing" not in str(e.value)
+    mixed = db.search_many([view_image, bad, other], top_k=1, return_exceptions=True)
+    assert mixed[0][0].to_dict() == many[0][0].to_dict()
+    assert mixed[2][0].to_dict() == many[1][0].to_dict()
+    assert isinstance(mixed[1], handdb.Error) and "bad.jpg" in str(mixed[1]) and mixed[1].code
+    with pytest.raises(handdb.Error) as single:
+        db.search(bad, top_k=1)
+    assert str(single.value) == str(mixed[1]) and single.value.code == mixed[1].code
+
+    assert db.search_many([]) == []
+    with pytest.raises(TypeError):
+        db.search_many([db[3].points])
+    with pytest.raises(ValueError):
+        db.search_many([view_image], top_k=0)
+    assert "GIL" in handdb.Database.search_many.__doc__
+    # The GIL is released while the pictures run: another thread keeps running Python code.
+    import threading
+    results = []
+    worker = threading.Thread(target=lambda: results.append(
+        db.search_many([view_image] * 4, top_k=5, threads=1, brute_force=True)))
+    spins = 0
+    worker.start()
+    while worker.is_alive():
+        spins += 1
+    worker.join()
+    assert spins > 10000, spins
+    assert [[m.to_dict() for m in r] for r in results[0]] == [[m.to_dict() for m in many[0]]] * 4
+
+
 @pytest.mark.parametrize("flags,options", [
     ([], {}),
     (["--contour-clearance", "4", "--canny", "30,100", "--edges-outside"],

@@ -1,0 +1,337 @@
+// The whole path of `handdb query` for photos, stage by stage, and what a batch saves: on a real
+// database and the development photos, in one run,
+//   (a) start-up: `handdb --help`, a process that loads the binary's libraries and exits;
+//   (b) in this process, each stage of a picture timed on its own: the database open
+//       (Searcher::Open as `handdb query` opens it), the landmark model load, the decode
+//       (photo/image_read.h), segmentation and edges (LoadQueryEdges less its decode), the
+//       landmark network (HandLandmarker::Detect on the crop ReadPicture chose), the top-k search
+//       of the edges, the landmark re-ranking of the pool, and SearchPicture as a whole. Cold is
+//       the first call in the process (the first photo: lazy caches, first network run), warm the
+//       median of the rest (open and model: of --repeats more);
+//   (c) photos/s of `handdb query DB PHOTO` run once per photo against one `handdb query DB
+//       PHOTO...` batch over the same photos and threads, their ratio, and whether every photo got
+//       the same matches both ways.
+//
+//   picture_bench --db DIR [--photos DIR] [--set-queries 24] [--threads 2] [--repeats 5]
+//                 [--handdb PATH]
+#include <fcntl.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "bench/bench_args.h"
+#include "bench/query_sets.h"
+#include "evaluate/photos.h"
+#include "photo/hand_landmarks.h"
+#include "photo/image_edges.h"
+#include "photo/image_read.h"
+#include "pose/landmark_rank.h"
+#include "pose/picture_search.h"
+#include "query/searcher.h"
+
+extern char** environ;
+
+namespace handdb {
+namespace {
+
+namespace fs = std::filesystem;
+using bench::Median;
+using bench::NowSeconds;
+
+struct Args {
+  std::string db;
+  std::string photos = bench::DefaultPhotoDir();
+  int set_queries = 24;
+  int threads = 2;
+  int repeats = 5;
+  std::string handdb = HANDDB_BINARY;
+};
+
+struct Timed {
+  double seconds = 0;  // from spawn to reaped
+  bool ok = false;     // started and exited 0
+};
+
+// Runs argv with stdout into `out` (or discarded when empty) and stderr discarded. Its own
+// posix_spawn and waitpid: base/subprocess.h polls its pipes, which would add to a 20 ms start.
+Timed RunTimed(const std::vector<std::string>& argv, const std::string& out) {
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions,
+                                   STDOUT_FILENO,
+                                   out.empty() ? "/dev/null" : out.c_str(),
+                                   O_WRONLY | O_CREAT | O_TRUNC,
+                                   0644);
+  posix_spawn_file_actions_addopen(&actions, STDERR_FILENO, "/dev/null", O_WRONLY, 0);
+  std::vector<char*> args;
+  for (const std::string& a : argv) args.push_back(const_cast<char*>(a.c_str()));
+  args.push_back(nullptr);
+  const double t0 = NowSeconds();
+  pid_t pid = 0;
+  const int rc = posix_spawn(&pid, args[0], &actions, nullptr, args.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  if (rc != 0) return {};
+  int status = 0;
+  if (waitpid(pid, &status, 0) != pid) return {};
+  return {NowSeconds() - t0, WIFEXITED(status) && WEXITSTATUS(status) == 0};
+}
+
+// The matches (view, roll, hand, D_c) of one query result, to compare two runs' answers.
+std::string MatchesKey(const nlohmann::json& result) {
+  std::string key;
+  for (const auto& m : result["matches"]) {
+    key += std::to_string(m["view_id"].get<int>()) + "/" + std::to_string(m["roll"].get<int>()) +
+           "/" + m["hand"].get<std::string>() + "/" + m["distance"].dump() + " ";
+  }
+  return key;
+}
+
+std::string ReadText(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+struct Stage {
+  explicit Stage(const char* stage_name) : name(stage_name) {}
+  const char* name;
+  double cold_ms = 0;
+  std::vector<double> warm_ms;
+};
+
+void PrintStage(const Stage& s, const char* note = "") {
+  std::printf("  %-34s %9.2f %9.2f  %s\n", s.name, s.cold_ms, Median(s.warm_ms), note);
+}
+
+int Run(const Args& args) {
+  const std::string threads = std::to_string(args.threads);
+  std::printf("picture_bench: database %s, photos %s, %d threads\n\n",
+              args.db.c_str(),
+              args.photos.c_str(),
+              args.threads);
+
+  // (a) Start-up.
+  std::vector<double> start_ms;
+  for (int r = 0; r < std::max(args.repeats, 1) * 4; ++r) {
+    const Timed t = RunTimed({args.handdb, "--help"}, "");
+    if (!t.ok) {
+      std::fprintf(stderr, "picture_bench: %s --help failed\n", args.handdb.c_str());
+      return 1;
+    }
+    start_ms.push_back(t.seconds * 1e3);
+  }
+  std::printf("start-up (handdb --help, %zu runs): median %.1f ms, min %.1f ms\n\n",
+              start_ms.size(),
+              Median(start_ms),
+              *std::min_element(start_ms.begin(), start_ms.end()));
+
+  // The photos: spread over the sorted files, as the other benches pick them.
+  std::vector<fs::path> files;
+  std::error_code ec;
+  for (auto it = fs::recursive_directory_iterator(args.photos, ec);
+       !ec && it != fs::recursive_directory_iterator();
+       it.increment(ec)) {
+    std::error_code type_ec;
+    if (it->is_regular_file(type_ec) && IsPhotoFile(it->path())) files.push_back(it->path());
+  }
+  std::sort(files.begin(), files.end());
+  std::vector<std::string> photos;
+  for (size_t i : bench::SpreadSample(files.size(), args.set_queries))
+    photos.push_back(files[i].string());
+  if (photos.size() < 2) {
+    std::fprintf(stderr, "picture_bench: fewer than 2 photos under %s\n", args.photos.c_str());
+    return 1;
+  }
+
+  // (b) The stages in this process.
+  Stage open{"open (Searcher::Open)"}, model{"landmark model load"};
+  SearcherOptions open_options;
+  open_options.num_threads = args.threads;
+  open_options.few_queries = true;  // as `handdb query` opens it
+  std::unique_ptr<Searcher> searcher;
+  for (int r = 0; r <= args.repeats; ++r) {
+    const double t0 = NowSeconds();
+    auto s = Searcher::Open(args.db, open_options);
+    const double ms = (NowSeconds() - t0) * 1e3;
+    if (!s.ok()) {
+      std::fprintf(stderr, "picture_bench: %s\n", s.status().message().c_str());
+      return 1;
+    }
+    (r == 0 ? open.cold_ms : open.warm_ms.emplace_back()) = ms;
+    searcher = std::move(s).value();
+  }
+  std::shared_ptr<const HandLandmarker> landmarker;
+  for (int r = 0; r <= args.repeats; ++r) {
+    const double t0 = NowSeconds();
+    auto m = HandLandmarker::Open(HandLandmarker::DefaultModelPath());
+    const double ms = (NowSeconds() - t0) * 1e3;
+    if (!m.ok()) {
+      std::fprintf(stderr, "picture_bench: %s\n", m.status().message().c_str());
+      return 1;
+    }
+    (r == 0 ? model.cold_ms : model.warm_ms.emplace_back()) = ms;
+    landmarker = std::move(m).value();
+  }
+
+  PictureSearchOptions options;
+  options.picture.landmarker = landmarker;
+  options.search.hand = Hand::kEither;  // `handdb query`'s default
+  options.search.num_threads = args.threads;
+  SearchOptions pool_search = options.search;
+  pool_search.top_k = std::max(options.search.top_k, options.landmark_rank.pool_views);
+
+  Stage decode{"decode"}, segment{"segmentation + edges"}, network{"landmark network"},
+      search{"search (top 10 of the edges)"}, pool{"search (the re-ranking's pool)"},
+      rerank{"re-rank by landmarks"}, whole{"SearchPicture (all of it)"};
+  int failed = 0;
+  for (size_t i = 0; i < photos.size(); ++i) {
+    // Cold: the first photo with a hand (the first search, the first network run).
+    const bool cold = failed == static_cast<int>(i);
+    auto put = [cold](Stage& s, double ms) { (cold ? s.cold_ms : s.warm_ms.emplace_back()) = ms; };
+    double t0 = NowSeconds();
+    auto bgr = ReadImage(photos[i], cv::IMREAD_COLOR);
+    const double decode_ms = (NowSeconds() - t0) * 1e3;
+    t0 = NowSeconds();
+    auto edges = LoadQueryEdges(photos[i], options.picture.edges);
+    const double edges_ms = (NowSeconds() - t0) * 1e3;
+    auto evidence = ReadPicture(photos[i], options.picture);
+    if (!bgr.ok() || !edges.ok() || !evidence.ok() || !evidence->landmarks) {
+      ++failed;  // no hand: not a picture the stages can be timed on
+      continue;
+    }
+    put(decode, decode_ms);
+    put(segment, edges_ms - decode_ms);
+    const HandLandmarks& l = *evidence->landmarks;
+    cv::Mat rgb;
+    cv::cvtColor(*bgr, rgb, cv::COLOR_BGR2RGB);
+    t0 = NowSeconds();
+    landmarker->Detect(
+        rgb.data, rgb.cols, rgb.rows, rgb.step, l.crop_centre, l.crop_side_px, l.crop_angle_deg);
+    put(network, (NowSeconds() - t0) * 1e3);
+    const std::vector<Point2f> points = evidence->edges.points_px();
+    t0 = NowSeconds();
+    auto top = searcher->Search(points, options.search);
+    put(search, (NowSeconds() - t0) * 1e3);
+    t0 = NowSeconds();
+    auto pool_matches = searcher->Search(points, pool_search);
+    put(pool, (NowSeconds() - t0) * 1e3);
+    if (!top.ok() || !pool_matches.ok()) return 1;
+    t0 = NowSeconds();
+    RerankByLandmarks(
+        std::move(pool_matches).value(), *evidence, options.search, options.landmark_rank);
+    put(rerank, (NowSeconds() - t0) * 1e3);
+    t0 = NowSeconds();
+    auto all = SearchPicture(*searcher, photos[i], options);
+    put(whole, (NowSeconds() - t0) * 1e3);
+  }
+  if (decode.warm_ms.empty()) {
+    std::fprintf(stderr, "picture_bench: no photo with a hand and landmarks\n");
+    return 1;
+  }
+  std::printf("stages in one process (%zu photos, %d without a hand or landmarks), ms:\n",
+              photos.size(),
+              failed);
+  std::printf("  %-34s %9s %9s\n", "stage", "cold", "warm");
+  PrintStage(open, "cold: the first open in the process");
+  PrintStage(model);
+  PrintStage(decode);
+  PrintStage(segment, "LoadQueryEdges less its decode");
+  PrintStage(network);
+  PrintStage(search);
+  PrintStage(pool, "what SearchEvidence searches for a photo with landmarks");
+  PrintStage(rerank);
+  PrintStage(whole);
+  const double per_picture = Median(whole.warm_ms);
+  const double fixed = Median(start_ms) + Median(open.warm_ms) + Median(model.warm_ms);
+  std::printf(
+      "  one process per photo pays start-up + open + model = %.1f ms (warm) on top of "
+      "%.1f ms per photo\n\n",
+      fixed,
+      per_picture);
+
+  // (c) One process per photo against one batch.
+  const fs::path tmp = fs::temp_directory_path() / ("picture_bench-" + std::to_string(getpid()));
+  fs::create_directories(tmp);
+  std::vector<std::string> single_keys(photos.size());
+  std::vector<double> per_process_s, batch_s;
+  bool same = true;
+  for (int r = 0; r < std::max(1, args.repeats / 2); ++r) {
+    double total = 0;
+    for (size_t i = 0; i < photos.size(); ++i) {
+      const std::string out = (tmp / ("single-" + std::to_string(i) + ".json")).string();
+      const Timed t = RunTimed(
+          {args.handdb, "query", args.db, photos[i], "--json", "-q", "--threads", threads}, out);
+      // A photo without a hand fails in both forms; its time still counts.
+      total += t.seconds;
+      if (t.ok && r == 0) single_keys[i] = MatchesKey(nlohmann::json::parse(ReadText(out)));
+    }
+    per_process_s.push_back(total);
+    std::vector<std::string> argv = {args.handdb, "query", args.db};
+    argv.insert(argv.end(), photos.begin(), photos.end());
+    for (const char* a : {"--json", "-q", "--threads"}) argv.push_back(a);
+    argv.push_back(threads);
+    const std::string out = (tmp / "batch.jsonl").string();
+    batch_s.push_back(RunTimed(argv, out).seconds);
+    std::istringstream lines(ReadText(out));
+    size_t i = 0;
+    for (std::string line; std::getline(lines, line); ++i) {
+      const auto doc = nlohmann::json::parse(line);
+      const std::string key = doc.contains("matches") ? MatchesKey(doc) : "";
+      same = same && i < photos.size() && doc["picture"] == photos[i] && key == single_keys[i];
+    }
+    same = same && i == photos.size();
+  }
+  fs::remove_all(tmp);
+  const double n = static_cast<double>(photos.size());
+  const double single_rate = n / Median(per_process_s);
+  const double batch_rate = n / Median(batch_s);
+  std::printf("%zu photos, %d threads, median of %zu runs:\n",
+              photos.size(),
+              args.threads,
+              per_process_s.size());
+  std::printf(
+      "  one process per photo   %7.2f s  %6.2f photos/s\n", Median(per_process_s), single_rate);
+  std::printf("  one batch process       %7.2f s  %6.2f photos/s  (%.2fx)\n",
+              Median(batch_s),
+              batch_rate,
+              batch_rate / single_rate);
+  std::printf("  same matches both ways: %s\n", same ? "yes" : "NO");
+  return same ? 0 : 1;
+}
+
+}  // namespace
+}  // namespace handdb
+
+int main(int argc, char** argv) {
+  handdb::Args args;
+  CLI::App app{"The photo path of handdb query stage by stage, and batch against per-process"};
+  app.add_option("--db", args.db, "database directory")->required();
+  app.add_option("--photos", args.photos, "real photos, searched recursively")
+      ->capture_default_str();
+  app.add_option("--set-queries", args.set_queries, "photos used, spread over the set")
+      ->check(CLI::Range(2, 100000))
+      ->capture_default_str();
+  app.add_option("--threads", args.threads, "threads of the searches and of both query forms")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--repeats", args.repeats, "repeats of the open, model load and process runs")
+      ->check(CLI::Range(1, 1000))
+      ->capture_default_str();
+  app.add_option("--handdb", args.handdb, "the handdb binary")->capture_default_str();
+  if (int rc = handdb::bench::ParseBenchArgs(app, argc, argv); rc >= 0) return rc;
+  return handdb::Run(args);
+}
