@@ -24,9 +24,11 @@
 #include "cli/photo_input_flags.h"
 #include "cli/query_batch.h"
 #include "format/roll.h"
+#include "generator/hand/camera.h"
 #include "generator/hand/database_rig.h"
 #include "handdb_version.h"
 #include "photo/image_edges.h"
+#include "pose/export_gltf.h"
 #include "pose/landmark_rank.h"
 #include "pose/match_json.h"
 #include "pose/picture_search.h"
@@ -172,7 +174,8 @@ std::string FormatFit(const PictureFit& fit) {
 
 // The flags of `handdb query`, bound to the option structs they set.
 struct QueryFlags {
-  std::string db_dir, sheet;
+  std::string db_dir, sheet, export_glb;
+  std::shared_ptr<const DatabaseRig> rig;  // with --fit or --export: the database's rig
   // One picture, or a batch (IsBatch): several, a directory's pictures, "-" (a list on stdin).
   std::vector<std::string> images;
   bool batch = false;  // --batch, or IsBatch(images): set by Finish
@@ -215,6 +218,11 @@ void QueryFlags::Add(CLI::App& app) {
                batch,
                "print as a batch even for one picture: JSON Lines with --json, a header line "
                "naming the picture above each table");
+  app.add_option("--export",
+                 export_glb,
+                 "write the answer's pose as a glTF binary (.glb) of the posed hand asset with "
+                 "its camera, for Blender or a web viewer: the fitted pose, else the top match's "
+                 "stored pose (one picture only)");
   app.add_option("--sheet",
                  sheet,
                  "write a contact sheet PNG: input, its edges, the top matches (one picture only)");
@@ -266,9 +274,11 @@ void QueryFlags::Add(CLI::App& app) {
                  "stored views alone")
       ->check(CLI::IsMember({"auto", "on", "off"}))
       ->capture_default_str();
-  app.add_option("--fit-matches",
-                 picture.options.fit.max_matches,
-                 "fit this many of the first matches; the best fit by its cost is the pose")
+  app.add_option(
+         "--fit-matches",
+         picture.options.fit.max_matches,
+         "fit this many of the first matches (each reported beside its match); the pose is the "
+         "first one fitted")
       ->check(CLI::Range(1, 100000))
       ->capture_default_str();
   app.add_flag("--quiet,-q",
@@ -291,6 +301,10 @@ bool QueryFlags::Finish() {
   if (batch && !sheet.empty()) {
     std::fprintf(stderr,
                  "handdb query: --sheet writes the contact sheet of one picture: give one IMAGE\n");
+    return false;
+  }
+  if (batch && !export_glb.empty()) {
+    std::fprintf(stderr, "handdb query: --export writes the pose of one picture: give one IMAGE\n");
     return false;
   }
   if (batch && !picture.mask.empty()) {
@@ -464,6 +478,46 @@ json ResultJson(const QueryFlags& flags,
   return doc;
 }
 
+// --export: the answer's pose as a posed glTF of the hand asset, seen through the camera that
+// saw the picture. A left hand is written as the mirror image the search matched.
+Status ExportPose(const QueryFlags& flags, const PictureMatches& found, const Database& db) {
+  if (found.matches.empty()) {
+    return Status(StatusCode::kNotFound, flags.export_glb + ": no match to export");
+  }
+  const DatabaseRig& rig = *flags.rig;
+  PosedHandGlbOptions options;
+  options.ortho_scale = rig.render.ortho_scale;
+  JointVector joints{};
+  if (found.fit.best >= 0) {
+    const MatchFit& f = found.fit.fits[found.fit.best];
+    joints = f.fit.joints;
+    options.left_hand = found.matches[found.fit.best].hand == Hand::kLeft;
+    // The fit's rotation is in the left hand's frame for a left hand (S_x R S_y); the export
+    // wants the right hand's camera, which the same flips give back.
+    Mat3d c = f.fit.cam_from_hand;
+    if (options.left_hand) {
+      for (int r = 0; r < 3; ++r) {
+        for (int k = 0; k < 3; ++k) {
+          if ((r == 0) != (k == 1)) c[r][k] = -c[r][k];
+        }
+      }
+    }
+    options.cam_from_hand = c;
+  } else {
+    // The top match's stored view: its label (right hand, roll 0) turned by the virtual roll.
+    const Match& m = found.matches.front();
+    const ViewLabel label = db.label(m.view_id);
+    for (int i = 0; i < kNumJointAngles; ++i) joints[i] = label.joint_angles[i];
+    const Vec3d direction{
+        label.view_direction[0], label.view_direction[1], label.view_direction[2]};
+    auto cam = CamFromHand(rig.rig, direction, label.camera_roll + m.roll_angle);
+    if (!cam.ok()) return cam.status();
+    options.cam_from_hand = *cam;
+    options.left_hand = m.hand == Hand::kLeft;
+  }
+  return WritePosedHandGlb(flags.export_glb, rig.rig, joints, options);
+}
+
 // One picture's answer: its evidence, its ranked matches and the search's counters.
 struct PictureQuery {
   PictureMatches found;
@@ -486,6 +540,10 @@ Result<PictureQuery> QueryOnePicture(const Searcher& searcher,
   if (!flags.sheet.empty()) {
     const Status st = WriteSheet(
         flags, image, q.found.evidence, q.found.matches, q.found.fit, searcher.database());
+    if (!st.ok()) return st;
+  }
+  if (!flags.export_glb.empty()) {
+    const Status st = ExportPose(flags, q.found, searcher.database());
     if (!st.ok()) return st;
   }
   return q;
@@ -631,12 +689,13 @@ int RunQuery(int argc, char** argv) {
   if (db.num_views() == 0)
     return Fail("query", Status(StatusCode::kNotFound, db_dir + ": the database has no views"));
 
-  // The pose fit needs the rig the database was rendered with.
-  if (flags.fit != "off") {
+  // The pose fit and --export need the rig the database was rendered with.
+  if (flags.fit != "off" || !flags.export_glb.empty()) {
     auto rig = LoadDatabaseRig(db_dir);
     if (rig.ok()) {
-      flags.picture.options.rig = std::make_shared<const DatabaseRig>(std::move(rig).value());
-    } else if (flags.fit == "on") {
+      flags.rig = std::make_shared<const DatabaseRig>(std::move(rig).value());
+      if (flags.fit != "off") flags.picture.options.rig = flags.rig;
+    } else if (flags.fit == "on" || !flags.export_glb.empty()) {
       return Fail("query", rig.status());
     } else if (!flags.quiet) {
       std::fprintf(stderr, "handdb query: no pose fit: %s\n", rig.status().message().c_str());
@@ -663,6 +722,7 @@ int RunQuery(int argc, char** argv) {
     std::fputs(FormatTable(matches, query, result->stats, db).c_str(), stdout);
     std::fputs(FormatFit(result->found.fit).c_str(), stdout);
     if (!flags.sheet.empty()) std::printf("\ncontact sheet: %s\n", flags.sheet.c_str());
+    if (!flags.export_glb.empty()) std::printf("pose exported: %s\n", flags.export_glb.c_str());
   }
   return kExitOk;
 }

@@ -130,9 +130,7 @@ Result<PictureFit> FitPictureMatches(const DatabaseRig& rig,
       mf.keypoints_image_px[k] = picture.edges.ImageFromNormalised(p);
     }
     mf.fitted = true;
-    if (out.best < 0 || mf.fit.final_cost < out.fits[out.best].fit.final_cost) {
-      out.best = static_cast<int>(i);
-    }
+    if (out.best < 0) out.best = static_cast<int>(i);
   }
   return out;
 }

@@ -1,8 +1,13 @@
 // The fitted pose of a picture: the pose fit (pose/fit.h) run from each of a search's first
-// matches, each in the query's own frame, and the best fit by its final cost chosen as the
-// answer. A match is a stored view on the database's grid of shapes, directions and rolls; its
-// fit moves the 20 joint angles, the rotation and the scale and shift off that grid towards the
-// picture's hand landmarks (docs/photo.md "Fitted pose").
+// matches, each in the query's own frame; the answer is the fit of the best-ranked match that
+// could be fitted. A match is a stored view on the database's grid of shapes, directions and
+// rolls; its fit moves the 20 joint angles, the rotation and the scale and shift off that grid
+// towards the picture's hand landmarks (docs/photo.md "Fitted pose").
+//
+// Why the rank and not the smallest cost: the landmarks are 2D, so fits from different starts
+// end at nearly the same landmark cost with different depths, and the smallest cost picked the
+// worse 3D pose (natural-pose photo renders, paper database: median 0.42 against 0.37
+// wrist-to-middle-knuckle lengths for the top match's fit; docs/decisions/0015).
 //
 // A left-hand match (Match::hand == kLeft) is fitted as the database's right hand to the
 // mirrored picture, then mirrored back: its keypoints are where the left hand's joints are, its
@@ -25,12 +30,14 @@ namespace handdb {
 
 struct MatchFitOptions {
   PoseFitOptions fit;
-  // Fit the first this many matches (each ~1-5 ms on one core). The best fit among them is the
-  // answer, so a candidate that ranks 3rd but whose pose explains the picture better wins.
-  int max_matches = 10;
-  // The landmarks are evidence when the network's presence score reaches this (the re-ranking's
-  // threshold, pose/landmark_rank.h): below it the joints are unreliable.
-  float min_presence = 0.9f;
+  // Fit the first this many matches (a few ms each on one core); the answer is the first fitted
+  // one, the others are reported beside their matches.
+  int max_matches = 1;
+  // The landmarks are evidence when the network's presence score reaches this. Lower than the
+  // re-ranking's 0.9 (pose/landmark_rank.h): on photo renders the network often scores real
+  // hands 0.5-0.9, and fits to those landmarks still moved the top match's 3D error from 0.53 to
+  // 0.39 (median; docs/decisions/0015).
+  float min_presence = 0.5f;
   bool Check() const;
 };
 
@@ -53,7 +60,7 @@ struct MatchFit {
 
 struct PictureFit {
   std::vector<MatchFit> fits;  // one per fitted match, in the matches' order
-  int best = -1;               // index of the fit with the smallest final cost; -1: none fitted
+  int best = -1;               // the answer: the first fitted match's index; -1: none fitted
 };
 
 // Fits the first options.max_matches of `matches` (a search of `picture` in `database`, whose
