@@ -57,3 +57,41 @@ print(f"top-1 {top1:.1f}% (floor {sys.argv[2]}%), top-5 {top5:.1f}% (floor {sys.
 if top1 < float(sys.argv[2]) or top5 < float(sys.argv[3]):
     sys.exit("FAIL: real-photo accuracy below the floor")
 PY
+
+# The fitted pose on the same photos, as one batch: every photo the network sees gets a pose
+# whose keypoints lie nearer its landmarks than the top match's did, inside the picture; the
+# pose exports as a glTF binary; Python's Match.fit is the CLI's.
+"$HANDDB" query "$work/db" "$SRC/tests/data/photos/asl-digits"/*/* --hand right --top 3 --json -q \
+  > "$work/fit.jsonl" || { echo "FAIL: query with the pose fit" >&2; exit 1; }
+photo="$(ls "$SRC/tests/data/photos/asl-digits/asl-5"/* | head -1)"
+"$HANDDB" query "$work/db" "$photo" --hand right --export "$work/pose.glb" -q > /dev/null \
+  || { echo "FAIL: query --export" >&2; exit 1; }
+PYTHONPATH="${HANDDB_PYTHONPATH:-}" /usr/bin/python3 - "$work/fit.jsonl" "$work/pose.glb" "$work/db" "$photo" <<'PY'
+import json, sys
+lines = [json.loads(l) for l in open(sys.argv[1])]
+fitted = [d for d in lines if "pose" in d]
+print(f"pose fit: {len(fitted)} of {len(lines)} photos fitted")
+if len(fitted) < 0.8 * len(lines):
+    sys.exit("FAIL: fewer than 80% of the photos got a fitted pose")
+for d in fitted:
+    p = d["pose"]
+    err = p["landmark_error_px"]
+    if not (err["fitted"] < err["start"]) or len(p["keypoints"]) != 21:
+        sys.exit(f"FAIL: {d['picture']}: the fit did not move the pose towards the landmarks: {err}")
+    w, h = d["query"]["width"], d["query"]["height"]
+    if not all(-0.25 * w <= x <= 1.25 * w and -0.25 * h <= y <= 1.25 * h
+               for x, y in p["keypoints_image_px"]):
+        sys.exit(f"FAIL: {d['picture']}: fitted keypoints far outside the picture")
+with open(sys.argv[2], "rb") as f:
+    if f.read(4) != b"glTF":
+        sys.exit("FAIL: --export did not write a glTF binary")
+try:
+    import handdb
+except ImportError:
+    print("python module not on PYTHONPATH: Match.fit not checked")
+    sys.exit(0)
+db = handdb.Database(sys.argv[3])
+m = db.search(sys.argv[4], top_k=3, hand="right")[0]
+if m.fit is None or not m.fit["fitted"] or m.to_dict()["fit"] != m.fit:
+    sys.exit("FAIL: Python's Match.fit")
+PY
