@@ -10,35 +10,35 @@
 namespace handdb {
 namespace {
 
-struct PngSink {
+struct PngEncodeSink {
   std::vector<uint8_t>* bytes = nullptr;
   char message[256] = {};
 };
 
-[[noreturn]] void PngError(png_structp png, png_const_charp message) {
-  auto* sink = static_cast<PngSink*>(png_get_error_ptr(png));
+[[noreturn]] void PngEncodeError(png_structp png, png_const_charp message) {
+  auto* sink = static_cast<PngEncodeSink*>(png_get_error_ptr(png));
   std::snprintf(sink->message, sizeof sink->message, "%s", message);
   png_longjmp(png, 1);
 }
 
-void PngWarning(png_structp, png_const_charp) {}
+void PngEncodeWarning(png_structp, png_const_charp) {}
 
-void PngWrite(png_structp png, png_bytep data, size_t size) {
-  auto* sink = static_cast<PngSink*>(png_get_io_ptr(png));
+void PngEncodeWrite(png_structp png, png_bytep data, size_t size) {
+  auto* sink = static_cast<PngEncodeSink*>(png_get_io_ptr(png));
   sink->bytes->insert(sink->bytes->end(), data, data + size);
 }
 
-void PngFlush(png_structp) {}
+void PngEncodeFlush(png_structp) {}
 
 // OpenCV 4.6's PngEncoder::write with no parameters, call for call.
-bool EncodeInto(const PngPixels& image, png_structp png, png_infop info, PngSink* sink) {
+bool EncodeInto(const PngPixels& image, png_structp png, png_infop info, PngEncodeSink* sink) {
   if (setjmp(png_jmpbuf(png)) != 0) return false;
   std::vector<png_bytep> rows(static_cast<size_t>(image.height));
   for (int y = 0; y < image.height; ++y) {
     rows[static_cast<size_t>(y)] =
         const_cast<png_bytep>(image.data + image.row_bytes * static_cast<size_t>(y));
   }
-  png_set_write_fn(png, sink, PngWrite, PngFlush);
+  png_set_write_fn(png, sink, PngEncodeWrite, PngEncodeFlush);
   png_set_filter(png, PNG_FILTER_TYPE_BASE, PNG_FILTER_SUB);
   png_set_compression_level(png, Z_BEST_SPEED);
   png_set_compression_strategy(png, Z_RLE);
@@ -74,9 +74,9 @@ Result<std::vector<uint8_t>> EncodePng(const PngPixels& image) {
     return Status(StatusCode::kInvalidArgument, "EncodePng: rows shorter than the width");
   }
   std::vector<uint8_t> bytes;
-  PngSink sink;
+  PngEncodeSink sink;
   sink.bytes = &bytes;
-  png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, &sink, PngError, PngWarning);
+  png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, &sink, PngEncodeError, PngEncodeWarning);
   if (png == nullptr) return Status(StatusCode::kIoError, "cannot start the PNG encoder");
   png_infop info = png_create_info_struct(png);
   const bool ok = info != nullptr && EncodeInto(image, png, info, &sink);
