@@ -10,6 +10,7 @@
 #include "base/repo_root.h"
 #include "base/testing.h"
 #include "generator/hand/camera.h"
+#include "generator/hand/rig_testing.h"
 #include "generator/plan/plan.h"
 #include "pose/tiny_gltf_config.h"
 
@@ -21,13 +22,7 @@ using Mat4 = Eigen::Matrix4d;
 
 constexpr double kTolerance = 1e-5;
 
-HandRig ShippedRig() {
-  auto model = LoadHandModel(RepoRoot() / "configs/hands/webxr_generic_right.json");
-  THROW_CHECK(model.ok());
-  auto rig = HandRig::Create(*model);
-  THROW_CHECK(rig.ok());
-  return std::move(rig).value();
-}
+using testing::ShippedRig;
 
 fs::path ShippedAsset(const HandRig& rig) { return ResolvePlanPath(rig.model().asset_path); }
 

@@ -4,18 +4,13 @@
 #include <gtest/gtest.h>
 
 #include "base/testing.h"
+#include "generator/hand/rig_testing.h"
 #include "generator/sampling/random.h"
 
 namespace handdb {
 namespace {
 
-HandRig ShippedRig() {
-  auto model = LoadHandModel(RepoRoot() / "configs/hands/webxr_generic_right.json");
-  THROW_CHECK(model.ok());
-  auto rig = HandRig::Create(*model);
-  THROW_CHECK(rig.ok());
-  return std::move(rig).value();
-}
+using testing::ShippedRig;
 
 // Joint vectors that reach both ends of every limit, zero, and random points between and beyond.
 std::vector<JointVector> TestJoints(const HandRig& rig) {

@@ -4,8 +4,8 @@
 
 #include <cmath>
 
-#include "base/repo_root.h"
 #include "generator/hand/camera.h"
+#include "generator/hand/rig_testing.h"
 
 namespace handdb {
 namespace {
@@ -13,13 +13,9 @@ namespace {
 constexpr uint32_t kRolls = 12;
 
 DatabaseRig ShippedRig() {
-  auto model = LoadHandModel(RepoRoot() / "configs/hands/webxr_generic_right.json");
-  THROW_CHECK(model.ok());
-  auto rig = HandRig::Create(*model);
-  THROW_CHECK(rig.ok());
-  DatabaseRig out{std::move(rig).value(), RenderSettings{}, {}, false};
+  DatabaseRig out{testing::ShippedRig(), RenderSettings{}, {}, false};
   out.render.resolution = 256;
-  out.render.ortho_scale = model->ortho_scale > 0 ? model->ortho_scale : 0.25;
+  out.render.ortho_scale = out.rig.model().ortho_scale > 0 ? out.rig.model().ortho_scale : 0.25;
   return out;
 }
 

@@ -6,18 +6,13 @@
 #include <cmath>
 
 #include "base/repo_root.h"
+#include "generator/hand/rig_testing.h"
 #include "pose/fit_kinematics.h"
 
 namespace handdb {
 namespace {
 
-HandRig ShippedRig() {
-  auto model = LoadHandModel(RepoRoot() / "configs/hands/webxr_generic_right.json");
-  THROW_CHECK(model.ok());
-  auto rig = HandRig::Create(*model);
-  THROW_CHECK(rig.ok());
-  return std::move(rig).value();
-}
+using testing::ShippedRig;
 
 // A pose of the test: joints, camera, and the normalised frame's scale and shift.
 struct Pose {

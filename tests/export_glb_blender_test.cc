@@ -15,6 +15,7 @@
 #include "base/subprocess.h"
 #include "base/testing.h"
 #include "generator/hand/camera.h"
+#include "generator/hand/rig_testing.h"
 #include "generator/render/blender.h"
 #include "pose/export_gltf.h"
 
@@ -28,13 +29,7 @@ using json = nlohmann::json;
 // the wrong way about any axis shows long before this.
 constexpr double kTolerance = 1e-5;
 
-HandRig ShippedRig() {
-  auto model = LoadHandModel(RepoRoot() / "configs/hands/webxr_generic_right.json");
-  THROW_CHECK(model.ok());
-  auto rig = HandRig::Create(*model);
-  THROW_CHECK(rig.ok());
-  return std::move(rig).value();
-}
+using testing::ShippedRig;
 
 // What Blender's importer made of `glb` (the script's JSON line).
 json ImportWithBlender(const fs::path& blender, const fs::path& glb) {

@@ -6,19 +6,14 @@
 
 #include "base/testing.h"
 #include "format/roll.h"
+#include "generator/hand/rig_testing.h"
 
 namespace handdb {
 namespace {
 
 using nlohmann::json;
 
-HandRig ShippedRig() {
-  auto model = LoadHandModel(RepoRoot() / "configs/hands/webxr_generic_right.json");
-  THROW_CHECK(model.ok());
-  auto rig = HandRig::Create(*model);
-  THROW_CHECK(rig.ok());
-  return std::move(rig).value();
-}
+using testing::ShippedRig;
 
 const JointVector kFist = {0.785398, 0.087266, 0.785398, 0.523599, 1.48353,  0.0,     1.745329,
                            1.047198, 1.48353,  0.0,      1.745329, 1.047198, 1.48353, 0.0,
