@@ -38,8 +38,10 @@ struct EvaluateFlags {
   // uses by default; a test set's photos take the photo path's defaults.
   std::shared_ptr<const HandLandmarker> landmarker;
   void Add(CLI::App& app);
-  // Completes `options` after parsing; false (message printed) on bad usage.
+  // Completes `options` after parsing; false (message printed) on bad usage, or when the landmark
+  // model cannot be loaded (then failure_exit_code is 1, not the usage error's 2).
   bool Finish(const std::string& cmd, bool quiet);
+  int failure_exit_code = 2;
   QueryInput query_input() const {
     return input == "clean" ? QueryInput::kClean : QueryInput::kPhoto;
   }
@@ -49,7 +51,7 @@ struct EvaluateFlags {
   SearcherOptions searcher_options() const;
   // --fit: loads DB_DIR's rig into options.fit_rig for photo queries (auto: when it has one).
   // False (message printed) when --fit on finds none.
-  bool LoadFit(const std::filesystem::path& db_dir, const std::string& cmd, bool quiet);
+  bool LoadFit(const std::filesystem::path& db_dir, const std::string& cmd);
 };
 
 // Test view -> query edge points: the clean label render through the database's own conversion

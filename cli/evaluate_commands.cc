@@ -235,14 +235,17 @@ bool EvaluateFlags::Finish(const std::string& cmd, bool quiet) {
     return false;
   }
   if (query_input() == QueryInput::kPhoto) {
-    if (!ResolveLandmarker("auto", cmd, &landmarker)) return false;
+    if (!ResolveLandmarker("auto", cmd, &landmarker)) {
+      failure_exit_code = kExitError;
+      return false;
+    }
     options.landmark_model = landmarker ? landmarker->path().string() : "";
     options.landmark_rank.enabled = landmarker != nullptr;
   }
   return true;
 }
 
-bool EvaluateFlags::LoadFit(const fs::path& db_dir, const std::string& cmd, bool quiet) {
+bool EvaluateFlags::LoadFit(const fs::path& db_dir, const std::string& cmd) {
   if (fit == "off" || query_input() != QueryInput::kPhoto) return true;
   auto rig = LoadDatabaseRig(db_dir);
   if (rig.ok()) {
@@ -253,11 +256,7 @@ bool EvaluateFlags::LoadFit(const fs::path& db_dir, const std::string& cmd, bool
     std::fprintf(stderr, "handdb %s: %s\n", cmd.c_str(), rig.status().message().c_str());
     return false;
   }
-  if (!quiet) {
-    std::fprintf(
-        stderr, "handdb %s: no pose fit: %s\n", cmd.c_str(), rig.status().message().c_str());
-  }
-  return true;
+  return true;  // auto: no fitted row without the rig
 }
 
 std::vector<std::string> EvaluateFlags::Args() const {
@@ -441,7 +440,7 @@ int RunEvaluate(int argc, char** argv) {
     return kExitUsage;
   }
   if (!CheckTestSetEvaluateUsage(app)) return kExitUsage;
-  if (!flags.Finish("evaluate", quiet)) return kExitUsage;
+  if (!flags.Finish("evaluate", quiet)) return flags.failure_exit_code;
   if (!slurm.enabled && (request.tasks != 0 || !request.work.empty())) {
     std::fprintf(stderr, "handdb evaluate: --tasks and --work need --slurm\n");
     return kExitUsage;
@@ -453,7 +452,7 @@ int RunEvaluate(int argc, char** argv) {
   auto searcher = Searcher::Open(db_dir, flags.searcher_options());
   if (!searcher.ok()) return Fail("evaluate", searcher.status());
   WarnIfTestSetMatchesDatabase(db_dir, *testset);
-  if (!flags.LoadFit(db_dir, "evaluate", quiet)) return kExitError;
+  if (!flags.LoadFit(db_dir, "evaluate")) return kExitError;
 
   const QueryInput query_input = flags.query_input();
   auto points_fn =

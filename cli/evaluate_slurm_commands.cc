@@ -342,7 +342,7 @@ int UnitEvaluateCommands::Run() {
   const bool merge = merge_cmd_->parsed();
   const std::string cmd_name = merge ? "unit evaluate-merge" : "unit evaluate";
   const char* cmd = cmd_name.c_str();
-  if (!flags_.Finish(cmd_name, quiet_)) return kExitUsage;
+  if (!flags_.Finish(cmd_name, quiet_)) return flags_.failure_exit_code;
   EvaluationOptions& options = flags_.options;
   if (!merge && options.num_threads == -1) options.num_threads = TaskThreads();
   if (!merge && task_ >= tasks_) {
@@ -354,7 +354,7 @@ int UnitEvaluateCommands::Run() {
   if (!testset.ok()) return Fail(cmd, testset.status());
   auto searcher = Searcher::Open(db_, flags_.searcher_options());
   if (!searcher.ok()) return Fail(cmd, searcher.status());
-  if (!merge && !flags_.LoadFit(db_, cmd_name, quiet_)) return kExitError;
+  if (!merge && !flags_.LoadFit(db_, cmd_name)) return kExitError;
   auto fp = ComputeEvaluationFingerprint(db_, *testset, input, options, tasks_);
   if (!fp.ok()) return Fail(cmd, fp.status());
   const std::vector<uint32_t> selected = SelectTestViews(*testset, options);

@@ -697,9 +697,9 @@ int RunQuery(int argc, char** argv) {
       if (flags.fit != "off") flags.picture.options.rig = flags.rig;
     } else if (flags.fit == "on" || !flags.export_glb.empty()) {
       return Fail("query", rig.status());
-    } else if (!flags.quiet) {
-      std::fprintf(stderr, "handdb query: no pose fit: %s\n", rig.status().message().c_str());
     }
+    // --fit auto on a database without its rig: the stored views alone, as --json's
+    // options.fit "unavailable" says.
   }
   // A label EXR is converted with the edge options the database was made with.
   const Status recorded = flags.picture.UseDatabaseConversion(db, db_dir);

@@ -851,6 +851,14 @@ TEST_F(HardeningCli, BadLandmarkModelsAreExitOneNamingTheFile) {
   EXPECT_EQ(r.err.rfind("handdb evaluate: --landmarks: " + (models / "random.tflite").string(), 0),
             0u)
       << r.err;
+  // So does a test set's photo evaluation, whose model is the installed one
+  // ($HANDDB_LANDMARK_MODEL).
+  ASSERT_EQ(setenv("HANDDB_LANDMARK_MODEL", (models / "random.tflite").c_str(), 1), 0);
+  const CliRun t = Handdb("evaluate " + Db() + " " + no_photos.string() + " --input photo -q");
+  unsetenv("HANDDB_LANDMARK_MODEL");
+  EXPECT_EQ(t.code, 1) << t.err;
+  EXPECT_EQ(Lines(t.err), 1) << t.err;
+  EXPECT_NE(t.err.find((models / "random.tflite").string()), std::string::npos) << t.err;
 }
 
 // A flag CLI11 rejects is bad usage in one line naming the command and the flag (exit 2), like
