@@ -177,6 +177,13 @@ void EvaluateFlags::Add(CLI::App& app) {
       ->capture_default_str();
   app.add_option("--threads", options.num_threads, "search threads (-1: all cores)")
       ->capture_default_str();
+  app.add_option("--fit",
+                 fit,
+                 "--input photo: fit the top match's pose to the photo's landmarks as handdb "
+                 "query --fit does and report the fitted answer's 3D keypoint error (auto: when "
+                 "the database carries its rig)")
+      ->check(CLI::IsMember({"auto", "on", "off"}))
+      ->capture_default_str();
   app.add_option("--search",
                  search,
                  "exact: every (view, roll) pair; indexed: candidates from the database's index, "
