@@ -33,10 +33,10 @@ if [ "${HANDDB_TEST_QUICK:-0}" != 1 ]; then
   # stack traces keep files and lines. The integration tests (whole searches and evaluations over
   # databases, already run above) are neither built nor run: under the sanitizers they cost
   # minutes and reach the same code the unit tests reach. The hardening test (hostile inputs
-  # through the CLI) stays in.
+  # through the CLI) stays in. The Python module is not built: pytest runs on the build above.
   step "build with ASan+UBSan"
   scripts/build.sh "$here/build-asan" -DHANDDB_WERROR=ON -DHANDDB_SANITIZE=ON -DHANDDB_BUILD_BENCH=OFF \
-    -DHANDDB_INTEGRATION_TESTS=OFF -DCMAKE_BUILD_TYPE=Debug "-DCMAKE_CXX_FLAGS_DEBUG=-O0 -g1"
+    -DHANDDB_INTEGRATION_TESTS=OFF -DHANDDB_PYTHON=OFF -DCMAKE_BUILD_TYPE=Debug "-DCMAKE_CXX_FLAGS_DEBUG=-O0 -g1"
   step "C++ tests under ASan+UBSan (all but integration)"
   (cd build-asan && ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
     ctest --output-on-failure -j "$jobs" --timeout 1800 -LE "no_sanitizer|integration")
