@@ -32,7 +32,7 @@ step "query the database with a held-out photo-like test image"
 # The first held-out photo of a basic shape (the demo database holds 6 of them, on its grid of
 # 42 directions x 12 rolls; the test view's direction and roll are off that grid).
 query_image="$out/testset/$(/usr/bin/python3 -c 'import json,sys; t=json.load(open(sys.argv[1])); print(next(i["photo"] for i in t["items"] if i["basic"]))' "$out/testset/testset.json")"
-"$handdb" query "$out/db" "$query_image" --top 5 --sheet "$out/query_sheet.png"
+"$handdb" query "$out/db" "$query_image" --top 5 --sheet "$out/query_sheet.png" --export "$out/pose.glb"
 "$handdb" query "$out/db" "$query_image" --top 5 --json > "$out/query_result.json"
 
 step "evaluate on the held-out test set"
@@ -43,3 +43,4 @@ echo "database:      $out/db"
 echo "query image:   $query_image"
 echo "contact sheet: $out/query_sheet.png"
 echo "result JSON:   $out/query_result.json"
+echo "fitted pose:   $out/pose.glb (glTF: open in Blender or a web viewer)"
