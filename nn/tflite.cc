@@ -6,6 +6,7 @@
 #include <cstring>
 #include <fstream>
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#include <cpuid.h>
 #include <immintrin.h>
 #endif
 #include <limits>
@@ -230,10 +231,23 @@ __attribute__((target("f16c"))) void HalvesToFloatsF16c(const uint8_t* src, int6
 }
 #endif
 
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+// F16C and the AVX stores it is used with, and an OS that saves the ymm registers (CPUID leaf 1,
+// XGETBV): what __builtin_cpu_supports("f16c") asks, which not every compiler's builtin knows.
+bool CpuHasF16c() {
+  unsigned eax = 0, ebx = 0, ecx = 0, edx = 0;
+  if (__get_cpuid(1, &eax, &ebx, &ecx, &edx) == 0) return false;
+  if ((ecx & bit_F16C) == 0 || (ecx & bit_AVX) == 0 || (ecx & bit_OSXSAVE) == 0) return false;
+  unsigned lo = 0, hi = 0;
+  __asm__ volatile("xgetbv" : "=a"(lo), "=d"(hi) : "c"(0));
+  return (lo & 6u) == 6u;
+}
+#endif
+
 // n little-endian float16 values at `src` as float32.
 void HalvesToFloats(const uint8_t* src, int64_t n, float* dst) {
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
-  static const bool f16c = __builtin_cpu_supports("f16c") != 0;
+  static const bool f16c = CpuHasF16c();
   if (f16c) {
     HalvesToFloatsF16c(src, n, dst);
     return;
