@@ -76,7 +76,8 @@ Result<std::vector<uint8_t>> EncodePng(const PngPixels& image) {
   std::vector<uint8_t> bytes;
   PngEncodeSink sink;
   sink.bytes = &bytes;
-  png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, &sink, PngEncodeError, PngEncodeWarning);
+  png_structp png =
+      png_create_write_struct(PNG_LIBPNG_VER_STRING, &sink, PngEncodeError, PngEncodeWarning);
   if (png == nullptr) return Status(StatusCode::kIoError, "cannot start the PNG encoder");
   png_infop info = png_create_info_struct(png);
   const bool ok = info != nullptr && EncodeInto(image, png, info, &sink);
