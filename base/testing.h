@@ -2,12 +2,16 @@
 // whole-file byte reads and writes.
 #pragma once
 
+#include <gtest/gtest.h>
 #include <unistd.h>
 
 #include <cstdint>
+#include <cstdlib>
 #include <filesystem>
+#include <mutex>
 #include <string>
 #include <string_view>
+#include <system_error>
 #include <vector>
 
 #include "base/atomic_file.h"
@@ -15,12 +19,41 @@
 
 namespace handdb::testing {
 
-// An empty directory <tmp>/handdb_test_<name>_<pid>, removed first if an earlier run left it.
+// The directories TempDir made, removed when the test process that made them exits with every
+// test passed. A failure's files stay for a look, and so do all of them with
+// HANDDB_KEEP_TEST_DIRS set. A death test's child (another pid) removes nothing.
+class TempDirs {
+ public:
+  static TempDirs& Get() {
+    static TempDirs dirs;
+    return dirs;
+  }
+  void Add(const std::filesystem::path& dir) {
+    std::lock_guard<std::mutex> lock(mu_);
+    dirs_.push_back(dir);
+  }
+  ~TempDirs() {
+    if (::getpid() != pid_ || std::getenv("HANDDB_KEEP_TEST_DIRS") != nullptr) return;
+    if (::testing::UnitTest::GetInstance()->Failed()) return;
+    std::error_code ignored;
+    for (const auto& dir : dirs_) std::filesystem::remove_all(dir, ignored);
+  }
+
+ private:
+  TempDirs() : pid_(::getpid()) {}
+  const pid_t pid_;
+  std::mutex mu_;
+  std::vector<std::filesystem::path> dirs_;
+};
+
+// An empty directory <tmp>/handdb_test_<name>_<pid>, removed first if an earlier run left it, and
+// at the end of a passing run (TempDirs).
 inline std::filesystem::path TempDir(const std::string& name) {
   const auto dir = std::filesystem::temp_directory_path() /
                    ("handdb_test_" + name + "_" + std::to_string(::getpid()));
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
+  TempDirs::Get().Add(dir);
   return dir;
 }
 
