@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "base/repo_root.h"
+#include "bench/median.h"
 #include "generator/sampling/random.h"
 #include "pose/fit.h"
 
@@ -20,10 +21,7 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-double Median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0 : v[v.size() / 2];
-}
+using bench::Median;
 
 NormalisedKeypoints2d Project(const HandRig& rig,
                               const JointVector& joints,

@@ -20,6 +20,7 @@
 
 #include "base/repo_root.h"
 #include "bench/bench_args.h"
+#include "bench/median.h"
 #include "nn/tflite.h"
 
 namespace handdb {
@@ -27,10 +28,7 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-double Median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0 : v[v.size() / 2];
-}
+using bench::Median;
 
 // Wall and thread CPU milliseconds since construction.
 struct Stopwatch {

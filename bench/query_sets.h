@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "base/repo_root.h"
+#include "bench/median.h"
 #include "edges/view_conversion.h"
 #include "evaluate/evaluate.h"
 #include "evaluate/photos.h"
@@ -31,13 +32,6 @@ inline std::string DefaultPhotoDir() {
 
 inline double NowSeconds() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-
-inline double Median(std::vector<double> v) {
-  if (v.empty()) return std::nan("");
-  std::sort(v.begin(), v.end());
-  const size_t n = v.size();
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
 }
 
 // Nearest-rank percentile, p in (0, 1].

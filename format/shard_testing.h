@@ -12,6 +12,8 @@
 #include <utility>
 #include <vector>
 
+#include "base/status.h"
+#include "format/shard_layout.h"
 #include "format/shard_writer.h"
 #include "format/view.h"
 
@@ -121,6 +123,21 @@ inline Result<ShardSummary> WriteSyntheticShard(const std::filesystem::path& pat
     HANDDB_RETURN_IF_ERROR(writer.AddView(SyntheticLabel(i), SyntheticPoints(i, n)));
   }
   return writer.Finish();
+}
+
+// Damages view 0's point code in a coded shard's bytes: 20 bytes of its chains, past the mode,
+// lengths, count and box its open reads, set to 0xff; then the checksums are rewritten, so only
+// decoding the view finds the damage.
+inline void DamageFirstPointCode(std::vector<uint8_t>* bytes) {
+  const shard::RawHeader h = shard::RawHeader::DecodeFrom(*bytes);
+  for (uint32_t i = 0; i < h.section_count; ++i) {
+    const shard::RawSection sec = shard::RawSection::DecodeFrom(
+        bytes->data() + h.section_table_offset + i * h.section_entry_size);
+    if (sec.type == shard::kSectionPointCodes) {
+      for (size_t k = 20; k < 40; ++k) (*bytes)[sec.offset + k] = 0xff;
+    }
+  }
+  THROW_CHECK(shard::RewriteChecksums(*bytes));
 }
 
 }  // namespace handdb::testing

@@ -601,16 +601,7 @@ TEST(Database, ACodedViewDamagedPastItsHeaderIsAnErrorOfTheSearch) {
   const std::vector<Point2f> query = RolledView(*good, 2, 1);
 
   std::vector<uint8_t> bytes = ::handdb::testing::ReadBytes(dir / "shard-00000.hdb");
-  const shard::RawHeader h = shard::RawHeader::DecodeFrom(bytes);
-  for (uint32_t i = 0; i < h.section_count; ++i) {
-    const shard::RawSection sec = shard::RawSection::DecodeFrom(
-        bytes.data() + h.section_table_offset + i * h.section_entry_size);
-    // View 0's code: mode, lengths, count and box in the first ~12 bytes, then the chains.
-    if (sec.type == shard::kSectionPointCodes) {
-      for (size_t k = 20; k < 40; ++k) bytes[sec.offset + k] = 0xff;
-    }
-  }
-  ASSERT_TRUE(shard::RewriteChecksums(bytes));
+  ::handdb::testing::DamageFirstPointCode(&bytes);
   {
     std::ofstream out(dir / "shard-00000.hdb", std::ios::binary | std::ios::trunc);
     out.write(reinterpret_cast<const char*>(bytes.data()),

@@ -36,6 +36,7 @@
 #include "format/manifest.h"
 #include "format/shard_layout.h"
 #include "format/shard_reader.h"
+#include "format/shard_testing.h"
 #include "format/shard_writer.h"
 #include "query/search_testing.h"
 
@@ -903,16 +904,7 @@ TEST_F(HardeningCli, ShowOfADamagedCodedViewNamesTheShardAndView) {
   std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)),
                              std::istreambuf_iterator<char>());
   in.close();
-  const shard::RawHeader h = shard::RawHeader::DecodeFrom(bytes);
-  for (uint32_t i = 0; i < h.section_count; ++i) {
-    const shard::RawSection sec = shard::RawSection::DecodeFrom(
-        bytes.data() + h.section_table_offset + i * h.section_entry_size);
-    // View 0's chains, past the header its open reads.
-    if (sec.type == shard::kSectionPointCodes) {
-      for (size_t k = 20; k < 40; ++k) bytes[sec.offset + k] = 0xff;
-    }
-  }
-  ASSERT_TRUE(shard::RewriteChecksums(bytes));
+  testing::DamageFirstPointCode(&bytes);
   std::ofstream(shard_path, std::ios::binary | std::ios::trunc)
       .write(reinterpret_cast<const char*>(bytes.data()),
              static_cast<std::streamsize>(bytes.size()));
