@@ -494,15 +494,8 @@ Status ExportPose(const QueryFlags& flags, const PictureMatches& found, const Da
     options.left_hand = found.matches[found.fit.best].hand == Hand::kLeft;
     // The fit's rotation is in the left hand's frame for a left hand (S_x R S_y); the export
     // wants the right hand's camera, which the same flips give back.
-    Mat3d c = f.fit.cam_from_hand;
-    if (options.left_hand) {
-      for (int r = 0; r < 3; ++r) {
-        for (int k = 0; k < 3; ++k) {
-          if ((r == 0) != (k == 1)) c[r][k] = -c[r][k];
-        }
-      }
-    }
-    options.cam_from_hand = c;
+    options.cam_from_hand =
+        options.left_hand ? MirrorCamFromHand(f.fit.cam_from_hand) : f.fit.cam_from_hand;
   } else {
     // The top match's stored view: its label (right hand, roll 0) turned by the virtual roll.
     const Match& m = found.matches.front();

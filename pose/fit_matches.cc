@@ -45,11 +45,7 @@ std::array<double, kNumKeypoints> Depths(const HandRig& rig, const PoseFit& fit)
 // x and the hand frame's y change sign (cam_from_hand -> S_x R S_y, a rotation again), and with
 // them the keypoints' x, the view direction's y and the roll, as MirrorLabel does for labels.
 void MirrorFit(PoseFit* fit) {
-  for (int r = 0; r < 3; ++r) {
-    for (int c = 0; c < 3; ++c) {
-      if ((r == 0) != (c == 1)) fit->cam_from_hand[r][c] = -fit->cam_from_hand[r][c];
-    }
-  }
+  fit->cam_from_hand = MirrorCamFromHand(fit->cam_from_hand);
   fit->view_direction[1] = -fit->view_direction[1];
   fit->roll = -fit->roll;
   fit->shift[0] = -fit->shift[0];
@@ -64,6 +60,16 @@ std::string PresenceReason(float presence, float min_presence) {
 }
 
 }  // namespace
+
+Mat3d MirrorCamFromHand(const Mat3d& cam_from_hand) {
+  Mat3d out = cam_from_hand;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) {
+      if ((r == 0) != (c == 1)) out[r][c] = -out[r][c];
+    }
+  }
+  return out;
+}
 
 bool MatchFitOptions::Check() const {
   if (!fit.Check()) return false;

@@ -69,6 +69,11 @@ struct PictureFit {
   int best = -1;               // the answer: the first fitted match's index; -1: none fitted
 };
 
+// A camera rotation between the right hand's frame and the left hand's (the right hand's with y
+// negated) in the mirrored picture (the camera's x negated): S_x R S_y, its own inverse. A
+// left-hand MatchFit's cam_from_hand is the right-hand fit's through it, and back again.
+Mat3d MirrorCamFromHand(const Mat3d& cam_from_hand);
+
 // Fits the first options.max_matches of `matches` (a search of `picture` in `database`, whose
 // rig is `rig`). Errors: kInvalidArgument for options; a match that cannot be fitted (no
 // landmarks, a label the rig cannot pose, a solver failure) is reported in its MatchFit, never

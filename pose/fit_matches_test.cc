@@ -142,6 +142,9 @@ TEST_F(FitMatchesTest, ALeftHandIsFittedInTheMirroredPictureAndMirroredBack) {
                      r[0][1] * (r[1][0] * r[2][2] - r[1][2] * r[2][0]) +
                      r[0][2] * (r[1][0] * r[2][1] - r[1][1] * r[2][0]);
   EXPECT_NEAR(det, 1.0, 1e-9);
+  // Mirroring it back gives the right hand's camera; twice, the rotation itself.
+  EXPECT_EQ(MirrorCamFromHand(MirrorCamFromHand(r)), r);
+  EXPECT_NE(MirrorCamFromHand(r), r);
 }
 
 TEST_F(FitMatchesTest, WithoutUsableLandmarksTheMatchStandsWithAReason) {
