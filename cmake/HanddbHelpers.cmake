@@ -21,7 +21,9 @@ endfunction()
 
 function(handdb_add_test)
   cmake_parse_arguments(ARG "" "NAME;TIMEOUT" "SRCS;DEPS;LABELS" ${ARGN})
-  if(NOT HANDDB_BUILD_TESTS OR (NOT HANDDB_INTEGRATION_TESTS AND "integration" IN_LIST ARG_LABELS))
+  # A test the sanitizer run leaves out (no_sanitizer) is not built there either.
+  if(NOT HANDDB_BUILD_TESTS OR (NOT HANDDB_INTEGRATION_TESTS AND "integration" IN_LIST ARG_LABELS)
+     OR (HANDDB_SANITIZE AND "no_sanitizer" IN_LIST ARG_LABELS))
     return()
   endif()
   string(REPLACE "/" "_" target ${ARG_NAME})
