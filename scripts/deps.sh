@@ -9,7 +9,7 @@ here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 
 PACKAGES=(
   build-essential cmake ninja-build pkg-config git ca-certificates
-  blender python3-numpy python3-pytest python3-opencv python3-jsonschema
+  blender python3-numpy python3-pytest python3-pytest-xdist python3-opencv python3-jsonschema
   openimageio-tools libopenexr-dev libopencv-dev libeigen3-dev
   libpcl-dev libnanoflann-dev libcli11-dev nlohmann-json3-dev libzstd-dev libxxhash-dev
   libssl-dev libboost-dev libfaiss-dev libpng-dev libjpeg62-turbo-dev libceres-dev

@@ -23,9 +23,10 @@ step "C++ tests"
 
 step "Python tests (Debian python3)"
 # tests/python/ includes the handdb module's tests, against the module and the binary
-# of this build; a missing module fails them instead of skipping.
+# of this build; a missing module fails them instead of skipping. On every core (pytest-xdist):
+# the Blender tests wait on Blender's start-up half of the time.
 PYTHONPATH="$here/build/python" HANDDB_BINARY_DIR="$here/build" HANDDB_REQUIRE_PYTHON_MODULE=1 \
-  /usr/bin/python3 -m pytest -q blender_scripts tests/python
+  /usr/bin/python3 -m pytest -q -n "$jobs" blender_scripts tests/python
 
 if [ "${HANDDB_TEST_QUICK:-0}" != 1 ]; then
   # -O0 -g1 (the search and edge libraries at -O1, see CMakeLists.txt): ASan+UBSan at -O1 doubles
