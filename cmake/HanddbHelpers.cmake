@@ -2,6 +2,7 @@
 #
 #   handdb_add_library(NAME handdb_format SRCS a.cc b.cc DEPS PUBLIC x PRIVATE y)
 #   handdb_add_test(NAME format/shard_reader_test SRCS format/shard_reader_test.cc DEPS handdb_format)
+#   (optional: LABELS a;b, TIMEOUT seconds, COST seconds of its longest run, under the sanitizers)
 #
 # Test names are "<module>/<file stem>" so `ctest -R format/` selects a module.
 include_guard(GLOBAL)
@@ -20,7 +21,7 @@ function(handdb_add_library)
 endfunction()
 
 function(handdb_add_test)
-  cmake_parse_arguments(ARG "" "NAME;TIMEOUT" "SRCS;DEPS;LABELS" ${ARGN})
+  cmake_parse_arguments(ARG "" "NAME;TIMEOUT;COST" "SRCS;DEPS;LABELS" ${ARGN})
   # A test the sanitizer run leaves out (no_sanitizer) is not built there either.
   if(NOT HANDDB_BUILD_TESTS OR (NOT HANDDB_INTEGRATION_TESTS AND "integration" IN_LIST ARG_LABELS)
      OR (HANDDB_SANITIZE AND "no_sanitizer" IN_LIST ARG_LABELS))
@@ -43,5 +44,9 @@ function(handdb_add_test)
   endif()
   if(ARG_LABELS)
     set_tests_properties(${ARG_NAME} PROPERTIES LABELS "${ARG_LABELS}")
+  endif()
+  # Seconds, the longest run (tests/CMakeLists.txt: `ctest -j` starts the long ones first).
+  if(ARG_COST)
+    set_tests_properties(${ARG_NAME} PROPERTIES COST ${ARG_COST})
   endif()
 endfunction()
