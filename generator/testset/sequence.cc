@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "base/json_number.h"
+#include "generator/hand/camera.h"
 #include "generator/sampling/random.h"
 
 namespace handdb {
@@ -25,12 +26,31 @@ Vec3 Normalised(const Vec3& v) {
   return {v[0] / n, v[1] / n, v[2] / n};
 }
 
-// Rodrigues' rotation of v about the unit `axis` perpendicular to it by `angle`.
+double Dot(const Vec3& a, const Vec3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+
+// Rodrigues' rotation of v about the unit `axis` by `angle`.
 Vec3 TurnAbout(const Vec3& v, const Vec3& axis, double angle) {
   const Vec3 w = Cross(axis, v);
   const double c = std::cos(angle);
   const double s = std::sin(angle);
-  return Normalised({v[0] * c + w[0] * s, v[1] * c + w[1] * s, v[2] * c + w[2] * s});
+  const double k = Dot(axis, v) * (1 - c);
+  return Normalised({v[0] * c + w[0] * s + axis[0] * k,
+                     v[1] * c + w[1] * s + axis[1] * k,
+                     v[2] * c + w[2] * s + axis[2] * k});
+}
+
+// The roll whose camera (CamFromHandRotation) looking along `direction` has its image x axis
+// nearest `x_axis` (a unit vector perpendicular to the direction).
+double RollForCameraX(const Vec3& direction,
+                      const Vec3& x_axis,
+                      const Vec3& forward_axis,
+                      const Vec3& palm_normal) {
+  auto at0 = CamFromHandRotation(direction, forward_axis, palm_normal, 0.0);
+  auto at90 = CamFromHandRotation(direction, forward_axis, palm_normal, M_PI / 2);
+  THROW_CHECK_MSG(at0.ok() && at90.ok(), "sequence camera: " + at0.status().ToString());
+  // Whichever way the roll turns the axes, x(a) = cos a x(0) + sense sin a y(0).
+  const double sense = Dot((*at90)[0], (*at0)[1]) >= 0 ? 1.0 : -1.0;
+  return std::atan2(sense * Dot(x_axis, (*at0)[1]), Dot(x_axis, (*at0)[0]));
 }
 
 // The shift out of the picture at frame f, as a share of the full distance.
@@ -146,7 +166,9 @@ std::vector<SequenceFrame> PlanSequenceFrames(const SequenceOptions& options,
                                               const NaturalPoseOptions& natural,
                                               const JointLimits& limits,
                                               uint64_t seed,
-                                              int resolution) {
+                                              int resolution,
+                                              const std::array<double, 3>& forward_axis,
+                                              const std::array<double, 3>& palm_normal) {
   THROW_CHECK(options.Check());
   THROW_CHECK(natural.Check());
   std::vector<SequenceFrame> frames;
@@ -170,6 +192,9 @@ std::vector<SequenceFrame> PlanSequenceFrames(const SequenceOptions& options,
     const double roll0 = 2.0 * M_PI * rng.Uniform();
     const double roll_sense = rng.Uniform() < 0.5 ? -1.0 : 1.0;
     const double leave_angle = 2.0 * M_PI * rng.Uniform();
+    auto camera0 = CamFromHandRotation(d0, forward_axis, palm_normal, roll0);
+    THROW_CHECK_MSG(camera0.ok(), "sequence camera: " + camera0.status().ToString());
+    const Vec3 x0 = (*camera0)[0];
 
     NaturalPoseOptions keypose_options = natural;
     keypose_options.seed = sequence_seed;
@@ -203,8 +228,15 @@ std::vector<SequenceFrame> PlanSequenceFrames(const SequenceOptions& options,
         frame.joints[j] = a.joints[j] + w * (b.joints[j] - a.joints[j]);
       }
       frame.clamped = a.clamped || b.clamped;
-      frame.direction = TurnAbout(d0, axis, options.turn_deg_per_frame * deg * f);
-      frame.roll = std::fmod(roll0 + roll_sense * options.roll_deg_per_frame * deg * f, 2.0 * M_PI);
+      // The camera turns rigidly with the direction (its x axis carried along by the same
+      // rotation), then rolls: a roll number kept fixed would spin the picture where the up rule
+      // changes fast, near the forward axis (docs/conventions.md).
+      const double turn = options.turn_deg_per_frame * deg * f;
+      frame.direction = TurnAbout(d0, axis, turn);
+      const double carried =
+          RollForCameraX(frame.direction, TurnAbout(x0, axis, turn), forward_axis, palm_normal);
+      frame.roll =
+          std::fmod(carried + roll_sense * options.roll_deg_per_frame * deg * f, 2.0 * M_PI);
       if (frame.roll < 0) frame.roll += 2.0 * M_PI;
       if (frame.roll >= 2.0 * M_PI) frame.roll = 0;
       if (leaves) {

@@ -11,7 +11,9 @@
 // the same derived seed, one every `keyposes_every` frames; the joint angles between two keyposes
 // follow the smoothstep 3u^2 - 2u^3 of the frame's place between them, so they stay within the
 // limits and the hand slows into each keypose instead of jumping. The view direction turns about
-// the fixed axis by `turn_deg_per_frame`, the roll by `roll_deg_per_frame`.
+// the fixed axis by `turn_deg_per_frame`, and the camera turns with it as a rigid body (its image
+// axes carried by the same rotation), then rolls by `roll_deg_per_frame`: the camera moves
+// smoothly even where the roll number of docs/conventions.md jumps (near the forward axis).
 //
 // A leave stretch moves the hand out of the picture and back: an image-plane shift of the photo
 // (the label render, the ground truth's pose, stays centred) that grows with the smoothstep over
@@ -79,11 +81,13 @@ struct SequenceFrame {
 };
 
 // The frames of every sequence, sequence by sequence, in frame order. `resolution` converts the
-// leave distance to px.
+// leave distance to px; the hand model's axes give the roll of each frame's camera.
 std::vector<SequenceFrame> PlanSequenceFrames(const SequenceOptions& options,
                                               const NaturalPoseOptions& natural,
                                               const JointLimits& limits,
                                               uint64_t seed,
-                                              int resolution);
+                                              int resolution,
+                                              const std::array<double, 3>& forward_axis,
+                                              const std::array<double, 3>& palm_normal);
 
 }  // namespace handdb

@@ -262,8 +262,13 @@ Result<nlohmann::json> MakeTestSetPlan(const nlohmann::json& config,
   }
   std::vector<SequenceFrame> sequence_frames;
   if (sequence_options) {
-    sequence_frames =
-        PlanSequenceFrames(*sequence_options, natural_options, limits, seed, resolution);
+    sequence_frames = PlanSequenceFrames(*sequence_options,
+                                         natural_options,
+                                         limits,
+                                         seed,
+                                         resolution,
+                                         Vec3FromJson(hand_doc->at("forward_axis")),
+                                         Vec3FromJson(hand_doc->at("palm_normal")));
   }
   nlohmann::json items = nlohmann::json::array();
   for (uint32_t i = 0; i < count && sequence_options; ++i) {

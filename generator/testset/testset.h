@@ -6,7 +6,10 @@
 // directions uniform on the sphere, camera rolls uniform in [0, 2 pi) — from a seed that should
 // differ from any database's; renders each one as a label EXR + sidecar (the database's render
 // layout, so the converter's code gives its clean edges and normalised keypoints) and as a
-// photo-like RGB image (blender_scripts/render_testset.py); then writes the ground truth.
+// photo-like RGB image (blender_scripts/render_testset.py); then writes the ground truth. With a
+// "sequence" object the items are the frames of short videos instead (generator/testset/
+// sequence.h): their plan items say where they sit in their sequence, their background and the
+// hand's shift in the photo.
 //
 // DIR/testset_plan.json            the plan (schemas/testset_plan.schema.json); a pure function of
 //                                  the config and the files it names
