@@ -77,7 +77,10 @@ int RunTestset(int argc, char** argv) {
       "sampled in the PCA shape space plus a share of basic shapes, view directions uniform on "
       "the sphere, random camera rolls. Each view is rendered as a label EXR + sidecar (clean "
       "input) and a photo-like PNG (skin material, lights, plain or --clutter background); "
-      "DIR/testset.json holds the ground truth and is written last. Resumable.",
+      "DIR/testset.json holds the ground truth and is written last. Resumable. A config with "
+      "\"sequence\" makes test sequences instead: frames of short videos between natural "
+      "poses, the view turning, some leaving the picture, with DIR/sequences/sNNN/ folders of "
+      "their frames (docs/evaluation.md, Sequences).",
       "handdb testset");
   std::string config_path;
   std::string out;
