@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <limits>
 #include <map>
 
 #include "base/json_schema.h"
@@ -184,17 +185,36 @@ Result<SequenceTestSet> ReadSequenceTestSet(const fs::path& dir_or_file) {
       return SequenceFieldError(file, "items[" + std::to_string(i) + "] is not a sequence frame");
     }
     const nlohmann::json& sj = j.at("sequence");
+    const std::string at = "items[" + std::to_string(i) + "].sequence.";
+    // The schema fixed the types; the ranges are checked here, as ReadTestSet does.
+    auto out_of_range = [&](const std::string& field, const nlohmann::json& value) {
+      return Status(StatusCode::kOutOfRange,
+                    file.string() + ": " + at + field + " is " + value.dump().substr(0, 40) +
+                        ", outside its range");
+    };
     SequenceFrameTruth f;
     f.view_index = static_cast<uint32_t>(i);
+    for (const char* key : {"id", "frame"}) {
+      if (sj.at(key).get<uint64_t>() > std::numeric_limits<uint32_t>::max()) {
+        return out_of_range(key, sj.at(key));
+      }
+    }
     f.sequence = sj.at("id").get<uint32_t>();
     f.frame = sj.at("frame").get<uint32_t>();
     f.time = sj.at("time").get<double>();
+    if (!std::isfinite(f.time)) return out_of_range("time", sj.at("time"));
     f.clutter = sj.at("clutter").get<bool>();
     f.in_picture = sj.at("in_picture").get<int>();
     f.visible = sj.at("visible").get<bool>();
     for (int k = 0; k < kNumKeypoints; ++k) {
-      f.keypoints_px[k] = {sj.at("keypoints_px").at(k).at(0).get<float>(),
-                           sj.at("keypoints_px").at(k).at(1).get<float>()};
+      const nlohmann::json& p = sj.at("keypoints_px").at(k);
+      for (int c = 0; c < 2; ++c) {
+        const double v = p.at(c).get<double>();
+        if (!std::isfinite(v) || std::abs(v) > std::numeric_limits<float>::max()) {
+          return out_of_range("keypoints_px[" + std::to_string(k) + "]", p);
+        }
+      }
+      f.keypoints_px[k] = {p.at(0).get<float>(), p.at(1).get<float>()};
     }
     f.keypoints = testset->views[i].truth.keypoints;
     f.photo = testset->views[i].photo;

@@ -245,6 +245,15 @@ TEST(SequenceTestSet, ReadsFramesInOrderAndRefusesGaps) {
   EXPECT_FALSE(set->sequences[1].frames[0].visible);
   EXPECT_FLOAT_EQ(set->sequences[0].frames[0].keypoints_px[3].y, 23.0f);
 
+  nlohmann::json huge = items;
+  huge[3]["sequence"]["keypoints_px"][4][1] = 1e300;  // no float holds it
+  ASSERT_TRUE(WriteJsonFileAtomic(dir / "testset.json", TruthDoc(huge)).ok());
+  auto refused = ReadSequenceTestSet(dir);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.status().code(), StatusCode::kOutOfRange);
+  EXPECT_NE(refused.status().message().find("items[3].sequence.keypoints_px[4]"), std::string::npos)
+      << refused.status().message();
+
   items[0]["sequence"]["frame"] = 2;  // frame 1 of sequence 0 missing
   ASSERT_TRUE(WriteJsonFileAtomic(dir / "testset.json", TruthDoc(items)).ok());
   auto bad = ReadSequenceTestSet(dir);
