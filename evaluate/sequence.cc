@@ -8,6 +8,7 @@
 #include <limits>
 #include <map>
 
+#include "base/json_number.h"
 #include "base/json_schema.h"
 #include "base/progress.h"
 #include "evaluate/photo_keypoints.h"
@@ -395,8 +396,6 @@ Result<SequenceReport> EvaluateSequences(const SequenceTestSet& testset,
 }
 
 namespace {
-
-nlohmann::json NumberOrNull(double v) { return std::isfinite(v) ? nlohmann::json(v) : nullptr; }
 
 nlohmann::json SequenceSummaryJson(const Summary& s) {
   if (s.count == 0) return {{"count", 0}};

@@ -64,7 +64,7 @@ double LeaveShare(const SequenceLeaveOptions& leave, uint32_t first, uint32_t f)
   return Smoothstep(1.0 - static_cast<double>(i - out_end + 1) / move);
 }
 
-Status Invalid(const std::string& what, const std::string& message) {
+Status SequenceConfigError(const std::string& what, const std::string& message) {
   return Status(StatusCode::kInvalidArgument, what + ": sequence: " + message);
 }
 
@@ -118,13 +118,13 @@ Result<SequenceOptions> SequenceOptions::FromJson(const nlohmann::json& j,
       o.leave.distance = l.value("distance", o.leave.distance);
     }
   } catch (const JsonRangeError& e) {
-    return Invalid(what, e.what());
+    return SequenceConfigError(what, e.what());
   }
   for (uint32_t s : o.leave.sequences) {
     if (s >= o.sequences) {
-      return Invalid(what,
-                     "leave.sequences names sequence " + std::to_string(s) + " of " +
-                         std::to_string(o.sequences) + " (they are numbered from 0)");
+      return SequenceConfigError(what,
+                                 "leave.sequences names sequence " + std::to_string(s) + " of " +
+                                     std::to_string(o.sequences) + " (they are numbered from 0)");
     }
   }
   if (!o.leave.sequences.empty()) {
@@ -132,14 +132,15 @@ Result<SequenceOptions> SequenceOptions::FromJson(const nlohmann::json& j,
     const uint64_t end =
         static_cast<uint64_t>(first) + 2ull * o.leave.move_frames + o.leave.out_frames;
     if (end >= o.frames) {
-      return Invalid(what,
-                     "the leave stretch (from frame " + std::to_string(first) + ", " +
-                         std::to_string(2 * o.leave.move_frames + o.leave.out_frames) +
-                         " frames) must end before the last of the " + std::to_string(o.frames) +
-                         " frames, so the hand is seen coming back");
+      return SequenceConfigError(what,
+                                 "the leave stretch (from frame " + std::to_string(first) + ", " +
+                                     std::to_string(2 * o.leave.move_frames + o.leave.out_frames) +
+                                     " frames) must end before the last of the " +
+                                     std::to_string(o.frames) +
+                                     " frames, so the hand is seen coming back");
     }
   }
-  if (!o.Check()) return Invalid(what, "bad options");
+  if (!o.Check()) return SequenceConfigError(what, "bad options");
   return o;
 }
 
