@@ -6,7 +6,8 @@
 For every item of the unit: a label EXR + sidecar exactly like the database renders
 (units/u00003/r000123.exr/.json, camera roll applied in Blender), then — with the scene switched to
 a skin material, lights and a plain or procedurally cluttered background — a photo-like PNG
-(photos/u00003/r000123.png). Items whose outputs exist are skipped; every file is written to a
+(photos/u00003/r000123.png), on the item's own background and shifted by its photo_offset_px when
+it has them (test sequences). Items whose outputs exist are skipped; every file is written to a
 temporary name and renamed; units/u00003/DONE and photos/u00003/DONE are written last. Errors:
 one line `handdb-render: <message>` on stderr, exit status 1.
 """
@@ -91,7 +92,7 @@ def main() -> int:
         pending = [it for it in items
                    if not os.path.exists(testset.photo_path(args.out, args.unit, it["id"]))]
         if pending:
-            studio = PhotoStudio(hs, plan["photo"], ortho)
+            studio = PhotoStudio(hs, plan["photo"], ortho, items)
             for item in pending:
                 place(item)
                 studio.set_item(item)

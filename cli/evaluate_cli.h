@@ -18,6 +18,7 @@
 #include "cli/slurm_cli.h"
 #include "evaluate/evaluate.h"
 #include "evaluate/photos.h"
+#include "evaluate/sequence.h"
 #include "query/database.h"
 #include "query/searcher.h"
 
@@ -76,6 +77,20 @@ struct EvaluateSlurmRequest {
   std::filesystem::path work;  // empty: TESTSET_DIR/slurm-evaluations/<fingerprint>
   bool quiet = false;
 };
+// ---- Sequence test sets: `handdb evaluate DB SEQUENCE-TESTSET`
+// (cli/evaluate_sequence_commands.cc) The scoring options of sequences (recovery window and error,
+// how many sequences).
+struct SequenceEvaluateFlags {
+  SequenceScoreOptions options;
+  void Add(CLI::App& app);
+};
+
+// Scores the predictor that answers each frame alone on the sequence test set request.testset;
+// `input_given`: --input was on the command line (only photo applies). Returns the exit code.
+int RunEvaluateSequences(EvaluateSlurmRequest request,
+                         const SequenceEvaluateFlags& sequence_flags,
+                         bool input_given);
+
 // `handdb evaluate DB TESTSET --slurm ...`: submits (or with --dry-run only writes) an array of
 // tasks for the parts that are missing plus the merge job; with --wait, waits and prints the
 // report as a local run does. Returns the exit code.

@@ -77,7 +77,10 @@ int RunTestset(int argc, char** argv) {
       "sampled in the PCA shape space plus a share of basic shapes, view directions uniform on "
       "the sphere, random camera rolls. Each view is rendered as a label EXR + sidecar (clean "
       "input) and a photo-like PNG (skin material, lights, plain or --clutter background); "
-      "DIR/testset.json holds the ground truth and is written last. Resumable.",
+      "DIR/testset.json holds the ground truth and is written last. Resumable. A config with "
+      "\"sequence\" makes test sequences instead: frames of short videos between natural "
+      "poses, the view turning, some leaving the picture, with DIR/sequences/sNNN/ folders of "
+      "their frames (docs/evaluation.md, Sequences).",
       "handdb testset");
   std::string config_path;
   std::string out;
@@ -385,7 +388,9 @@ int RunEvaluate(int argc, char** argv) {
       "photos in DIR/<shape name>/*.jpg|png (top-1/5/10 against a chance baseline, per-shape "
       "table, confusion matrix, contact sheets), searched as --hand right, left or either, with "
       "the photo flags of handdb query; --keypoints FILE adds the 2D keypoint error on annotated "
-      "photos; --slurm splits the photos over a job array the same way.",
+      "photos; --slurm splits the photos over a job array the same way. A test set of sequences "
+      "(handdb testset with a \"sequence\" config) is scored per frame from its photos, each "
+      "frame alone: keypoint error, jitter, recovery after the hand left the picture, frames/s.",
       "handdb evaluate");
   // Bound to the request of a Slurm run; a local run reads the same fields.
   EvaluateSlurmRequest request;
@@ -407,6 +412,8 @@ int RunEvaluate(int argc, char** argv) {
   app.add_option(
       "--plots", request.plots_dir, "write PNG plots and example sheets into this directory");
   flags.Add(app);
+  SequenceEvaluateFlags sequence_flags;
+  sequence_flags.Add(app);
   app.add_flag("-q,--quiet", request.quiet, "no progress, no text report");
   slurm.Add(app);
   const char* group = "Slurm (docs/cluster.md)";
@@ -447,6 +454,14 @@ int RunEvaluate(int argc, char** argv) {
     return kExitUsage;
   }
   if (!CheckTestSetEvaluateUsage(app)) return kExitUsage;
+  // A test set of sequences is scored as sequences (an unreadable one fails below, as any).
+  if (auto sequences = IsSequenceTestSet(testset_path); sequences.ok() && *sequences) {
+    if (slurm.enabled) {
+      std::fprintf(stderr, "handdb evaluate: a sequence test set is scored locally (no --slurm)\n");
+      return kExitUsage;
+    }
+    return RunEvaluateSequences(request, sequence_flags, app.get_option("--input")->count() > 0);
+  }
   if (!flags.Finish("evaluate", quiet)) return flags.failure_exit_code;
   if (!slurm.enabled && (request.tasks != 0 || !request.work.empty())) {
     std::fprintf(stderr, "handdb evaluate: --tasks and --work need --slurm\n");

@@ -6,6 +6,11 @@ grey world gives ambient light, and a background card parented to the camera fil
 behind the hand: a plain colour, or (clutter) a seeded procedural texture of Voronoi cells, noise
 and stripes. Cycles renders the colour image with a few samples to an 8-bit sRGB PNG.
 
+A plan's items may each choose their background (`clutter`, default the plan's photo.clutter) and
+shift the hand in the picture (`photo_offset_px`, x right and y down: the camera's lens shift, with
+the background card moved along so it still fills the view); test sequences use both
+(generator/testset/sequence.h). Label renders are made before the studio and are never shifted.
+
 With `forearm` the studio adds a skin-coloured forearm (forearm.py) to the photos; with
 `forearm_fraction` it adds it once and shows it on the items whose plan entry says `forearm`. The
 label renders made before the studio exists never see it.
@@ -36,10 +41,13 @@ def _emission_material(name: str):
 
 
 class PhotoStudio:
-    def __init__(self, hand_scene, photo: dict, ortho_scale: float):
+    def __init__(self, hand_scene, photo: dict, ortho_scale: float, items=()):
         self.hs = hand_scene
         scene = hand_scene.scene
         self.clutter = bool(photo["clutter"])
+        self.any_clutter = self.clutter or any(bool(it.get("clutter", False)) for it in items)
+        self.ortho_scale = ortho_scale
+        self.resolution = None
         skin = [testset.srgb_to_linear(c) for c in testset.check_rgb(photo["skin_rgb"], "photo.skin_rgb")]
         plain = [testset.srgb_to_linear(c)
                  for c in testset.check_rgb(photo["background_rgb"], "photo.background_rgb")]
@@ -82,6 +90,8 @@ class PhotoStudio:
         card.location = (0.0, 0.0, -(CAMERA_DISTANCE + BACKGROUND_DEPTH))
         card.rotation_euler = (0.0, 0.0, 0.0)
         card.scale = (ortho_scale * 1.5, ortho_scale * 1.5, 1.0)
+        self.card = card
+        self.card_depth = -(CAMERA_DISTANCE + BACKGROUND_DEPTH)
         card.visible_shadow = False
         card.visible_diffuse = False
         card.visible_glossy = False
@@ -89,10 +99,11 @@ class PhotoStudio:
         bmat, nt, emit = _emission_material("handdb_background")
         self.emit = emit
         self.plain = plain
-        if self.clutter:
+        self.background_tree = nt
+        self.clutter_link = None
+        emit.inputs["Color"].default_value = (*plain, 1.0)
+        if self.any_clutter:
             self._build_clutter(nt, emit)
-        else:
-            emit.inputs["Color"].default_value = (*plain, 1.0)
         card.data.materials.append(bmat)
 
         self._setup_render(scene, int(photo["samples"]))
@@ -155,7 +166,7 @@ class PhotoStudio:
         self.mix_wave.blend_type = "MULTIPLY"
         nt.links.new(self.mix_noise.outputs["Color"], self.mix_wave.inputs["Color1"])
         nt.links.new(self.wave.outputs["Color"], self.mix_wave.inputs["Color2"])
-        nt.links.new(self.mix_wave.outputs["Color"], emit.inputs["Color"])
+        self.clutter_link = nt.links.new(self.mix_wave.outputs["Color"], emit.inputs["Color"])
 
     def _setup_render(self, scene, samples: int) -> None:
         cy = scene.cycles
@@ -192,10 +203,38 @@ class PhotoStudio:
         self.fill.rotation_euler = (math.radians(-15.0), math.radians(-lights["key_yaw_deg"] * 1.5), 0.0)
         self.fill.data.energy = lights["fill_strength"]
         self.world_bg.inputs["Strength"].default_value = lights["ambient"]
-        if self.clutter:
+        clutter = testset.item_clutter(item, self.clutter)
+        self._use_clutter(clutter)
+        if clutter:
             self._set_clutter(testset.clutter_params(int(item["seed"])))
+        self._set_offset(testset.item_offset_px(item))
         if self.forearm_obj is not None:
             self.forearm_obj.hide_render = not testset.item_forearm(item, self.forearm_default)
+
+    def _use_clutter(self, on: bool) -> None:
+        """Links the clutter texture to the background, or unlinks it for the plain colour."""
+        if self.clutter_link is None:
+            return
+        nt = self.background_tree
+        if on and not self._clutter_linked():
+            self.clutter_link = nt.links.new(self.mix_wave.outputs["Color"], self.emit.inputs["Color"])
+        elif not on and self._clutter_linked():
+            nt.links.remove(self.clutter_link)
+
+    def _clutter_linked(self) -> bool:
+        return any(l.from_node == self.mix_wave and l.to_node == self.emit
+                   for l in self.background_tree.links)
+
+    def _set_offset(self, offset_px) -> None:
+        """Shifts the view so the hand appears offset_px away (x right, y down); the background
+        card follows the view."""
+        res = self.hs.scene.render.resolution_x
+        shift_x = -float(offset_px[0]) / res
+        shift_y = float(offset_px[1]) / res
+        cam = self.hs.camera.data
+        cam.shift_x = shift_x
+        cam.shift_y = shift_y
+        self.card.location = (shift_x * self.ortho_scale, shift_y * self.ortho_scale, self.card_depth)
 
     def _set_clutter(self, p: dict) -> None:
         self.mapping.inputs["Location"].default_value = p["offset"]

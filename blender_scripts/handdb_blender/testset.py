@@ -103,6 +103,19 @@ def item_forearm(item: dict, default: bool) -> bool:
     return bool(item.get("forearm", default))
 
 
+def item_clutter(item: dict, default: bool) -> bool:
+    """Whether this item's photo has the cluttered background: its own entry, else the plan's."""
+    return bool(item.get("clutter", default))
+
+
+def item_offset_px(item: dict) -> List[float]:
+    """The hand's shift in this item's photo, px (x right, y down); [0, 0] when the plan has none."""
+    offset = item.get("photo_offset_px", [0.0, 0.0])
+    if len(offset) != 2:
+        raise RenderError(f"item {item.get('id')}: photo_offset_px must be 2 numbers, got {offset!r}")
+    return [float(offset[0]), float(offset[1])]
+
+
 def srgb_to_linear(c: float) -> float:
     """Blender colour inputs are scene-linear; configs give sRGB."""
     return c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4

@@ -124,3 +124,21 @@ def test_forearm_all_or_none(plan):
     plan["photo"]["forearm"] = True
     assert testset.uses_forearm(plan["photo"])
     assert testset.item_forearm(plan["items"][0], True)
+
+
+def test_sequence_items_choose_background_and_shift(tmp_path, plan):
+    plan["items"][1]["clutter"] = True
+    plan["items"][2]["photo_offset_px"] = [12.5, -3.0]
+    plan["items"][2]["sequence"] = {"id": 0, "frame": 2, "time": 2 / 30, "leaving": True}
+    plan["sequence"] = {"sequences": 1, "frames": 5}
+    jsonschema.validate(plan, _schema("testset_plan.schema.json"))
+    path = tmp_path / "testset_plan.json"
+    path.write_text(json.dumps(plan))
+    loaded = testset.load_plan(str(path))
+    assert testset.item_clutter(loaded["items"][1], False) is True
+    assert testset.item_clutter(loaded["items"][0], False) is False
+    assert testset.item_clutter(loaded["items"][0], True) is True
+    assert testset.item_offset_px(loaded["items"][2]) == [12.5, -3.0]
+    assert testset.item_offset_px(loaded["items"][0]) == [0.0, 0.0]
+    with pytest.raises(RenderError, match="photo_offset_px"):
+        testset.item_offset_px({"id": 3, "photo_offset_px": [1.0]})

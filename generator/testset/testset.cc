@@ -19,6 +19,7 @@
 #include "generator/sampling/natural_pose.h"
 #include "generator/sampling/random.h"
 #include "generator/sampling/shape_sampler.h"
+#include "generator/testset/sequence.h"
 #include "handdb_version.h"
 
 namespace handdb {
@@ -87,7 +88,15 @@ Result<nlohmann::json> MakeTestSetPlan(const nlohmann::json& config,
   // Where the hand shapes come from: the shape library (basic shapes and PCA samples), or the
   // natural-pose sampler, which uses neither. Fields of the other source are errors.
   const nlohmann::json poses_cfg = config.value("poses", nlohmann::json::object());
-  const bool natural = poses_cfg.value("method", std::string("library")) == "natural";
+  // A sequence's keyposes are natural poses: with "sequence" the method defaults to natural.
+  const bool sequence = config.contains("sequence");
+  const std::string method =
+      poses_cfg.value("method", std::string(sequence ? "natural" : "library"));
+  const bool natural = method == "natural";
+  if (sequence && !natural) {
+    return Invalid(what,
+                   "sequence needs poses.method \"natural\" (its keyposes are natural poses)");
+  }
   if (natural) {
     for (const char* key : {"shapes", "basic_fraction", "basic_names", "pca"}) {
       if (config.contains(key)) {
@@ -146,7 +155,7 @@ Result<nlohmann::json> MakeTestSetPlan(const nlohmann::json& config,
   if (!natural_options.Check()) return Invalid(what, "bad poses options");
   std::vector<NaturalPose> natural_poses;
   uint64_t natural_clamped = 0;
-  for (uint32_t i = 0; i < num_natural; ++i) {
+  for (uint32_t i = 0; i < num_natural && !sequence; ++i) {
     natural_poses.push_back(SampleNaturalPose(natural_options, limits, i));
     natural_clamped += natural_poses.back().clamped ? 1 : 0;
   }
@@ -197,7 +206,21 @@ Result<nlohmann::json> MakeTestSetPlan(const nlohmann::json& config,
   if (ortho_scale <= 0) ortho_scale = hand->ortho_scale;
   if (ortho_scale <= 0)
     return Invalid(what, "render.ortho_scale is not set and the hand model gives none");
-  const uint32_t unit_size = config.value("unit_size", 50u);
+  std::optional<SequenceOptions> sequence_options;
+  if (sequence) {
+    auto parsed = SequenceOptions::FromJson(config.at("sequence"), what);
+    if (!parsed.ok()) return parsed.status();
+    sequence_options = *parsed;
+    const uint64_t frames = static_cast<uint64_t>(parsed->sequences) * parsed->frames;
+    if (frames != count) {
+      return Invalid(what,
+                     "count " + std::to_string(count) + " but the sequences have " +
+                         std::to_string(frames) + " frames (sequence.sequences x sequence.frames)");
+    }
+  }
+  // A sequence's frames default to one unit per sequence.
+  const uint32_t unit_size =
+      config.value("unit_size", sequence_options ? sequence_options->frames : 50u);
 
   const nlohmann::json photo_cfg = config.value("photo", nlohmann::json::object());
   nlohmann::json photo = {
@@ -237,8 +260,45 @@ Result<nlohmann::json> MakeTestSetPlan(const nlohmann::json& config,
       }
     }
   }
+  std::vector<SequenceFrame> sequence_frames;
+  if (sequence_options) {
+    sequence_frames = PlanSequenceFrames(*sequence_options,
+                                         natural_options,
+                                         limits,
+                                         seed,
+                                         resolution,
+                                         Vec3FromJson(hand_doc->at("forward_axis")),
+                                         Vec3FromJson(hand_doc->at("palm_normal")));
+  }
   nlohmann::json items = nlohmann::json::array();
-  for (uint32_t i = 0; i < count; ++i) {
+  for (uint32_t i = 0; i < count && sequence_options; ++i) {
+    const SequenceFrame& f = sequence_frames[i];
+    const std::array<double, 3>& d = f.direction;
+    nlohmann::json item = {
+        {"id", i},
+        {"unit", i / unit_size},
+        {"seed", f.seed},
+        {"direction", d},
+        {"theta", std::acos(std::clamp(d[2], -1.0, 1.0))},
+        {"phi", std::atan2(d[1], d[0])},
+        {"roll", f.roll},
+        {"basic", false},
+        {"shape_name", Numbered("s", f.sequence, 3) + Numbered("-f", f.frame, 6)},
+        {"joints", nlohmann::json(f.joints)},
+        {"coeffs", nlohmann::json::array()},
+        {"clamped", f.clamped},
+        {"clutter", f.clutter || photo.at("clutter").get<bool>()},
+        {"photo_offset_px", f.photo_offset_px},
+        {"sequence",
+         {{"id", f.sequence}, {"frame", f.frame}, {"time", f.time}, {"leaving", f.leaving}}},
+    };
+    // Drawn per sequence: an arm does not come and go between frames.
+    if (forearm_some) {
+      item["forearm"] = Rng(DeriveSeed(f.seed, kForearmStream, 0)).Uniform() < forearm_fraction;
+    }
+    items.push_back(std::move(item));
+  }
+  for (uint32_t i = 0; i < count && !sequence_options; ++i) {
     const uint64_t item_seed = DeriveSeed(seed, kTestViewStream, i);
     Rng rng(item_seed);
     const double z = 2.0 * rng.Uniform() - 1.0;
@@ -284,7 +344,12 @@ Result<nlohmann::json> MakeTestSetPlan(const nlohmann::json& config,
   }
 
   nlohmann::json shapes_report;
-  if (natural) {
+  if (sequence_options) {
+    shapes_report = {{"sequence_keyposes", "natural"},
+                     {"natural_sampler",
+                      {{"finger_spread", natural_options.finger_spread},
+                       {"abduction_spread", natural_options.abduction_spread}}}};
+  } else if (natural) {
     shapes_report = {{"natural", num_natural},
                      {"natural_sampler",
                       {{"finger_spread", natural_options.finger_spread},
@@ -312,6 +377,7 @@ Result<nlohmann::json> MakeTestSetPlan(const nlohmann::json& config,
       {"handdb_version", HANDDB_VERSION},
       {"items", items},
   };
+  if (sequence_options) plan["sequence"] = sequence_options->ToJson();
   HANDDB_RETURN_IF_ERROR(ValidateJson(plan, kPlanSchema, what + " (test-set plan)"));
   return plan;
 }
@@ -371,6 +437,20 @@ Result<TestSetPlan> ParseTestSetPlanFields(const nlohmann::json& doc, const std:
     item.roll = j.at("roll").get<double>();
     item.seed = JsonIntegerOrThrow<uint64_t>(j.at("seed"), at + "seed");
     item.forearm = j.value("forearm", plan.photo.forearm);
+    item.clutter = j.value("clutter", plan.photo.clutter);
+    if (j.contains("photo_offset_px")) {
+      item.photo_offset_px = {j["photo_offset_px"].at(0).get<double>(),
+                              j["photo_offset_px"].at(1).get<double>()};
+    }
+    if (j.contains("sequence")) {
+      const nlohmann::json& sj = j["sequence"];
+      TestSetSequenceRef ref;
+      ref.sequence = JsonIntegerOrThrow<uint32_t>(sj.at("id"), at + "sequence.id");
+      ref.frame = JsonIntegerOrThrow<uint32_t>(sj.at("frame"), at + "sequence.frame");
+      ref.time = sj.at("time").get<double>();
+      ref.leaving = sj.at("leaving").get<bool>();
+      item.sequence = ref;
+    }
     plan.items.push_back(std::move(item));
   }
   return plan;

@@ -6,12 +6,17 @@
 // directions uniform on the sphere, camera rolls uniform in [0, 2 pi) — from a seed that should
 // differ from any database's; renders each one as a label EXR + sidecar (the database's render
 // layout, so the converter's code gives its clean edges and normalised keypoints) and as a
-// photo-like RGB image (blender_scripts/render_testset.py); then writes the ground truth.
+// photo-like RGB image (blender_scripts/render_testset.py); then writes the ground truth. With a
+// "sequence" object the items are the frames of short videos instead (generator/testset/
+// sequence.h): their plan items say where they sit in their sequence, their background and the
+// hand's shift in the photo.
 //
 // DIR/testset_plan.json            the plan (schemas/testset_plan.schema.json); a pure function of
 //                                  the config and the files it names
 // DIR/units/u00000/r000000.exr     label render of item 0 (+ r000000.json sidecar), DONE last
 // DIR/photos/u00000/r000000.png    photo of item 0, DONE last
+// DIR/sequences/s000/000000.png     sequence test sets: each sequence's photos in frame order
+//                                  (relative symlinks), a folder to hand to a tracker
 // DIR/testset.json                 ground truth (schemas/testset.schema.json), written last
 //
 // Everything is deterministic: item i's shape, direction, roll and clutter texture derive from
@@ -23,6 +28,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -51,6 +57,14 @@ struct PhotoSettings {
   double forearm_fraction = 0;
 };
 
+// Where a frame of a sequence test set (generator/testset/sequence.h) sits in its sequence.
+struct TestSetSequenceRef {
+  uint32_t sequence = 0;
+  uint32_t frame = 0;
+  double time = 0;       // seconds
+  bool leaving = false;  // inside a leave stretch: the photo is shifted by photo_offset_px
+};
+
 struct TestSetItem {
   uint32_t id = 0;  // == render id, shape id and dir id in its sidecar
   uint32_t unit = 0;
@@ -65,6 +79,10 @@ struct TestSetItem {
   double roll = 0;       // camera roll, radians in [0, 2 pi)
   uint64_t seed = 0;     // DeriveSeed(seed, kTestViewStream, id): clutter texture etc.
   bool forearm = false;  // its photo shows a forearm
+  bool clutter = false;  // its photo has the cluttered background (default: photo.clutter)
+  // The hand's shift in the photo, px (x right, y down); the label render is not shifted.
+  std::array<double, 2> photo_offset_px{};
+  std::optional<TestSetSequenceRef> sequence;  // a frame of a sequence test set
 };
 
 struct TestSetPlan {
@@ -107,6 +125,10 @@ std::filesystem::path TestSetSidecarPath(const std::filesystem::path& dir,
 std::filesystem::path TestSetPhotoPath(const std::filesystem::path& dir,
                                        uint32_t unit,
                                        uint32_t id);
+// DIR/sequences/s000/000012.png: frame 12 of sequence 0 (a link to its photo).
+std::filesystem::path SequenceFramePath(const std::filesystem::path& dir,
+                                        uint32_t sequence,
+                                        uint32_t frame);
 
 struct TestSetRenderOptions {
   int jobs = 1;                       // parallel Blender processes (each -t 1)

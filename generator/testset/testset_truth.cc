@@ -3,6 +3,7 @@
 // and sampler headers.
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 
 #include "base/json_schema.h"
 #include "base/progress.h"
@@ -14,6 +15,39 @@
 
 namespace handdb {
 namespace fs = std::filesystem;
+
+fs::path SequenceFramePath(const fs::path& dir, uint32_t sequence, uint32_t frame) {
+  char name[64];
+  std::snprintf(name, sizeof name, "s%03u/%06u.png", sequence, frame);
+  return dir / "sequences" / name;
+}
+
+namespace {
+
+// DIR/sequences/sNNN/NNNNNN.png -> ../../photos/uNNNNN/rNNNNNN.png for every photographed frame.
+// Relative links keep the folder valid when DIR is moved or copied with its links; a link left
+// by an earlier run is replaced only when it points elsewhere.
+Status WriteSequenceFolders(const fs::path& dir, const TestSetPlan& plan) {
+  for (const TestSetItem& item : plan.items) {
+    if (!item.sequence) continue;
+    const fs::path photo = TestSetPhotoPath(dir, item.unit, item.id);
+    if (!fs::exists(photo)) continue;
+    const fs::path link = SequenceFramePath(dir, item.sequence->sequence, item.sequence->frame);
+    const fs::path target = fs::path("..") / ".." / fs::relative(photo, dir);
+    std::error_code ec;
+    fs::create_directories(link.parent_path(), ec);
+    if (ec) return Status(StatusCode::kIoError, link.parent_path().string() + ": " + ec.message());
+    if (fs::is_symlink(fs::symlink_status(link, ec))) {
+      if (fs::read_symlink(link, ec) == target) continue;
+      fs::remove(link, ec);
+    }
+    fs::create_symlink(target, link, ec);
+    if (ec) return Status(StatusCode::kIoError, link.string() + ": " + ec.message());
+  }
+  return Status::Ok();
+}
+
+}  // namespace
 
 Status WriteTestSetGroundTruth(const fs::path& dir, int num_threads, bool progress_enabled) {
   auto plan = ReadTestSetPlan(dir / "testset_plan.json");
@@ -86,6 +120,30 @@ Status WriteTestSetGroundTruth(const fs::path& dir, int num_threads, bool progre
     if (fs::exists(photo)) j["photo"] = fs::relative(photo, dir).generic_string();
     // Per item only when the plan draws the forearm per item; otherwise the set's "forearm" says.
     if (plan->doc.at("photo").contains("forearm_fraction")) j["forearm"] = item.forearm;
+    if (item.sequence) {
+      // The photo shows the label render's hand shifted by the offset: the same camera.
+      nlohmann::json px = nlohmann::json::array();
+      int in_picture = 0;
+      for (const auto& k : sidecar->keypoints_px) {
+        const double x = k[0] + item.photo_offset_px[0];
+        const double y = k[1] + item.photo_offset_px[1];
+        px.push_back({x, y});
+        in_picture += (x >= 0 && y >= 0 && x < plan->resolution && y < plan->resolution) ? 1 : 0;
+      }
+      j["sequence"] = {{"id", item.sequence->sequence},
+                       {"frame", item.sequence->frame},
+                       {"time", item.sequence->time},
+                       {"clutter", item.clutter},
+                       {"offset_px", item.photo_offset_px},
+                       {"keypoints_px", px},
+                       {"in_picture", in_picture},
+                       {"visible", in_picture == kNumKeypoints}};
+      if (j.contains("photo")) {
+        j["sequence"]["frame_file"] =
+            SequenceFramePath(fs::path(), item.sequence->sequence, item.sequence->frame)
+                .generic_string();
+      }
+    }
     items[i] = std::move(j);
     progress.Add();
     return true;
@@ -105,6 +163,7 @@ Status WriteTestSetGroundTruth(const fs::path& dir, int num_threads, bool progre
         first.message() +
             (bad > 1 ? " (and " + std::to_string(bad - 1) + " more bad test views)" : ""));
   }
+  HANDDB_RETURN_IF_ERROR(WriteSequenceFolders(dir, *plan));
   nlohmann::json truth = {
       {"format", "handdb-testset"},
       {"version", kTestSetFormatVersion},
@@ -121,6 +180,7 @@ Status WriteTestSetGroundTruth(const fs::path& dir, int num_threads, bool progre
       {"items", items},
   };
   if (plan->photo.forearm) truth["forearm"] = true;
+  if (plan->doc.contains("sequence")) truth["sequence"] = plan->doc.at("sequence");
   HANDDB_RETURN_IF_ERROR(
       ValidateJson(truth, "testset.schema.json", (dir / "testset.json").string()));
   return WriteJsonFileAtomic(dir / "testset.json", truth);
