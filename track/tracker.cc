@@ -129,7 +129,7 @@ class Tracker {
       filter_.Reset();
       return;
     }
-    if (options_.keypoint_filter.enabled) {
+    if (options_.keypoint_filter.enabled && options_.smoothing != Smoothing::kOff) {
       frame->keypoints_image_px = filter_.Filter(frame->keypoints_image_px, frame->time_s);
     }
   }

@@ -9,7 +9,8 @@
 //    (a repeated frame);
 // then one candidate of the frame's top k chosen over time (track/smoothing.h: dynamic
 // programming, online over a look-back window or offline over the whole sequence), fitted to
-// the picture when the database has its rig (pose/fit_matches.h), and its keypoints filtered.
+// the picture when the database has its rig (pose/fit_matches.h), and its keypoints filtered
+// (smoothing off: each frame's best as it is, unfiltered).
 #pragma once
 
 #include <array>
