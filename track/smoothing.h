@@ -60,7 +60,7 @@ std::vector<int> ChooseByDynamicProgramming(const std::vector<std::vector<PoseCa
 struct KeypointFilterOptions {
   bool enabled = true;
   double min_cutoff_hz = 1.5;  // the cut-off of a still hand
-  double beta = 0.02;          // how fast the cut-off rises with speed (per px/s)
+  double beta = 0.1;           // how fast the cut-off rises with speed (per px/s)
   double d_cutoff_hz = 1.0;    // the cut-off of the speed's own estimate
   bool Check() const;
 };
