@@ -150,6 +150,9 @@ class Tracker {
       const std::vector<SearchPair> subset = neighbourhood_->Near(*previous_, options_.local);
       SearchOptions local = options_.picture.search;
       local.subset = subset;
+      // The neighbourhood holds the previous hand's pairs only: searching that hand alone spares
+      // the other hand's slots and their grids.
+      if (local.hand == Hand::kEither) local.hand = previous_->hand;
       SearchStats stats;
       auto matches =
           SearchEvidence(searcher_, evidence, local, options_.picture.landmark_rank, &stats);
