@@ -29,6 +29,7 @@ int RunTestset(int argc, char** argv);   // cli/evaluate_commands.cc
 int RunEvaluate(int argc, char** argv);  // cli/evaluate_commands.cc
 int RunQuery(int argc, char** argv);     // cli/query_commands.cc
 int RunIndex(int argc, char** argv);     // cli/index_commands.cc
+int RunTrack(int argc, char** argv);     // cli/track_commands.cc
 
 // The one-line summary of an index written by WriteDatabaseIndex (query/index/database_index.h),
 // led by `cmd`, on stdout.

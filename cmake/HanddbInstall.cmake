@@ -41,7 +41,8 @@ set(HANDDB_DOORS_nn tflite.h)
 set(HANDDB_DOORS_photo image_edges.h hand_landmarks.h)
 set(HANDDB_DOORS_pose fit.h fit_matches.h landmark_rank.h match_json.h picture_search.h sheet.h)
 set(HANDDB_DOORS_evaluate evaluate.h metrics.h plots.h parts.h photos.h photo_keypoints.h)
-set(HANDDB_MODULES base nn format cluster edges generator query photo pose evaluate)
+set(HANDDB_DOORS_track frames.h neighbourhood.h smoothing.h tracker.h track_json.h)
+set(HANDDB_MODULES base nn format cluster edges generator query photo pose track evaluate)
 
 # Every door's `#include "x/y.h"` must be a door too (or the generated version header).
 set(_handdb_all_doors handdb_version.h)

@@ -929,6 +929,13 @@ void ScaleToSource(cv::Size source, cv::Size decoded, HandLandmarks* l) {
   l->crop_side_px *= static_cast<float>(f);
 }
 
+Result<PictureEvidence> FromDecoded(const std::filesystem::path& image,
+                                    const cv::Mat& any,
+                                    cv::Size source,
+                                    QueryInputKind kind,
+                                    const ImageEdgeOptions& options,
+                                    const HandLandmarker* landmarker);
+
 // The picture decoded once: its edges, then (a photo, with a landmarker) the landmark network
 // on the same pixels and the hand the segmentation found, both in the decoded picture's pixels
 // until the last step maps them to the file's.
@@ -973,6 +980,18 @@ Result<PictureEvidence> Read(const std::filesystem::path& image,
       flags == cv::IMREAD_UNCHANGED || !size
           ? any.size()
           : cv::Size(static_cast<int>(size->width), static_cast<int>(size->height));
+  return FromDecoded(image, any, source, kind, options, landmarker);
+}
+
+// A decoded picture (`source`: its size in its file) -> its evidence: the edges of an edge image
+// or a photo and, for a photo, the landmarks.
+Result<PictureEvidence> FromDecoded(const std::filesystem::path& image,
+                                    const cv::Mat& any,
+                                    cv::Size source,
+                                    QueryInputKind kind,
+                                    const ImageEdgeOptions& options,
+                                    const HandLandmarker* landmarker) {
+  PictureEvidence out;
   if (kind == QueryInputKind::kAuto) {
     kind = LooksLikeEdgeImage(any) ? QueryInputKind::kEdges : QueryInputKind::kPhoto;
   }
@@ -1083,6 +1102,38 @@ Result<QueryEdges> LoadQueryEdges(const std::filesystem::path& image,
 Result<PictureEvidence> ReadPicture(const std::filesystem::path& image,
                                     const PictureOptions& options) {
   return Read(image, options.edges, options.landmarker.get());
+}
+
+Result<PictureEvidence> ReadPicturePixels(const std::string& name,
+                                          const PicturePixels& pixels,
+                                          const PictureOptions& options) {
+  if (!options.edges.Check()) {
+    return Status(StatusCode::kInvalidArgument, "invalid image edge options (see the line above)");
+  }
+  if (options.edges.kind == QueryInputKind::kLabels) {
+    return Status(StatusCode::kInvalidArgument,
+                  name + ": a label picture is read from its EXR file, not from pixels");
+  }
+  const size_t row_bytes = pixels.row_bytes != 0
+                               ? pixels.row_bytes
+                               : static_cast<size_t>(pixels.width) * pixels.channels;
+  if (pixels.data == nullptr || pixels.width <= 0 || pixels.height <= 0 ||
+      (pixels.channels != 1 && pixels.channels != 3 && pixels.channels != 4) ||
+      row_bytes < static_cast<size_t>(pixels.width) * pixels.channels ||
+      static_cast<uint64_t>(pixels.width) * pixels.height > kMaxImagePixels) {
+    return Status(StatusCode::kBadImage,
+                  name + ": not a picture: " + std::to_string(pixels.width) + "x" +
+                      std::to_string(pixels.height) + " px of " + std::to_string(pixels.channels) +
+                      " channels");
+  }
+  // A header over the caller's bytes: every step reads them, none writes.
+  const cv::Mat any(pixels.height,
+                    pixels.width,
+                    CV_MAKETYPE(CV_8U, pixels.channels),
+                    const_cast<uint8_t*>(pixels.data),
+                    row_bytes);
+  return FromDecoded(
+      name, any, any.size(), options.edges.kind, options.edges, options.landmarker.get());
 }
 
 }  // namespace handdb

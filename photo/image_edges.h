@@ -202,4 +202,22 @@ struct PictureEvidence {
 Result<PictureEvidence> ReadPicture(const std::filesystem::path& image,
                                     const PictureOptions& options);
 
+// A picture already decoded in memory (a video's frame), as ReadImage decodes a file: 8-bit,
+// `channels` 1 (grey), 3 (BGR) or 4 (BGRA), rows `row_bytes` apart (0: width * channels).
+struct PicturePixels {
+  int width = 0;
+  int height = 0;
+  int channels = 3;
+  const uint8_t* data = nullptr;
+  size_t row_bytes = 0;
+};
+
+// ReadPicture of decoded pixels: the same evidence, bit for bit, as ReadPicture of a PNG holding
+// these pixels (options.edges.kind kAuto, kPhoto or kEdges; a mask is read from its file).
+// `name` names the picture in errors. Errors: kBadImage (no pixels, too many, a channel count
+// other than 1, 3, 4), kInvalidArgument (kLabels, bad options), then ReadPicture's.
+Result<PictureEvidence> ReadPicturePixels(const std::string& name,
+                                          const PicturePixels& pixels,
+                                          const PictureOptions& options);
+
 }  // namespace handdb

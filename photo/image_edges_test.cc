@@ -209,6 +209,43 @@ TEST_F(ImageEdgesTest, ThePictureSizeDoesNotChangeTheEdges) {
   EXPECT_EQ(b->width, 3 * 320);
 }
 
+// A frame decoded in memory (a video's) gives the evidence its PNG file gives, bit for bit: a
+// photo and an edge image, through every field of the edges.
+TEST_F(ImageEdgesTest, PixelsInMemoryGiveTheEvidenceOfTheirFile) {
+  const fs::path photo = WritePhoto(Hand(0.4).image, "frame.png", 5);
+  const fs::path edges = WriteEdgeImage(Hand(-0.2).image, "edges.png");
+  for (const fs::path& file : {photo, edges}) {
+    const cv::Mat decoded = cv::imread(file.string(), cv::IMREAD_UNCHANGED);
+    ASSERT_FALSE(decoded.empty());
+    PicturePixels pixels;
+    pixels.width = decoded.cols;
+    pixels.height = decoded.rows;
+    pixels.channels = decoded.channels();
+    pixels.data = decoded.data;
+    pixels.row_bytes = decoded.step[0];
+    auto a = ReadPicture(file, PictureOptions{});
+    auto b = ReadPicturePixels(file.string(), pixels, PictureOptions{});
+    ASSERT_TRUE(a.ok()) << a.status().ToString();
+    ASSERT_TRUE(b.ok()) << b.status().ToString();
+    EXPECT_EQ(a->edges.kind, b->edges.kind);
+    ASSERT_EQ(a->edges.points.size(), b->edges.points.size());
+    for (size_t i = 0; i < a->edges.points.size(); ++i) {
+      EXPECT_EQ(a->edges.points[i].x, b->edges.points[i].x);
+      EXPECT_EQ(a->edges.points[i].y, b->edges.points[i].y);
+    }
+    EXPECT_EQ(a->edges.centre_x, b->edges.centre_x);
+    EXPECT_EQ(a->edges.centre_y, b->edges.centre_y);
+    EXPECT_EQ(a->edges.scale, b->edges.scale);
+    EXPECT_EQ(a->edges.hand_pixels, b->edges.hand_pixels);
+    EXPECT_EQ(a->edges.edge_pixels.size(), b->edges.edge_pixels.size());
+  }
+  PicturePixels none;
+  auto bad = ReadPicturePixels("frame 7", none, PictureOptions{});
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.status().code(), StatusCode::kBadImage);
+  EXPECT_NE(bad.status().message().find("frame 7"), std::string::npos);
+}
+
 // The hand's largest inscribed circle's radius, px.
 double PalmRadius(const LabelImage& li) {
   cv::Mat dt;

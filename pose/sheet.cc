@@ -39,6 +39,33 @@ void Caption(cv::Mat& tile, const std::string& text) {
   cv::putText(tile, text, {4, 16}, cv::FONT_HERSHEY_SIMPLEX, 0.42, kBlack, 1, cv::LINE_AA);
 }
 
+// The bones (amber) and joints (black) of 21 keypoints, each mapped to the image by `to_image`.
+template <typename ToImage>
+void DrawSkeleton(cv::Mat& image, std::span<const Point2f> skeleton_px, ToImage to_image) {
+  const cv::Scalar bone(0, 215, 255);  // amber (BGR)
+  for (const auto& b : kSkeletonBones) {
+    cv::line(image,
+             to_image(skeleton_px[b[0]].x, skeleton_px[b[0]].y),
+             to_image(skeleton_px[b[1]].x, skeleton_px[b[1]].y),
+             bone,
+             2,
+             cv::LINE_AA);
+  }
+  for (const Point2f& k : skeleton_px) {
+    cv::circle(image, to_image(k.x, k.y), 2, kBlack, cv::FILLED, cv::LINE_AA);
+  }
+}
+
+Status WritePng(const std::filesystem::path& out_png, const cv::Mat& image) {
+  auto png = EncodePng({image.data, image.cols, image.rows, image.channels(), image.step[0]});
+  if (!png.ok()) {
+    return Status(StatusCode::kIoError,
+                  out_png.string() + ": PNG encoding failed: " + png.status().message());
+  }
+  return WriteFileAtomic(out_png,
+                         std::string_view(reinterpret_cast<const char*>(png->data()), png->size()));
+}
+
 }  // namespace
 
 bool ContactSheetOptions::Check() const {
@@ -111,20 +138,7 @@ Status WriteContactSheet(const std::filesystem::path& out_png,
                  1,
                  cv::LINE_AA);
     }
-    if (!skeleton_px.empty()) {
-      const cv::Scalar bone(0, 215, 255);  // amber (BGR)
-      for (const auto& b : kSkeletonBones) {
-        cv::line(tile,
-                 to_tile(skeleton_px[b[0]].x, skeleton_px[b[0]].y),
-                 to_tile(skeleton_px[b[1]].x, skeleton_px[b[1]].y),
-                 bone,
-                 2,
-                 cv::LINE_AA);
-      }
-      for (const Point2f& k : skeleton_px) {
-        cv::circle(tile, to_tile(k.x, k.y), 2, kBlack, cv::FILLED, cv::LINE_AA);
-      }
-    }
+    if (!skeleton_px.empty()) DrawSkeleton(tile, skeleton_px, to_tile);
     // The landmark network's joints (docs/query.md, "Hand landmarks") as small magenta rings,
     // so the top match's skeleton can be read against what the network saw.
     if (picture.landmarks) {
@@ -165,13 +179,40 @@ Status WriteContactSheet(const std::filesystem::path& out_png,
     const int c = static_cast<int>(i) % cols;
     tiles[i].copyTo(sheet(cv::Rect(4 + c * (t + 4), 4 + r * (th + 4), t, th)));
   }
-  auto png = EncodePng({sheet.data, sheet.cols, sheet.rows, sheet.channels(), sheet.step[0]});
-  if (!png.ok()) {
-    return Status(StatusCode::kIoError,
-                  out_png.string() + ": PNG encoding failed: " + png.status().message());
+  return WritePng(out_png, sheet);
+}
+
+Status WriteSkeletonOverlay(const std::filesystem::path& out_png,
+                            const std::filesystem::path& input_image,
+                            const PicturePixels* pixels,
+                            std::span<const Point2f> skeleton_px) {
+  THROW_CHECK(skeleton_px.empty() || skeleton_px.size() == kNumKeypoints);
+  cv::Mat image;
+  if (pixels != nullptr) {
+    const cv::Mat view(pixels->height,
+                       pixels->width,
+                       CV_MAKETYPE(CV_8U, pixels->channels),
+                       const_cast<uint8_t*>(pixels->data),
+                       pixels->row_bytes != 0
+                           ? pixels->row_bytes
+                           : static_cast<size_t>(pixels->width) * pixels->channels);
+    if (pixels->channels == 1) {
+      cv::cvtColor(view, image, cv::COLOR_GRAY2BGR);
+    } else if (pixels->channels == 4) {
+      cv::cvtColor(view, image, cv::COLOR_BGRA2BGR);
+    } else {
+      image = view.clone();
+    }
+  } else {
+    Result<cv::Mat> read = ReadImage(input_image, cv::IMREAD_COLOR);
+    if (!read.ok()) return read.status();
+    image = std::move(read).value();
   }
-  return WriteFileAtomic(out_png,
-                         std::string_view(reinterpret_cast<const char*>(png->data()), png->size()));
+  DrawSkeleton(image, skeleton_px, [](double x, double y) {
+    return cv::Point(static_cast<int>(std::lround(x - 0.5)),
+                     static_cast<int>(std::lround(y - 0.5)));
+  });
+  return WritePng(out_png, image);
 }
 
 }  // namespace handdb

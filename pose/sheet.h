@@ -39,4 +39,12 @@ Status WriteContactSheet(const std::filesystem::path& out_png,
                          const ContactSheetOptions& options,
                          std::span<const Point2f> skeleton_px = {});
 
+// A video frame's overlay: the picture (the file `input_image`, or `pixels` when given) with the
+// skeleton of 21 keypoints in its px drawn as the contact sheet draws it (none when empty),
+// written atomically as a PNG. Errors: the picture's (kBadImage, kNotFound), kIoError.
+Status WriteSkeletonOverlay(const std::filesystem::path& out_png,
+                            const std::filesystem::path& input_image,
+                            const PicturePixels* pixels,
+                            std::span<const Point2f> skeleton_px);
+
 }  // namespace handdb

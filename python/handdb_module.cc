@@ -42,6 +42,9 @@
 #include "pose/picture_search.h"
 #include "query/database.h"
 #include "query/searcher.h"
+#include "track/frames.h"
+#include "track/track_json.h"
+#include "track/tracker.h"
 
 namespace handdb::python {
 namespace {
@@ -732,6 +735,52 @@ py::object Search(const PyDatabase& self,
   return py::make_tuple(out, st);
 }
 
+// A video's (or a folder of frames') poses, one dict per frame as `handdb track` prints them
+// (track/track_json.h); the GIL is released while tracking.
+py::list Track(const PyDatabase& self,
+               py::object path,
+               int top_k,
+               int threads,
+               const std::string& hand,
+               const std::string& smooth,
+               bool local_search,
+               int full_every,
+               double fps,
+               const std::string& fit,
+               const py::kwargs& edge_kwargs) {
+  const fs::path input = PathArg(path, "path");
+  TrackOptions options;
+  options.picture.search =
+      SearchOptionsFromArgs(top_k, threads, hand, false, "nanoflann", 1.0f, true, 0);
+  options.picture.picture = PictureOptionsFromKwargs(edge_kwargs);
+  FitFromArgs(self, fit, MatchFitOptions{}.max_matches, &options.picture);
+  auto smoothing = ParseSmoothing(smooth);
+  if (!smoothing.ok()) throw py::value_error(smoothing.status().message());
+  options.smoothing = *smoothing;
+  options.local_search = local_search;
+  if (full_every < 0) throw py::value_error("full_every must be >= 0");
+  options.full_every = full_every;
+  FrameSourceOptions source;
+  source.folder_fps = fps;
+  if (!source.Check()) throw py::value_error("fps must be in (0, 10000]");
+  const Searcher& searcher = self.searcher();
+  std::vector<json> frames;
+  {
+    py::gil_scoped_release release;
+    UseDatabaseConversion(self.path(), &options.picture.picture);
+    auto opened = OpenFrames(input, source);
+    if (!opened.ok()) throw StatusError(opened.status());
+    auto summary = TrackFrames(searcher, **opened, options, [&](const TrackFrame& f) {
+      frames.push_back(TrackFrameToJson(f));
+      return Status::Ok();
+    });
+    if (!summary.ok()) throw StatusError(summary.status());
+  }
+  py::list out;
+  for (const json& f : frames) out.append(JsonToPython(f));
+  return out;
+}
+
 // handdb.Error for a library error, as the exception translator raises it (BindError).
 py::object ErrorObject(const Status& status) {
   py::object exc = (*error_type)(status.message());
@@ -1346,6 +1395,25 @@ void BindDatabase(py::module_& m) {
           "--landmark-weight). fit: for an image path, 'auto' (default) fits the pose of the "
           "first fit_matches matches to the photo's landmarks as `handdb query --fit` does "
           "(Match.fit; 'on' raises if the database carries no rig, 'off' skips it).")
+      .def("track",
+           &Track,
+           py::arg("path"),
+           py::arg("top_k") = 10,
+           py::arg("threads") = -1,
+           py::arg("hand") = "either",
+           py::arg("smooth") = std::string(SmoothingName(TrackOptions{}.smoothing)),
+           py::arg("local_search") = true,
+           py::arg("full_every") = TrackOptions{}.full_every,
+           py::arg("fps") = FrameSourceOptions{}.folder_fps,
+           py::arg("fit") = "auto",
+           "Tracks a hand through a video file or a folder of frames, as `handdb track DB "
+           "PATH` does (docs/track.md): a list with one dict per frame, in order, with the "
+           "fields of its JSON lines (schemas/track_frame.schema.json): frame, time_s, source, "
+           "found ('full', 'local', 'carried' or 'none' with 'error'), matches, and pose (the "
+           "chosen match, its keypoints in the frame's px) when one was found. smooth: "
+           "'online' (default), 'offline' or 'off'; local_search=False searches the whole "
+           "database every frame; full_every: a full search at least every this many frames; "
+           "fps: a folder's frame rate. Photo options as in search().")
       .def("search_many",
            &SearchMany,
            py::arg("pictures"),

@@ -237,6 +237,21 @@ std::vector<uint32_t> CandidatePairs(const ViewIndex& index,
   return pairs;
 }
 
+// SearchOptions::subset as pairs (s * num_views + v) of the run's slots, as CandidatePairs.
+std::vector<uint32_t> SubsetPairs(const Database& db, const SearchOptions& options) {
+  std::vector<uint32_t> pairs;
+  pairs.reserve(options.subset.size());
+  const bool both = options.hand == Hand::kEither;
+  for (const SearchPair& p : options.subset) {
+    if (p.view >= db.num_views() || p.roll >= db.num_rolls()) continue;
+    if (p.hand != Hand::kRight && p.hand != Hand::kLeft) continue;
+    if (!both && p.hand != options.hand) continue;
+    const size_t first_slot = both && p.hand == Hand::kLeft ? db.num_rolls() : 0;
+    pairs.push_back(static_cast<uint32_t>((first_slot + p.roll) * db.num_views() + p.view));
+  }
+  return pairs;
+}
+
 // An indexed search needs an index of this database.
 Status CheckIndex(const ViewIndex* index, const Database& db) {
   if (index == nullptr) {
@@ -351,7 +366,8 @@ Result<std::vector<Match>> Searcher::SearchImpl(std::span<const Point2f> query_p
                                                 SearchStats* stats) const {
   const auto start = std::chrono::steady_clock::now();
   if (Status s = CheckQuery(query_px, options); !s.ok()) return s;
-  const bool indexed = ModeFor(options) == SearchMode::kIndexed;
+  const bool subset = !options.subset.empty() && !options.brute_force;
+  const bool indexed = !subset && ModeFor(options) == SearchMode::kIndexed;
   if (indexed) HANDDB_RETURN_IF_ERROR(CheckIndex(index_.get(), *db_));
 
   // A coded database's views decoded for this search stay valid until it returns (the pin);
@@ -377,7 +393,7 @@ Result<std::vector<Match>> Searcher::SearchImpl(std::span<const Point2f> query_p
   // kd-trees), the shards' own for indexed search when they have them, else the cell-major copy.
   const CoarseFields* fields = nullptr;
   if (options.coarse_bound && !options.brute_force && db_->num_views() > 0) {
-    fields = indexed && !coarse_rows_.empty() ? &coarse_rows_ : &cell_major_fields();
+    fields = (indexed || subset) && !coarse_rows_.empty() ? &coarse_rows_ : &cell_major_fields();
   }
   const ShapeIndex* shapes = options.max_per_shape > 0 ? &shape_index() : nullptr;
   // Hand::kEither searches both hands' slots in one run with one top k, ordered by (D_c, view
@@ -388,7 +404,7 @@ Result<std::vector<Match>> Searcher::SearchImpl(std::span<const Point2f> query_p
   in.y_sorted = y_sorted_;
   in.grid_half_extent_px = grid_half_extent_px_;
   in.coarse = fields;
-  in.view_histograms = fields != nullptr && !indexed ? &view_histograms() : nullptr;
+  in.view_histograms = fields != nullptr && !indexed && !subset ? &view_histograms() : nullptr;
   if (shapes != nullptr) {
     in.shape_of = shapes->of_view;
     in.num_shapes = shapes->num_shapes;
@@ -399,9 +415,11 @@ Result<std::vector<Match>> Searcher::SearchImpl(std::span<const Point2f> query_p
   SearchRun run(in, query_px, options);
   if (options.brute_force) {
     run.BruteForce(&local, start);
-  } else if (indexed) {
+  } else if (indexed || subset) {
     std::vector<uint32_t> pairs =
-        CandidatePairs(*index_, *db_, query_px, options, threads, pool, &local.candidates);
+        subset ? SubsetPairs(*db_, options)
+               : CandidatePairs(*index_, *db_, query_px, options, threads, pool, &local.candidates);
+    if (subset) local.candidates = pairs.size();
     local.seconds_index = SecondsSince(start);
     const auto bounds_start = std::chrono::steady_clock::now();
     run.BoundCandidates(std::move(pairs));

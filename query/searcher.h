@@ -66,6 +66,13 @@ struct SearcherOptions {
   bool Check() const;
 };
 
+// One (view, roll, hand) of a restricted search (SearchOptions::subset); hand is kRight or kLeft.
+struct SearchPair {
+  view_id_t view = kInvalidViewId;
+  roll_id_t roll = 0;
+  Hand hand = Hand::kRight;
+};
+
 struct SearchOptions {
   int top_k = 10;  // number of matches returned
   // At most this many matches per basic shape (0: no limit). 1 ranks shapes: the top k are the k
@@ -100,6 +107,12 @@ struct SearchOptions {
   // candidates per hand. kAuto follows the Searcher: indexed when it has an index.
   SearchMode mode = SearchMode::kAuto;
   IndexSearchOptions index;
+  // Not empty: the search is restricted to these pairs (a tracker's neighbourhood of the last
+  // answer), bounded and refined as kIndexed's candidates are: the exact top-k of brute force
+  // over the subset, whatever `mode` says (brute_force ignores it: every pair). Pairs of a hand not
+  // searched (`hand`) or outside the database are ignored; repeats are allowed. The caller keeps
+  // the pairs alive during Search.
+  std::span<const SearchPair> subset;
   bool Check() const;
 };
 
@@ -145,7 +158,9 @@ struct SearchStats {
   uint64_t query_points = 0;
   uint32_t searches = 0;                 // hands searched: 1, or 2 for Hand::kEither
   SearchMode mode = SearchMode::kExact;  // what the search ran: kExact or kIndexed
-  uint64_t candidates = 0;    // kIndexed: pairs the index proposed (the only ones bounded)
+  // kIndexed: pairs the index proposed (the only ones bounded); a subset search (reported as
+  // kExact): the subset's pairs searched.
+  uint64_t candidates = 0;
   double seconds_index = 0;   // kIndexed: the index's candidate search
   double seconds_bounds = 0;  // step 1 (rotations, coarse bounds, distance transforms, B bounds)
   double seconds_refine = 0;  // step 2

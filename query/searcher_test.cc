@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <fstream>
@@ -499,6 +500,70 @@ TEST(Searcher, EitherHandPrunedEqualsBruteForce) {
     EXPECT_GT(left_won, 4);  // both hands won somewhere, so the merge was exercised
     EXPECT_LT(left_won, 20);
   }
+}
+
+// A subset search (a tracker's neighbourhood) is the brute-force ranking of every pair, filtered
+// to the subset, cut at k: for random subsets of either hand, with and without a per-shape limit.
+TEST(Searcher, SubsetSearchEqualsBruteForceOverTheSubset) {
+  const Searcher searcher(SortedTestDatabase());
+  std::mt19937 rng(11);
+  std::uniform_int_distribution<uint32_t> view(0, kViews - 1);
+  std::uniform_int_distribution<uint32_t> roll(0, kRolls - 1);
+  int outside_best = 0;
+  for (int i = 0; i < 24; ++i) {
+    std::vector<Point2f> q = NearViewQuery(rng, 300 + i);
+    if (i % 3 == 1) q = Mirrored(q);
+    std::vector<SearchPair> subset;
+    const size_t n = 1 + (i * 37) % 200;
+    for (size_t j = 0; j < n; ++j) {
+      subset.push_back({view(rng), roll(rng), j % 2 ? Hand::kLeft : Hand::kRight});
+    }
+    subset.push_back(subset.front());  // repeats are allowed
+    SearchOptions options = Options(1 + i % 7, 1 + i % 2);
+    options.hand = i % 4 == 3 ? Hand::kRight : Hand::kEither;
+    options.max_per_shape = i % 5 == 2 ? 1 : 0;
+    SearchOptions all = options;
+    all.top_k = static_cast<int>(2 * kViews * kRolls);
+    all.max_per_shape = 0;
+    all.brute_force = true;
+    auto every = searcher.Search(q, all);
+    ASSERT_TRUE(every.ok());
+    auto in_subset = [&](const Match& m) {
+      return std::any_of(subset.begin(), subset.end(), [&](const SearchPair& p) {
+        return p.view == m.view_id && p.roll == m.roll && p.hand == m.hand;
+      });
+    };
+    std::vector<Match> expected;
+    std::map<uint32_t, int> per_shape;
+    for (const Match& m : *every) {
+      if (!in_subset(m)) continue;
+      const uint32_t shape = TestDatabase()->label(m.view_id).shape_id;
+      if (options.max_per_shape > 0 && per_shape[shape]++ >= options.max_per_shape) continue;
+      if (expected.size() < static_cast<size_t>(options.top_k)) expected.push_back(m);
+    }
+    if (!in_subset(every->front())) ++outside_best;
+    options.subset = subset;
+    SearchStats stats;
+    auto got = searcher.Search(q, options, &stats);
+    ASSERT_TRUE(got.ok());
+    ExpectSameResults(*got, expected);
+    EXPECT_GT(stats.candidates, 0u);
+    EXPECT_LE(stats.bounded, subset.size());
+  }
+  EXPECT_GT(outside_best, 10);  // the subset did restrict the answer
+}
+
+// A subset without a pair of the hand searched (or inside the database) finds nothing.
+TEST(Searcher, SubsetOfAnotherHandFindsNothing) {
+  const Searcher searcher(TestDatabase());
+  std::mt19937 rng(5);
+  const std::vector<Point2f> q = NearViewQuery(rng, 9);
+  const std::vector<SearchPair> subset = {{1, 2, Hand::kLeft}, {kViews + 3, 0, Hand::kRight}};
+  SearchOptions options = Options(3);
+  options.subset = subset;
+  auto got = searcher.Search(q, options);
+  ASSERT_TRUE(got.ok());
+  EXPECT_TRUE(got->empty());
 }
 
 TEST(Searcher, MissingDatabaseDirectory) {

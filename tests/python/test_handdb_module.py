@@ -430,3 +430,31 @@ def test_search_uses_the_index_the_manifest_lists(handdb, tmp_path, view_image):
     assert pickle.loads(pickle.dumps(exact)).search_mode == "exact"
     with pytest.raises(ValueError):
         handdb.Database(str(path), search="fast")
+
+
+def test_track_equals_the_track_command(handdb, db, db_dir, view_image, tmp_path):
+    """Database.track: the dicts of `handdb track`'s JSON lines, frame by frame; a frame that is
+    not a picture is an item with found "none", a path that is neither a video nor a folder an
+    error."""
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    other = frames / "f002.png"
+    run_handdb("show", db_dir, "--view", 11, "--roll", 7, "-o", other)
+    shutil.copy(view_image, frames / "f000.png")
+    (frames / "f001.png").write_bytes(b"not a png")
+    got = db.track(str(frames), top_k=3, smooth="off", fit="off")
+    # After the bad frame the search starts from view 5's answer: a local search near it, or the
+    # full one when the local best is far worse.
+    assert [f["found"] for f in got] in (["full", "none", "local"], ["full", "none", "full"])
+    assert got[1]["code"] == "kBadImage" and "pose" not in got[1]
+    assert got[0]["pose"]["view_id"] == 5 and "pose" in got[2]
+    out = run_handdb("track", db_dir, frames, "--top", 3, "--smooth", "off", "--quiet", "--fit", "off")
+    lines = [json.loads(line) for line in out.stdout.splitlines() if line]
+    assert len(lines) == len(got) == 3
+    for a, b in zip(got, lines):
+        assert a["found"] == b["found"]
+        assert [m["view_id"] for m in a["matches"]] == [m["view_id"] for m in b["matches"]]
+        assert a.get("pose", {}).get("view_id") == b.get("pose", {}).get("view_id")
+    with pytest.raises(handdb.Error) as e:
+        db.track(str(tmp_path / "nothing-here"))
+    assert e.value.code == "kNotFound"

@@ -27,9 +27,10 @@ RANK = {
     "query": 3,
     "photo": 3,
     "pose": 4,
-    "evaluate": 5,
-    "cli": 6,
-    "python": 6,
+    "track": 5,
+    "evaluate": 6,
+    "cli": 7,
+    "python": 7,
 }
 
 # Folders a folder may include beyond the rank rule's own folder, where the rule is narrower.
