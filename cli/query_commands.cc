@@ -49,14 +49,17 @@ constexpr double kDeg = 180.0 / M_PI;
 // Pictures up to which a batch opens the database as a single query does (few_queries).
 constexpr size_t kFewPictures = 4;
 
-// fn() on a thread of its own, or when the future is waited for if the system refuses a thread.
+// fn() on a thread of its own when `background`, else (or when the system refuses a thread)
+// when the future is waited for: a deferred fn that is never waited for never runs.
 template <typename Fn>
-std::future<std::invoke_result_t<Fn>> InBackground(Fn fn) {
-  try {
-    return std::async(std::launch::async, std::move(fn));
-  } catch (const std::system_error&) {
-    return std::async(std::launch::deferred, std::move(fn));
+std::future<std::invoke_result_t<Fn>> InBackground(bool background, Fn fn) {
+  if (background) {
+    try {
+      return std::async(std::launch::async, fn);
+    } catch (const std::system_error&) {
+    }
   }
+  return std::async(std::launch::deferred, std::move(fn));
 }
 
 // printf into a string: a batch formats pictures on many threads and prints them in order.
@@ -679,11 +682,13 @@ int RunQuery(int argc, char** argv) {
     pictures = std::move(listed).value();
   }
 
-  // The landmark model loads on its own thread while the database opens: the two are
-  // independent, and a single photo's query waits for both (docs/decisions/0018). A model that
-  // cannot be loaded is still reported before the database's problems.
+  // With two threads or more, the landmark model loads on a thread of its own while the
+  // database opens: the two are independent, and a single photo's query waits for both
+  // (docs/decisions/0018). A model that cannot be loaded is still reported before the
+  // database's problems. --threads 1 does one thing at a time.
+  const bool overlap = ResolveNumThreads(flags.picture.options.search.num_threads) > 1;
   std::future<bool> landmarker =
-      InBackground([&flags] { return flags.picture.OpenLandmarker("query"); });
+      InBackground(overlap, [&flags] { return flags.picture.OpenLandmarker("query"); });
   // Open the database first: a broken database is reported before any image work. Its index is
   // attached when the manifest lists one (--search auto), and searched (SearchMode::kAuto).
   SearcherOptions open;
@@ -710,7 +715,7 @@ int RunQuery(int argc, char** argv) {
   std::future<void> prepared;
   if ((*searcher)->ModeFor(search) == SearchMode::kExact && !search.brute_force &&
       search.coarse_bound) {
-    prepared = InBackground([&searcher] {
+    prepared = InBackground(overlap, [&searcher] {
       try {
         (*searcher)->PrepareExactSearch();
       } catch (...) {
