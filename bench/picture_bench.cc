@@ -1,21 +1,27 @@
-// The whole path of `handdb query` for photos, stage by stage, and what a batch saves: on a real
-// database and the development photos, in one run,
+// The whole path of `handdb query` for photos, stage by stage, against the search alone: on a
+// real database and the development photos, in one run,
 //   (a) start-up: `handdb --help`, a process that loads the binary's libraries and exits;
 //   (b) in this process, each stage of a picture timed on its own: the database open
 //       (Searcher::Open as `handdb query` opens it), the landmark model load, the decode
 //       (photo/image_read.h), segmentation and edges (LoadQueryEdges less its decode), the
 //       landmark network (HandLandmarker::Detect on the crop ReadPicture chose), the top-k search
-//       of the edges, the landmark re-ranking of the pool, and SearchPicture as a whole. Cold is
+//       of the edges, the search of the re-ranking's pool, the landmark re-ranking, the pose fit
+//       (FitPictureMatches, when the database has its rig) and SearchPicture as a whole. Cold is
 //       the first call in the process (the first photo: lazy caches, first network run), warm the
-//       median of the rest (open and model: of --repeats more);
-//   (c) photos/s of `handdb query DB PHOTO` run once per photo against one `handdb query DB
-//       PHOTO...` batch over the same photos and threads, their ratio, and whether every photo got
-//       the same matches both ways.
+//       median of the rest (open and model: of --repeats more); each warm median also as a
+//       ratio to the warm search of the pool, the search a photo with landmarks runs;
+//   (c) `handdb query DB PHOTO` run once per photo (median wall per photo) against one
+//       `handdb query DB PHOTO...` batch over the same photos and threads, and whether every
+//       photo got the same matches both ways;
+//   (d) the batch over every photo under --photos (`handdb query DB - --json`, the paths on
+//       stdin), with the default fit and with --fit off: photos/s, and the CPU time of the
+//       process over wall time x threads (how busy the threads were).
 //
 //   picture_bench --db DIR [--photos DIR] [--set-queries 24] [--threads 2] [--repeats 5]
 //                 [--handdb PATH]
 #include <fcntl.h>
 #include <spawn.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -35,9 +41,11 @@
 #include "bench/bench_args.h"
 #include "bench/query_sets.h"
 #include "evaluate/photos.h"
+#include "generator/hand/database_rig.h"
 #include "photo/hand_landmarks.h"
 #include "photo/image_edges.h"
 #include "photo/image_read.h"
+#include "pose/fit_matches.h"
 #include "pose/landmark_rank.h"
 #include "pose/picture_search.h"
 #include "query/searcher.h"
@@ -61,15 +69,21 @@ struct Args {
 };
 
 struct Timed {
-  double seconds = 0;  // from spawn to reaped
-  bool ok = false;     // started and exited 0
+  double seconds = 0;      // from spawn to reaped
+  double cpu_seconds = 0;  // user + system time of the process
+  bool ok = false;         // started and exited 0
 };
 
-// Runs argv with stdout into `out` (or discarded when empty) and stderr discarded. Its own
-// posix_spawn and waitpid: base/subprocess.h polls its pipes, which would add to a 20 ms start.
-Timed RunTimed(const std::vector<std::string>& argv, const std::string& out) {
+// Runs argv with stdin from `in` (or /dev/null when empty), stdout into `out` (or discarded when
+// empty) and stderr discarded. Its own posix_spawn and wait4: base/subprocess.h polls its pipes,
+// which would add to a 20 ms start.
+Timed RunTimed(const std::vector<std::string>& argv,
+               const std::string& out,
+               const std::string& in = "") {
   posix_spawn_file_actions_t actions;
   posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(
+      &actions, STDIN_FILENO, in.empty() ? "/dev/null" : in.c_str(), O_RDONLY, 0);
   posix_spawn_file_actions_addopen(&actions,
                                    STDOUT_FILENO,
                                    out.empty() ? "/dev/null" : out.c_str(),
@@ -85,8 +99,12 @@ Timed RunTimed(const std::vector<std::string>& argv, const std::string& out) {
   posix_spawn_file_actions_destroy(&actions);
   if (rc != 0) return {};
   int status = 0;
-  if (waitpid(pid, &status, 0) != pid) return {};
-  return {NowSeconds() - t0, WIFEXITED(status) && WEXITSTATUS(status) == 0};
+  rusage usage{};
+  if (wait4(pid, &status, 0, &usage) != pid) return {};
+  auto seconds = [](const timeval& t) { return static_cast<double>(t.tv_sec) + t.tv_usec * 1e-6; };
+  return {NowSeconds() - t0,
+          seconds(usage.ru_utime) + seconds(usage.ru_stime),
+          WIFEXITED(status) && WEXITSTATUS(status) == 0};
 }
 
 // The matches (view, roll, hand, D_c) of one query result, to compare two runs' answers.
@@ -113,8 +131,14 @@ struct Stage {
   std::vector<double> warm_ms;
 };
 
-void PrintStage(const Stage& s, const char* note = "") {
-  std::printf("  %-34s %9.2f %9.2f  %s\n", s.name, s.cold_ms, Median(s.warm_ms), note);
+// A stage's cold and warm times and its warm median over the warm search of the pool.
+void PrintStage(const Stage& s, double search_ms, const char* note = "") {
+  std::printf("  %-34s %9.2f %9.2f %8.2f  %s\n",
+              s.name,
+              s.cold_ms,
+              Median(s.warm_ms),
+              Median(s.warm_ms) / search_ms,
+              note);
 }
 
 int Run(const Args& args) {
@@ -187,8 +211,15 @@ int Run(const Args& args) {
     landmarker = std::move(m).value();
   }
 
+  // The pose fit `handdb query` runs by default, when the database carries its rig.
+  std::shared_ptr<const DatabaseRig> rig;
+  if (auto r = LoadDatabaseRig(args.db); r.ok()) {
+    rig = std::make_shared<const DatabaseRig>(std::move(r).value());
+  }
+
   PictureSearchOptions options;
   options.picture.landmarker = landmarker;
+  options.rig = rig;
   options.search.hand = Hand::kEither;  // `handdb query`'s default
   options.search.num_threads = args.threads;
   SearchOptions pool_search = options.search;
@@ -196,7 +227,8 @@ int Run(const Args& args) {
 
   Stage decode{"decode"}, segment{"segmentation + edges"}, network{"landmark network"},
       search{"search (top 10 of the edges)"}, pool{"search (the re-ranking's pool)"},
-      rerank{"re-rank by landmarks"}, whole{"SearchPicture (all of it)"};
+      rerank{"re-rank by landmarks"}, fit{"pose fit (FitPictureMatches)"},
+      whole{"SearchPicture (all of it)"};
   int failed = 0;
   for (size_t i = 0; i < photos.size(); ++i) {
     // Cold: the first photo with a hand (the first search, the first network run).
@@ -231,9 +263,15 @@ int Run(const Args& args) {
     put(pool, (NowSeconds() - t0) * 1e3);
     if (!top.ok() || !pool_matches.ok()) return 1;
     t0 = NowSeconds();
-    RerankByLandmarks(
+    const std::vector<Match> ranked = RerankByLandmarks(
         std::move(pool_matches).value(), *evidence, options.search, options.landmark_rank);
     put(rerank, (NowSeconds() - t0) * 1e3);
+    if (rig != nullptr) {
+      t0 = NowSeconds();
+      auto fitted = FitPictureMatches(*rig, searcher->database(), *evidence, ranked, options.fit);
+      put(fit, (NowSeconds() - t0) * 1e3);
+      if (!fitted.ok()) return 1;
+    }
     t0 = NowSeconds();
     auto all = SearchPicture(*searcher, photos[i], options);
     put(whole, (NowSeconds() - t0) * 1e3);
@@ -245,16 +283,18 @@ int Run(const Args& args) {
   std::printf("stages in one process (%zu photos, %d without a hand or landmarks), ms:\n",
               photos.size(),
               failed);
-  std::printf("  %-34s %9s %9s\n", "stage", "cold", "warm");
-  PrintStage(open, "cold: the first open in the process");
-  PrintStage(model);
-  PrintStage(decode);
-  PrintStage(segment, "LoadQueryEdges less its decode");
-  PrintStage(network);
-  PrintStage(search);
-  PrintStage(pool, "what SearchEvidence searches for a photo with landmarks");
-  PrintStage(rerank);
-  PrintStage(whole);
+  std::printf("  %-34s %9s %9s %8s\n", "stage", "cold", "warm", "/search");
+  const double search_ms = Median(pool.warm_ms);
+  PrintStage(open, search_ms, "cold: the first open in the process");
+  PrintStage(model, search_ms);
+  PrintStage(decode, search_ms);
+  PrintStage(segment, search_ms, "LoadQueryEdges less its decode");
+  PrintStage(network, search_ms);
+  PrintStage(search, search_ms);
+  PrintStage(pool, search_ms, "what SearchEvidence searches for a photo with landmarks");
+  PrintStage(rerank, search_ms);
+  if (rig != nullptr) PrintStage(fit, search_ms, "the first match fitted (--fit auto)");
+  PrintStage(whole, search_ms);
   const double per_picture = Median(whole.warm_ms);
   const double fixed = Median(start_ms) + Median(open.warm_ms) + Median(model.warm_ms);
   std::printf(
@@ -267,7 +307,7 @@ int Run(const Args& args) {
   const fs::path tmp = fs::temp_directory_path() / ("picture_bench-" + std::to_string(getpid()));
   fs::create_directories(tmp);
   std::vector<std::string> single_keys(photos.size());
-  std::vector<double> per_process_s, batch_s;
+  std::vector<double> per_process_s, batch_s, per_photo_s;
   bool same = true;
   for (int r = 0; r < std::max(1, args.repeats / 2); ++r) {
     double total = 0;
@@ -277,6 +317,7 @@ int Run(const Args& args) {
           {args.handdb, "query", args.db, photos[i], "--json", "-q", "--threads", threads}, out);
       // A photo without a hand fails in both forms; its time still counts.
       total += t.seconds;
+      per_photo_s.push_back(t.seconds);
       if (t.ok && r == 0) single_keys[i] = MatchesKey(nlohmann::json::parse(ReadText(out)));
     }
     per_process_s.push_back(total);
@@ -303,13 +344,59 @@ int Run(const Args& args) {
               photos.size(),
               args.threads,
               per_process_s.size());
-  std::printf(
-      "  one process per photo   %7.2f s  %6.2f photos/s\n", Median(per_process_s), single_rate);
+  std::printf("  one process per photo   %7.2f s  %6.2f photos/s  (median %.1f ms a photo)\n",
+              Median(per_process_s),
+              single_rate,
+              Median(per_photo_s) * 1e3);
   std::printf("  one batch process       %7.2f s  %6.2f photos/s  (%.2fx)\n",
               Median(batch_s),
               batch_rate,
               batch_rate / single_rate);
-  std::printf("  same matches both ways: %s\n", same ? "yes" : "NO");
+  std::printf("  same matches both ways: %s\n\n", same ? "yes" : "NO");
+
+  // (d) The batch over every photo, the paths on stdin as a script would send them.
+  const fs::path list =
+      fs::temp_directory_path() / ("picture_bench-" + std::to_string(getpid()) + "-photos.txt");
+  {
+    std::ofstream out(list);
+    for (const fs::path& f : files) out << f.string() << "\n";
+  }
+  std::printf(
+      "batch of all %zu photos (handdb query DB - --json), %d threads, median of %d runs:\n",
+      files.size(),
+      args.threads,
+      std::max(1, args.repeats / 2));
+  for (const char* fit_mode : {"auto", "off"}) {
+    std::vector<double> wall_s, cpu_s;
+    for (int r = 0; r < std::max(1, args.repeats / 2); ++r) {
+      const Timed t = RunTimed({args.handdb,
+                                "query",
+                                args.db,
+                                "-",
+                                "--json",
+                                "-q",
+                                "--threads",
+                                threads,
+                                "--fit",
+                                fit_mode},
+                               "",
+                               list.string());
+      wall_s.push_back(t.seconds);
+      cpu_s.push_back(t.cpu_seconds);
+    }
+    const double wall = Median(wall_s);
+    const double cpu = Median(cpu_s);
+    std::printf(
+        "  --fit %-4s  %7.2f s  %6.2f photos/s  CPU %6.2f s (%.1f ms a photo), threads "
+        "busy %3.0f%%\n",
+        fit_mode,
+        wall,
+        static_cast<double>(files.size()) / wall,
+        cpu,
+        cpu / static_cast<double>(files.size()) * 1e3,
+        100.0 * cpu / (wall * args.threads));
+  }
+  fs::remove(list);
   return same ? 0 : 1;
 }
 

@@ -84,7 +84,7 @@ void PhotoInputFlags::Add(CLI::App& app, Which which) {
       ->capture_default_str();
 }
 
-bool PhotoInputFlags::Finish(const std::string& cmd) {
+bool PhotoInputFlags::FinishFlags(const std::string& cmd) {
   const char* c = cmd.c_str();
   auto kind = ParseQueryInputKind(input);
   if (!kind.ok()) {
@@ -145,6 +145,15 @@ bool PhotoInputFlags::Finish(const std::string& cmd) {
     std::fprintf(stderr, "handdb %s: invalid photo options (see above)\n", c);
     return false;
   }
+  return true;
+}
+
+bool PhotoInputFlags::Finish(const std::string& cmd) {
+  return FinishFlags(cmd) && OpenLandmarker(cmd);
+}
+
+bool PhotoInputFlags::OpenLandmarker(const std::string& cmd) {
+  const char* c = cmd.c_str();
   // Edge images and label EXRs have no photo to find landmarks in.
   if (options.picture.edges.kind != QueryInputKind::kEdges &&
       options.picture.edges.kind != QueryInputKind::kLabels &&

@@ -41,6 +41,12 @@ struct PhotoInputFlags {
   // Completes `options.picture` from the text flags and opens the landmark model; false (one line
   // "handdb <cmd>: ..." on stderr) on bad usage or a model that cannot be loaded.
   bool Finish(const std::string& cmd);
+  // Finish in two steps, so a command can load the model while it opens its database: the text
+  // flags (false: bad usage, exit 2), then the landmark model (false: failure_exit_code). Neither
+  // prints anything to stdout; OpenLandmarker writes only `options.picture.landmarker` and
+  // `options.landmark_rank`.
+  bool FinishFlags(const std::string& cmd);
+  bool OpenLandmarker(const std::string& cmd);
   // After Finish failed: the exit code it means. A model file that cannot be loaded is a user
   // error (1), like any other file; the rest is bad usage (2).
   int failure_exit_code = 2;

@@ -9,11 +9,15 @@
 #include <cstdarg>
 #include <cstdio>
 #include <filesystem>
+#include <future>
 #include <iostream>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
+#include <system_error>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "base/json_schema.h"
@@ -44,6 +48,19 @@ using json = nlohmann::json;
 constexpr double kDeg = 180.0 / M_PI;
 // Pictures up to which a batch opens the database as a single query does (few_queries).
 constexpr size_t kFewPictures = 4;
+
+// fn() on a thread of its own when `background`, else (or when the system refuses a thread)
+// when the future is waited for: a deferred fn that is never waited for never runs.
+template <typename Fn>
+std::future<std::invoke_result_t<Fn>> InBackground(bool background, Fn fn) {
+  if (background) {
+    try {
+      return std::async(std::launch::async, fn);
+    } catch (const std::system_error&) {
+    }
+  }
+  return std::async(std::launch::deferred, std::move(fn));
+}
 
 // printf into a string: a batch formats pictures on many threads and prints them in order.
 [[gnu::format(printf, 2, 3)]] void Appendf(std::string* out, const char* format, ...) {
@@ -311,7 +328,8 @@ bool QueryFlags::Finish() {
     std::fprintf(stderr, "handdb query: --mask belongs to one photo: give one IMAGE\n");
     return false;
   }
-  if (!picture.Finish("query")) return false;
+  // The landmark model is loaded by RunQuery while the database opens (OpenLandmarker).
+  if (!picture.FinishFlags("query")) return false;
   // One line naming the flag for what the flags can get wrong (the option checks below print
   // source paths); they stay as the backstop for the rest.
   bool dt_cell_ok = false;
@@ -664,6 +682,13 @@ int RunQuery(int argc, char** argv) {
     pictures = std::move(listed).value();
   }
 
+  // With two threads or more, the landmark model loads on a thread of its own while the
+  // database opens: the two are independent, and a single photo's query waits for both
+  // (docs/decisions/0018). A model that cannot be loaded is still reported before the
+  // database's problems. --threads 1 does one thing at a time.
+  const bool overlap = ResolveNumThreads(flags.picture.options.search.num_threads) > 1;
+  std::future<bool> landmarker =
+      InBackground(overlap, [&flags] { return flags.picture.OpenLandmarker("query"); });
   // Open the database first: a broken database is reported before any image work. Its index is
   // attached when the manifest lists one (--search auto), and searched (SearchMode::kAuto).
   SearcherOptions open;
@@ -677,10 +702,26 @@ int RunQuery(int argc, char** argv) {
   // answers are the same either way.
   open.few_queries = pictures.size() < kFewPictures;
   auto searcher = Searcher::Open(db_dir, open);
+  if (!landmarker.get()) return flags.picture.failure_exit_code;
   if (!searcher.ok()) return Fail("query", searcher.status());
   const Database& db = (*searcher)->database();
   if (db.num_views() == 0)
     return Fail("query", Status(StatusCode::kNotFound, db_dir + ": the database has no views"));
+
+  // What the first exact search would build before it starts (the coarse fields, the views'
+  // histograms) builds on the Searcher's pool while the rig loads and the first pictures are
+  // read. The same caches either way; an error is left for the search to report.
+  const SearchOptions& search = flags.picture.options.search;
+  std::future<void> prepared;
+  if ((*searcher)->ModeFor(search) == SearchMode::kExact && !search.brute_force &&
+      search.coarse_bound) {
+    prepared = InBackground(overlap, [&searcher] {
+      try {
+        (*searcher)->PrepareExactSearch();
+      } catch (...) {
+      }
+    });
+  }
 
   // The pose fit and --export need the rig the database was rendered with.
   if (flags.fit != "off" || !flags.export_glb.empty()) {

@@ -25,9 +25,9 @@ set(HANDDB_SCHEMA_INSTALL_DIR ${CMAKE_INSTALL_DATADIR}/handdb/schemas)
 # query/kdtree.h and query/coarse_bound.h are doors because query/searcher.h needs their types
 # (SearchOptions::kdtree, the Searcher's coarse fields), query/index/view_index.h for
 # SearchOptions::index and Searcher::SetIndex (and index/embedding.h for the index's grid);
-# format/coarse_field.h because coarse_bound.h does.
+# format/coarse_field.h and base/huge_pages.h because coarse_bound.h does.
 set(HANDDB_DOORS_base status.h atomic_file.h json_schema.h thread_pool.h progress.h subprocess.h
-                      repo_root.h)
+                      repo_root.h huge_pages.h)
 set(HANDDB_DOORS_format view.h roll.h shard_reader.h shard_writer.h manifest.h validator.h
                         coarse_field.h)
 set(HANDDB_DOORS_cluster slurm.h)

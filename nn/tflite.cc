@@ -381,8 +381,8 @@ bool CheckOp(const TfliteModel::Graph& g,
 
 using Graph = TfliteModel::Graph;
 
-// The model file's bytes, in huge pages like the weights (nn/huge_pages.h).
-using FileBytes = std::vector<uint8_t, nn::HugePageAllocator<uint8_t>>;
+// The model file's bytes, in huge pages like the weights (base/huge_pages.h).
+using FileBytes = std::vector<uint8_t, HugePageAllocator<uint8_t>>;
 
 // The whole file, after its size and identifier checks.
 Result<FileBytes> ReadModelFile(const std::filesystem::path& path) {

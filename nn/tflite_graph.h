@@ -9,7 +9,7 @@
 #include <span>
 #include <vector>
 
-#include "nn/huge_pages.h"
+#include "base/huge_pages.h"
 #include "nn/tflite.h"
 #include "nn/tflite_ops.h"
 
@@ -46,9 +46,9 @@ struct TfliteModel::Graph {
     int64_t elements = 1;
     int type = tflite::kFloat32;
     bool constant = false;
-    // Constants (float16 weights converted at load), in huge pages (nn/huge_pages.h). Read them
+    // Constants (float16 weights converted at load), in huge pages (base/huge_pages.h). Read them
     // through Graph::Values: a folded DEQUANTIZE moves its input's here.
-    std::vector<float, nn::HugePageAllocator<float>> values;
+    std::vector<float, HugePageAllocator<float>> values;
     int folded_into = -1;   // a float16 constant: the DEQUANTIZE output that holds its values
     std::vector<int> ints;  // int32 constants (MEAN's axes, RESHAPE's shape)
   };
@@ -61,7 +61,7 @@ struct TfliteModel::Graph {
   };
   // Constant t's float values (followed through the DEQUANTIZEs that moved them: each writes a
   // tensor written by no earlier operator, so the chain ends).
-  const std::vector<float, nn::HugePageAllocator<float>>& Values(int t) const {
+  const std::vector<float, HugePageAllocator<float>>& Values(int t) const {
     while (tensors[t].folded_into >= 0) t = tensors[t].folded_into;
     return tensors[t].values;
   }

@@ -16,14 +16,14 @@ namespace {
 using XnnGraph = TfliteModel::Graph;
 
 // XNNPACK's aligned blocks (packed weights, the runtimes' activations: 16 MB for the full
-// landmark model) in huge pages, as the model's own weights (nn/huge_pages.h).
+// landmark model) in huge pages, as the model's own weights (base/huge_pages.h).
 void* Allocate(void*, size_t bytes) { return std::malloc(bytes); }
 void* Reallocate(void*, void* p, size_t bytes) { return std::realloc(p, bytes); }
 void Deallocate(void*, void* p) { std::free(p); }
 void* AllocateAligned(void*, size_t alignment, size_t bytes) {
-  return nn::AllocateHuge(bytes, alignment);
+  return AllocateHuge(bytes, alignment);
 }
-void DeallocateAligned(void*, void* p) { nn::FreeHuge(p); }
+void DeallocateAligned(void*, void* p) { FreeHuge(p); }
 
 // XNNPACK's own state is set up once per process and kept: its status answers every later call.
 xnn_status InitializeXnnpack() {

@@ -20,6 +20,7 @@
 #include <span>
 #include <vector>
 
+#include "base/huge_pages.h"
 #include "format/coarse_field.h"
 #include "format/view.h"
 #include "query/database.h"
@@ -200,7 +201,8 @@ class CoarseFields {
   FieldKind kind_ = FieldKind::kBox;
   size_t num_views_ = 0;
   size_t computed_views_ = 0;
-  std::vector<uint8_t> planes_;  // [block][cell][view in block]
+  // [block][cell][view in block], in huge pages: written once, first touched in one go.
+  std::vector<uint8_t, HugePageAllocator<uint8_t>> planes_;
 };
 
 // The coarse bound of the view -> query term B (docs/query.md, "The coarse B bound"). For slot

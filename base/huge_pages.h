@@ -1,17 +1,18 @@
-// Memory for a model's large buffers (the file's bytes, the float weights, XNNPACK's packed
-// weights and activations), carved from 2 MiB-aligned mappings advised for transparent huge
-// pages. Loading the full landmark model first-touches ~30 MB: in 4 KiB pages that is ~8000 page
-// faults, which on a virtual machine cost ~17 us each (40 MB: 170 ms, against 3.5 ms in huge
-// pages; docs/decisions/0013-landmark-network-on-xnnpack.md). Where the kernel gives no huge
+// Memory for large buffers that are written once and read often -- the landmark model's (the
+// file's bytes, the float weights, XNNPACK's packed weights and activations) and the exact
+// search's cell-major coarse fields -- carved from 2 MiB-aligned mappings advised for transparent
+// huge pages. Loading the full landmark model first-touches ~30 MB: in 4 KiB pages that is ~8000
+// page faults, which on a virtual machine cost ~17 us each (40 MB: 170 ms, against 3.5 ms in huge
+// pages; docs/decisions/0013-landmark-network-on-xnnpack.md); the paper database's coarse fields
+// are 4 MB, ~1000 faults in small pages (docs/decisions/0018). Where the kernel gives no huge
 // pages (transparent_hugepage=never) the mappings are plain ones: slower, the same results.
-// Under AddressSanitizer the blocks are plain heap blocks, checked like any other. Internal to
-// nn/.
+// Under AddressSanitizer the blocks are plain heap blocks, checked like any other.
 #pragma once
 
 #include <cstddef>
 #include <new>
 
-namespace handdb::nn {
+namespace handdb {
 
 // `bytes` aligned to `alignment` (a power of two, at most 4096); nullptr when the system has no
 // memory left. Thread-safe. A block of 1 MiB or more gets mappings of its own; smaller ones share
@@ -40,4 +41,4 @@ struct HugePageAllocator {
   }
 };
 
-}  // namespace handdb::nn
+}  // namespace handdb

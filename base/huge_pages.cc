@@ -1,4 +1,4 @@
-#include "nn/huge_pages.h"
+#include "base/huge_pages.h"
 
 #include <sys/mman.h>
 
@@ -9,16 +9,16 @@
 #include <vector>
 
 // Under AddressSanitizer every block is an ordinary heap block, so a read past the end of the
-// model file's bytes or a weight tensor is reported, as the fuzz target relies on.
+// model file's bytes, a weight tensor or a coarse field is reported, as the fuzz targets rely on.
 #if defined(__SANITIZE_ADDRESS__)
-#define HANDDB_NN_PLAIN_BLOCKS 1
+#define HANDDB_HUGE_PAGES_PLAIN_BLOCKS 1
 #elif defined(__has_feature)
 #if __has_feature(address_sanitizer)
-#define HANDDB_NN_PLAIN_BLOCKS 1
+#define HANDDB_HUGE_PAGES_PLAIN_BLOCKS 1
 #endif
 #endif
 
-namespace handdb::nn {
+namespace handdb {
 namespace {
 
 constexpr size_t kHugePage = size_t{2} << 20;
@@ -67,7 +67,7 @@ Chunks& State() {
 
 void* AllocateHuge(size_t bytes, size_t alignment) {
   if (bytes == 0) bytes = 1;
-#ifdef HANDDB_NN_PLAIN_BLOCKS
+#ifdef HANDDB_HUGE_PAGES_PLAIN_BLOCKS
   return std::aligned_alloc(alignment, (bytes + alignment - 1) / alignment * alignment);
 #endif
   Chunks& s = State();
@@ -102,7 +102,7 @@ void* AllocateHuge(size_t bytes, size_t alignment) {
 
 void FreeHuge(void* p) {
   if (p == nullptr) return;
-#ifdef HANDDB_NN_PLAIN_BLOCKS
+#ifdef HANDDB_HUGE_PAGES_PLAIN_BLOCKS
   std::free(p);
   return;
 #endif
@@ -124,4 +124,4 @@ void FreeHuge(void* p) {
   }
 }
 
-}  // namespace handdb::nn
+}  // namespace handdb
