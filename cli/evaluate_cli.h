@@ -82,10 +82,13 @@ struct EvaluateSlurmRequest {
 // how many sequences).
 struct SequenceEvaluateFlags {
   SequenceScoreOptions options;
+  std::string predictor = "tracker";  // "tracker" (handdb track's defaults) or "alone"
+  std::string smooth = "online";      // the tracker's smoothing
   void Add(CLI::App& app);
 };
 
-// Scores the predictor that answers each frame alone on the sequence test set request.testset;
+// Scores the tracker (or the predictor that answers each frame alone) on the sequence test set
+// request.testset;
 // `input_given`: --input was on the command line (only photo applies). Returns the exit code.
 int RunEvaluateSequences(EvaluateSlurmRequest request,
                          const SequenceEvaluateFlags& sequence_flags,

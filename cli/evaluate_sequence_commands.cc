@@ -1,7 +1,8 @@
 // `handdb evaluate DB SEQUENCE-TESTSET`: a test set made of sequences (generator/testset/
 // sequence.h) is scored with the sequence metrics of evaluate/sequence.h -- per-frame keypoint
-// error, jitter, recovery after the hand left the picture, frames/s -- for the baseline that
-// answers each frame alone, as `handdb query` answers a photo (docs/evaluation.md, "Sequences").
+// error, jitter, recovery after the hand left the picture, frames/s -- for the tracker of
+// `handdb track` (track/tracker.h), or for the baseline that answers each frame alone, as
+// `handdb query` answers a photo (docs/evaluation.md, "Sequences").
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <string>
@@ -11,6 +12,7 @@
 #include "cli/cli_util.h"
 #include "cli/evaluate_cli.h"
 #include "evaluate/sequence.h"
+#include "evaluate/sequence_track.h"
 #include "pose/picture_search.h"
 
 namespace handdb::cli {
@@ -28,6 +30,17 @@ void SequenceEvaluateFlags::Add(CLI::App& app) {
                  options.recovery_max_error,
                  "... with a 2D keypoint error of at most this many hand sizes")
       ->check(CLI::NonNegativeNumber)
+      ->capture_default_str()
+      ->group(group);
+  app.add_option("--predictor",
+                 predictor,
+                 "what answers the frames: tracker (handdb track, with its defaults) or alone "
+                 "(each frame searched on its own, as handdb query answers a photo)")
+      ->check(CLI::IsMember({"tracker", "alone"}))
+      ->capture_default_str()
+      ->group(group);
+  app.add_option("--smooth", smooth, "the tracker's smoothing: online, offline or off")
+      ->check(CLI::IsMember({"online", "offline", "off"}))
       ->capture_default_str()
       ->group(group);
   app.add_option("--sequences", options.max_sequences, "score only the first N sequences (0: all)")
@@ -77,13 +90,23 @@ int RunEvaluateSequences(EvaluateSlurmRequest request,
     std::fprintf(stderr, "handdb evaluate: bad picture search options\n");
     return kExitUsage;
   }
-  const FramePredictor predictor = MakeFrameAlonePredictor(**searcher, search);
-  auto report = EvaluateSequences(*testset, predictor, options);
+  const char* fitted = search.rig != nullptr ? "fitted" : "top match";
+  std::string predictor_name;
+  auto report = [&]() -> Result<SequenceReport> {
+    if (sequence_flags.predictor == "alone") {
+      predictor_name = std::string("each frame alone (SearchPicture, ") + fitted + ")";
+      return EvaluateSequences(*testset, MakeFrameAlonePredictor(**searcher, search), options);
+    }
+    TrackOptions track;
+    track.picture = search;
+    track.smoothing = *ParseSmoothing(sequence_flags.smooth);
+    predictor_name = "tracker (smoothing " + sequence_flags.smooth + ", " + fitted + ")";
+    return EvaluateSequences(*testset, MakeTrackerPredictor(**searcher, track), options);
+  }();
   if (!report.ok()) return Fail("evaluate", report.status());
   report->database = request.db;
   report->testset = request.testset;
-  report->predictor = search.rig != nullptr ? "each frame alone (SearchPicture, fitted)"
-                                            : "each frame alone (SearchPicture, top match)";
+  report->predictor = predictor_name;
   if (!request.quiet) std::printf("%s", SequenceReportToText(*report).c_str());
   if (!request.json_out.empty()) {
     const nlohmann::json doc = SequenceReportToJson(*report);

@@ -346,8 +346,33 @@ SequenceStats CombineSequenceStats(const std::vector<SequenceOutcome>& sequences
   return FinishParts(parts);
 }
 
+SequencePredictor FrameByFrame(FramePredictor predictor) {
+  return [predictor = std::move(predictor)](
+             const std::vector<SequenceFrameInput>& frames,
+             double /*fps*/,
+             std::vector<double>* seconds,
+             const std::function<void()>& frame_done) -> Result<std::vector<FramePrediction>> {
+    std::vector<FramePrediction> predictions;
+    for (const SequenceFrameInput& in : frames) {
+      const auto t0 = std::chrono::steady_clock::now();
+      auto p = predictor(in);
+      seconds->push_back(SecondsSince(t0));
+      if (!p.ok()) return p.status();
+      predictions.push_back(*p);
+      frame_done();
+    }
+    return predictions;
+  };
+}
+
 Result<SequenceReport> EvaluateSequences(const SequenceTestSet& testset,
                                          const FramePredictor& predictor,
+                                         const SequenceScoreOptions& options) {
+  return EvaluateSequences(testset, FrameByFrame(predictor), options);
+}
+
+Result<SequenceReport> EvaluateSequences(const SequenceTestSet& testset,
+                                         const SequencePredictor& predictor,
                                          const SequenceScoreOptions& options) {
   if (!options.Check()) return Status(StatusCode::kInvalidArgument, "bad sequence options");
   const auto start = std::chrono::steady_clock::now();
@@ -364,8 +389,7 @@ Result<SequenceReport> EvaluateSequences(const SequenceTestSet& testset,
   Progress progress("sequence frames", total, options.progress, "frames");
   for (size_t s = 0; s < num_sequences; ++s) {
     const SequenceTruth& truth = testset.sequences[s];
-    std::vector<FramePrediction> predictions;
-    std::vector<double> seconds;
+    std::vector<SequenceFrameInput> inputs;
     for (size_t t = 0; t < truth.frames.size(); ++t) {
       const SequenceFrameTruth& f = truth.frames[t];
       if (f.photo.empty()) {
@@ -380,14 +404,14 @@ Result<SequenceReport> EvaluateSequences(const SequenceTestSet& testset,
       in.time = f.time;
       in.first = t == 0;
       in.photo = f.photo;
-      const auto t0 = std::chrono::steady_clock::now();
-      auto p = predictor(in);
-      seconds.push_back(SecondsSince(t0));
-      if (!p.ok()) return p.status();
-      predictions.push_back(*p);
-      progress.Add();
+      inputs.push_back(std::move(in));
     }
-    report.sequences.push_back(ScoreSequence(truth, predictions, seconds, options));
+    std::vector<double> seconds;
+    auto predictions = predictor(inputs, testset.fps, &seconds, [&] { progress.Add(); });
+    if (!predictions.ok()) return predictions.status();
+    THROW_CHECK_EQ(predictions->size(), inputs.size());
+    THROW_CHECK_EQ(seconds.size(), inputs.size());
+    report.sequences.push_back(ScoreSequence(truth, *predictions, seconds, options));
   }
   progress.Finish();
   report.overall = CombineSequenceStats(report.sequences, options);

@@ -90,6 +90,19 @@ struct FramePrediction {
 // a hand is an answer with found = false.
 using FramePredictor = std::function<Result<FramePrediction>(const SequenceFrameInput&)>;
 
+// A whole sequence at once, for a predictor that needs the frames after a frame to answer it (a
+// tracker's offline smoothing): the prediction of every frame of `frames` (one sequence, in
+// order) and, in *seconds, the time each took; frame_done() once per frame as it is answered
+// (progress). An error ends the evaluation.
+using SequencePredictor = std::function<Result<std::vector<FramePrediction>>(
+    const std::vector<SequenceFrameInput>& frames,
+    double fps,
+    std::vector<double>* seconds,
+    const std::function<void()>& frame_done)>;
+
+// A frame predictor as a sequence predictor: frame after frame.
+SequencePredictor FrameByFrame(FramePredictor predictor);
+
 // Each frame alone: SearchPicture of its photo, the top match (its fit when options.rig is set
 // and the fit succeeded). No hand in the picture (kNoHand) is "not found". The searcher must
 // outlive the predictor.
@@ -167,6 +180,9 @@ SequenceStats CombineSequenceStats(const std::vector<SequenceOutcome>& sequences
                                    const SequenceScoreOptions& options);
 
 // Runs `predictor` over every frame (progress with ETA) and scores them.
+Result<SequenceReport> EvaluateSequences(const SequenceTestSet& testset,
+                                         const SequencePredictor& predictor,
+                                         const SequenceScoreOptions& options);
 Result<SequenceReport> EvaluateSequences(const SequenceTestSet& testset,
                                          const FramePredictor& predictor,
                                          const SequenceScoreOptions& options);

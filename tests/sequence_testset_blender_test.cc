@@ -3,7 +3,8 @@
 // 128 px, the second leaving the picture and coming back), its truth marks the frames out of the
 // picture, the per-sequence frame folders link to the photos, a rerun renders nothing; then
 // `handdb evaluate` scores the sequences against a tiny database (one shape, 12 directions, 4
-// rolls) with the each-frame-alone baseline and writes a report that matches its schema.
+// rolls) with the tracker and with the each-frame-alone baseline, and writes reports that match
+// their schema.
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -124,6 +125,17 @@ TEST(SequenceTestSetBlender, RendersTruthFoldersAndScores) {
   EXPECT_GT(overall.at("frames_per_second").get<double>(), 0);
   // The frames where the hand is wholly in the picture are found from the photo alone.
   EXPECT_GE(overall.at("found_visible").get<int>(), 10);
+
+  // The baseline: each frame answered alone.
+  r = Handdb("evaluate " + (dir / "db").string() + " " + ts.string() + " --json " +
+             report_path.string() + " --threads 2 --fit off --predictor alone");
+  ASSERT_EQ(r.code, 0) << r.err;
+  auto alone = ReadJsonFile(report_path, "sequence_evaluation.schema.json");
+  ASSERT_TRUE(alone.ok()) << alone.status().ToString();
+  EXPECT_EQ(alone->at("overall").at("frames"), 16);
+  EXPECT_GE(alone->at("overall").at("found_visible").get<int>(), 10);
+  EXPECT_NE(alone->at("predictor").get<std::string>().find("alone"), std::string::npos);
+  EXPECT_NE(report->at("predictor").get<std::string>().find("tracker"), std::string::npos);
 
   // A sequence is scored from its photos.
   r = Handdb("evaluate " + (dir / "db").string() + " " + ts.string() + " --input clean");
