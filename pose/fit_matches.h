@@ -28,6 +28,12 @@
 
 namespace handdb {
 
+// Which fit is the answer.
+enum class FitChoice {
+  kFirstFitted,  // the best-ranked match that could be fitted
+  kLeastCost,    // the fit with the smallest final cost (landmarks, silhouette and prior)
+};
+
 struct MatchFitOptions {
   // The fit stops once a step lowers the cost by less than 1e-4 of it: on the natural-pose renders
   // half the iterations of Ceres' default 1e-6 for the same 3D error (docs/decisions/0015).
@@ -44,6 +50,12 @@ struct MatchFitOptions {
   // hands 0.5-0.9, and fits to those landmarks still moved the top match's 3D error from 0.53 to
   // 0.39 (median; docs/decisions/0015).
   float min_presence = 0.5f;
+  // The silhouette term (pose/fit_silhouette.h): every picture with a hand region has it, so a
+  // picture without landmarks (an edge image, a label EXR, a photo whose presence is below
+  // min_presence) is fitted to its silhouette and edges alone.
+  bool use_silhouette = true;
+  SilhouetteFieldOptions silhouette;
+  FitChoice choice = FitChoice::kFirstFitted;
   bool Check() const;
 };
 
@@ -51,7 +63,7 @@ struct MatchFitOptions {
 // across) and the picture's px.
 struct MatchFit {
   bool fitted = false;  // false: the match stands as it was; `reason` says why
-  std::string reason;   // "no landmarks", "landmark presence 0.42 below 0.9", a fit error
+  std::string reason;   // "no landmarks and no silhouette (...)", a fit error
   PoseFit fit;          // valid when fitted (mirrored back for a left-hand match)
   // Keypoints in the normalised frame with depth: x, y as fit.keypoints_normalised, z the depth
   // away from the camera relative to the rig's look-at point (the database labels' keypoints'
@@ -65,14 +77,21 @@ struct MatchFit {
 };
 
 struct PictureFit {
-  std::vector<MatchFit> fits;  // one per fitted match, in the matches' order
-  int best = -1;               // the answer: the first fitted match's index; -1: none fitted
+  std::vector<MatchFit> fits;    // one per fitted match, in the matches' order
+  int best = -1;                 // the answer (MatchFitOptions::choice); -1: none fitted
+  bool landmarks_used = false;   // the fits used the landmarks
+  bool silhouette_used = false;  // and the silhouette term
 };
 
 // A camera rotation between the right hand's frame and the left hand's (the right hand's with y
 // negated) in the mirrored picture (the camera's x negated): S_x R S_y, its own inverse. A
 // left-hand MatchFit's cam_from_hand is the right-hand fit's through it, and back again.
 Mat3d MirrorCamFromHand(const Mat3d& cam_from_hand);
+
+// The picture's hand region (what its silhouette's outline pixels enclose) and edge points as the
+// fit's distance fields, in its normalised frame. Errors: MakeSilhouetteFields'.
+Result<SilhouetteFields> PictureSilhouetteFields(const PictureEvidence& picture,
+                                                 const SilhouetteFieldOptions& options);
 
 // Fits the first options.max_matches of `matches` (a search of `picture` in `database`, whose
 // rig is `rig`). Errors: kInvalidArgument for options; a match that cannot be fitted (no
