@@ -94,6 +94,8 @@ bool MatchFitOptions::Check() const {
   CHECK_OPTION_GE(max_matches, 0);
   CHECK_OPTION(min_presence >= 0.0f && min_presence <= 1.0f);
   if (!silhouette.Check()) return false;
+  if (!silhouette_fit.Check()) return false;
+  CHECK_OPTION_GE(max_silhouette_matches, 0);
   return true;
 }
 
@@ -121,7 +123,7 @@ Result<PictureFit> FitPictureMatches(const DatabaseRig& rig,
     no_silhouette = "the silhouette term is off";
   } else if (!(picture.edges.scale > 0)) {
     no_silhouette = "no normalisation";
-  } else if (n > 0) {
+  } else if (n > 0 && (options.silhouette_with_landmarks || !no_landmarks.empty())) {
     auto made = PictureSilhouetteFields(picture, options.silhouette);
     if (made.ok()) {
       fields = std::make_shared<const SilhouetteFields>(std::move(made).value());
@@ -130,6 +132,7 @@ Result<PictureFit> FitPictureMatches(const DatabaseRig& rig,
     }
   }
   out.landmarks_used = no_landmarks.empty() && n > 0;
+  if (out.landmarks_used && !options.silhouette_with_landmarks) fields.reset();
   out.silhouette_used = fields != nullptr;
   std::string no_evidence;
   if (!out.landmarks_used && !out.silhouette_used) {
@@ -141,6 +144,11 @@ Result<PictureFit> FitPictureMatches(const DatabaseRig& rig,
     MatchFit& mf = out.fits[i];
     if (!no_evidence.empty()) {
       mf.reason = no_evidence;
+      continue;
+    }
+    if (!out.landmarks_used && i >= static_cast<size_t>(options.max_silhouette_matches)) {
+      mf.reason = "a silhouette fit is made of the first " +
+                  std::to_string(options.max_silhouette_matches) + " matches only";
       continue;
     }
     const bool mirrored = match.hand == Hand::kLeft;
@@ -159,7 +167,8 @@ Result<PictureFit> FitPictureMatches(const DatabaseRig& rig,
     }
     evidence.silhouette = fields;
     evidence.silhouette_mirrored = mirrored;
-    auto fit = FitPose(rig.rig, *start, evidence, options.fit);
+    auto fit = FitPose(
+        rig.rig, *start, evidence, out.landmarks_used ? options.fit : options.silhouette_fit);
     if (!fit.ok()) {
       mf.reason = fit.status().message();
       continue;
