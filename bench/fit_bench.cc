@@ -1,6 +1,9 @@
 // The pose fit's cost: the median time of one FitPose (pose/fit.h) on one core over synthetic
 // perturbed starts, beside the time of one HandRig::Keypoints3d, the forward kinematics a fit
-// evaluates (with derivatives) per landmark and iteration. Also how well the fits converge.
+// evaluates (with derivatives) per landmark and iteration. Also how well the fits converge. The
+// silhouette term's cost besides: the truth's capsules (pose/fit_silhouette.h) rasterised as the
+// picture's hand region, its distance fields made once per picture (MakeSilhouetteFields), and
+// the fit to landmarks and silhouette, and to the silhouette alone.
 //
 //   fit_bench [--fits N]
 #include <algorithm>
@@ -9,12 +12,14 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <memory>
 #include <vector>
 
 #include "base/repo_root.h"
 #include "bench/median.h"
 #include "generator/sampling/random.h"
 #include "pose/fit.h"
+#include "pose/fit_silhouette.h"
 
 namespace handdb {
 namespace {
@@ -22,6 +27,39 @@ namespace {
 using Clock = std::chrono::steady_clock;
 
 using bench::Median;
+
+// The union of the projected capsules on a 1 px grid: its outline pixels (region pixels with a
+// 4-neighbour outside), which also stand for the edges.
+std::vector<Point2f> CapsuleOutline(const std::vector<ProjectedCapsule>& capsules) {
+  constexpr int kHalf = 170;
+  constexpr int kSide = 2 * kHalf + 1;
+  std::vector<uint8_t> in(kSide * kSide, 0);
+  for (int y = 0; y < kSide; ++y) {
+    for (int x = 0; x < kSide; ++x) {
+      const double px = x - kHalf, py = y - kHalf;
+      for (const ProjectedCapsule& c : capsules) {
+        const double dx = c.to.x - c.from.x, dy = c.to.y - c.from.y;
+        const double ex = px - c.from.x, ey = py - c.from.y;
+        const double t = std::clamp((ex * dx + ey * dy) / (dx * dx + dy * dy + 1e-9), 0.0, 1.0);
+        if (std::hypot(ex - t * dx, ey - t * dy) <= c.radius) {
+          in[y * kSide + x] = 1;
+          break;
+        }
+      }
+    }
+  }
+  std::vector<Point2f> out;
+  for (int y = 1; y + 1 < kSide; ++y) {
+    for (int x = 1; x + 1 < kSide; ++x) {
+      if (!in[y * kSide + x]) continue;
+      if (!in[y * kSide + x - 1] || !in[y * kSide + x + 1] || !in[(y - 1) * kSide + x] ||
+          !in[(y + 1) * kSide + x]) {
+        out.push_back({static_cast<float>(x - kHalf), static_cast<float>(y - kHalf)});
+      }
+    }
+  }
+  return out;
+}
 
 NormalisedKeypoints2d Project(const HandRig& rig,
                               const JointVector& joints,
@@ -53,7 +91,9 @@ int Run(int fits) {
   const JointLimits& limits = rig->limits();
   Rng rng(7);
   const PoseFitOptions options;  // one thread
-  std::vector<double> fit_ms, iterations, max_px;
+  std::vector<double> fit_ms, iterations, max_px, fields_ms, both_ms, silhouette_ms,
+      silhouette_iterations;
+  const std::vector<HandCapsule> capsules = HandCapsules(*rig);
   int converged = 0;
   for (int n = 0; n < fits; ++n) {
     // A random pose inside the limits, a random view, and a start perturbed like a near match.
@@ -101,6 +141,32 @@ int Run(int fits) {
                               double{fit->keypoints_normalised[k].y} - evidence.landmarks_px[k].y));
     }
     max_px.push_back(worst);
+
+    // The same fit with the truth's silhouette as the picture's (centred on the hand).
+    const HandKeypoints3d truth_points = rig->Keypoints3d(truth);
+    const std::vector<Point2f> outline =
+        CapsuleOutline(ProjectCapsules(capsules, truth_points, *cam, rig->look_at(), 1000, {0, 0}));
+    std::vector<PointQ> edges;
+    for (const Point2f& p : outline) {
+      edges.push_back({static_cast<int16_t>(std::lround(p.x * kPointScale)),
+                       static_cast<int16_t>(std::lround(p.y * kPointScale))});
+    }
+    const auto f0 = Clock::now();
+    auto fields = MakeSilhouetteFields(outline, edges);
+    const auto f1 = Clock::now();
+    if (!fields.ok()) continue;
+    fields_ms.push_back(std::chrono::duration<double, std::milli>(f1 - f0).count());
+    evidence.silhouette = std::make_shared<const SilhouetteFields>(std::move(fields).value());
+    const auto b0 = Clock::now();
+    auto both = FitPose(*rig, start, evidence, options);
+    const auto b1 = Clock::now();
+    evidence.has_landmarks = false;
+    auto alone = FitPose(*rig, start, evidence, options);
+    const auto b2 = Clock::now();
+    if (!both.ok() || !alone.ok()) return 1;
+    both_ms.push_back(std::chrono::duration<double, std::milli>(b1 - b0).count());
+    silhouette_ms.push_back(std::chrono::duration<double, std::milli>(b2 - b1).count());
+    silhouette_iterations.push_back(alone->iterations);
   }
 
   // The baseline: one forward kinematics evaluation in double, as the search side calls it.
@@ -126,6 +192,11 @@ int Run(int fits) {
   std::printf("iterations median         %.0f\n", Median(iterations));
   std::printf("worst keypoint median     %.3f px (normalised frame, hand diameter ~192 px)\n",
               Median(max_px));
+  std::printf("silhouette fields median   %.3f ms (once per picture)\n", Median(fields_ms));
+  std::printf("fit + silhouette median   %.3f ms (landmarks and silhouette)\n", Median(both_ms));
+  std::printf("silhouette fit median     %.3f ms (no landmarks; %.0f iterations)\n",
+              Median(silhouette_ms),
+              Median(silhouette_iterations));
   std::printf("HandRig::Keypoints3d      %.3f us\n", fk_us);
   std::printf("fit / Keypoints3d         %.0f x\n", ms * 1000 / fk_us);
   return sink == 12345.678 ? 2 : 0;  // keeps the baseline loop from being optimised away

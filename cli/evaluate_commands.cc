@@ -182,9 +182,10 @@ void EvaluateFlags::Add(CLI::App& app) {
       ->capture_default_str();
   app.add_option("--fit",
                  fit,
-                 "--input photo: fit the top match's pose to the photo's landmarks as handdb "
-                 "query --fit does and report the fitted answer's 3D keypoint error (auto: when "
-                 "the database carries its rig)")
+                 "fit the matches' poses to the picture as handdb query --fit does and report "
+                 "the fitted answer's 3D keypoint error (auto: --input photo, when the database "
+                 "carries its rig; on: also --input clean, fitted to the label render's "
+                 "silhouette and edges)")
       ->check(CLI::IsMember({"auto", "on", "off"}))
       ->capture_default_str();
   app.add_option("--search",
@@ -256,7 +257,8 @@ bool EvaluateFlags::Finish(const std::string& cmd, bool quiet) {
 }
 
 bool EvaluateFlags::LoadFit(const fs::path& db_dir, const std::string& cmd) {
-  if (fit == "off" || query_input() != QueryInput::kPhoto) return true;
+  // A clean label render has no landmarks: its fit (silhouette and edges alone) is asked for.
+  if (fit == "off" || (query_input() != QueryInput::kPhoto && fit != "on")) return true;
   auto rig = LoadDatabaseRig(db_dir);
   if (rig.ok()) {
     options.fit_rig = std::make_shared<const DatabaseRig>(std::move(rig).value());
@@ -334,11 +336,20 @@ Result<QueryPointsFn> MakeQueryPointsFn(QueryInput input,
       auto converted =
           LabelImageToPoints(*image, view_options, BorderContact::kReject, view.label.string());
       if (!converted.ok()) return converted.status();
-      std::vector<Point2f> points;
-      points.reserve(converted->points.size());
-      for (const PointQ& p : converted->points)
-        points.push_back({PointQToPx(p.x), PointQToPx(p.y)});
-      return TestQuery(std::move(points));
+      // The render as a label picture (its points and silhouette), which --fit on fits.
+      QueryEdges edges;
+      edges.kind = QueryInputKind::kLabels;
+      edges.width = image->width;
+      edges.height = image->height;
+      edges.centre_x = converted->normalisation.centre_x;
+      edges.centre_y = converted->normalisation.centre_y;
+      edges.diameter_px = converted->normalisation.diameter;
+      edges.scale = converted->normalisation.scale;
+      for (const EdgePixel& p : converted->edges.silhouette) {
+        edges.contour_pixels.push_back({p.col, p.row});
+      }
+      edges.points = std::move(converted->points);
+      return TestQuery(PictureEvidence(std::move(edges)));
     });
   }
   // The photo through the real-image path: skin segmentation, Canny, the same normalisation.

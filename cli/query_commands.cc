@@ -285,8 +285,9 @@ void QueryFlags::Add(CLI::App& app) {
       ->capture_default_str();
   app.add_option("--fit",
                  fit,
-                 "fit the pose of the first --fit-matches matches to the picture's hand landmarks "
-                 "(pose/fit_matches.h): joint angles, rotation and keypoints off the database's "
+                 "fit the pose of the first --fit-matches matches to the picture's hand landmarks, "
+                 "or without them to its silhouette (pose/fit_matches.h): joint angles, rotation "
+                 "and keypoints off the database's "
                  "grid; auto: when the database carries its rig (hand_model.json); off: the "
                  "stored views alone")
       ->check(CLI::IsMember({"auto", "on", "off"}))
@@ -295,7 +296,7 @@ void QueryFlags::Add(CLI::App& app) {
          "--fit-matches",
          picture.options.fit.max_matches,
          "fit this many of the first matches (each reported beside its match); the pose is the "
-         "first one fitted")
+         "fit of least final cost")
       ->check(CLI::Range(1, 100000))
       ->capture_default_str();
   app.add_flag("--quiet,-q",

@@ -39,7 +39,7 @@ set(HANDDB_DOORS_query database.h searcher.h kdtree.h coarse_bound.h index/view_
                        index/embedding.h)
 set(HANDDB_DOORS_nn tflite.h)
 set(HANDDB_DOORS_photo image_edges.h hand_landmarks.h)
-set(HANDDB_DOORS_pose fit.h fit_matches.h landmark_rank.h match_json.h picture_search.h sheet.h)
+set(HANDDB_DOORS_pose fit.h fit_matches.h fit_silhouette.h landmark_rank.h match_json.h picture_search.h sheet.h)
 set(HANDDB_DOORS_evaluate evaluate.h metrics.h plots.h parts.h photos.h photo_keypoints.h)
 set(HANDDB_DOORS_track frames.h neighbourhood.h smoothing.h tracker.h track_json.h)
 set(HANDDB_MODULES base nn format cluster edges generator query photo pose track evaluate)

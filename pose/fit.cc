@@ -1,10 +1,12 @@
 #include "pose/fit.h"
 
 #include <ceres/ceres.h>
+#include <ceres/cubic_interpolation.h>
 #include <ceres/rotation.h>
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <sstream>
 #include <vector>
@@ -132,6 +134,178 @@ class PosePrior {
   Quaternion hand_from_cam_;
   double inverse_joint_sigma_;
   double inverse_rotation_sigma_;
+};
+
+// The value part of a scalar: a Jet's value, or the double itself.
+inline double ValueOf(double x) { return x; }
+template <typename J>
+double ValueOf(const J& x) {
+  return x.a;
+}
+
+// Geman-McClure in residual form: r for small r, bounded by `scale` for large r, smooth at 0.
+template <typename T>
+T Bounded(const T& r, double scale) {
+  using std::sqrt;
+  return r / sqrt(T(1.0) + (r * r) * (1.0 / (scale * scale)));
+}
+
+// The silhouette term (PoseFitOptions): one block over all 21 keypoints, since every sample
+// depends on two of them and the outline's points on whichever capsule is nearest.
+class SilhouetteResidual {
+ public:
+  // Samples along each capsule: a third of the way in from each end and the middle, on the axis
+  // and on both sides.
+  static constexpr double kAlong[3] = {1.0 / 6, 0.5, 5.0 / 6};
+
+  SilhouetteResidual(const FitKinematics* kinematics,
+                     std::vector<HandCapsule> capsules,
+                     const Vec3d& look_at,
+                     std::shared_ptr<const SilhouetteFields> fields,
+                     bool mirrored,
+                     const PoseFitOptions& options)
+      : kinematics_(kinematics),
+        capsules_(std::move(capsules)),
+        look_at_(look_at),
+        fields_(std::move(fields)),
+        mirror_(mirrored ? -1.0 : 1.0),
+        hand_grid_(fields_->outside_hand.data(), 0, fields_->size, 0, fields_->size),
+        edge_grid_(fields_->edges.data(), 0, fields_->size, 0, fields_->size),
+        hand_field_(hand_grid_),
+        edge_field_(edge_grid_),
+        inverse_sigma_(1.0 / options.silhouette_sigma_px),
+        loss_scale_(options.silhouette_loss_scale) {
+    int outline_capsules = 0;
+    for (const HandCapsule& c : capsules_) outline_capsules += c.outline ? 1 : 0;
+    num_inside_ = static_cast<int>(capsules_.size()) * 3 * 3;
+    num_edges_ = outline_capsules * 3 * 2;
+    num_cover_ = static_cast<int>(fields_->outline.size());
+    inside_weight_ = std::sqrt(options.inside_weight / num_inside_);
+    edge_weight_ = num_edges_ > 0 ? std::sqrt(options.edge_weight / num_edges_) : 0;
+    cover_weight_ = num_cover_ > 0 ? std::sqrt(options.cover_weight / num_cover_) : 0;
+    for (const Point2f& p : fields_->outline) outline_.push_back({mirror_ * p.x, double(p.y)});
+  }
+
+  int num_residuals() const { return num_inside_ + num_edges_ + num_cover_; }
+
+  template <typename T>
+  bool operator()(
+      const T* joints, const T* cam_from_hand, const T* scale, const T* shift, T* residuals) const {
+    using std::sqrt;
+    T xy[kNumKeypoints][2];
+    for (int k = 0; k < kNumKeypoints; ++k) {
+      T point[3];
+      kinematics_->Keypoint(joints, k, point);
+      for (int r = 0; r < 3; ++r) point[r] -= T(look_at_[r]);
+      T in_cam[3];
+      ceres::UnitQuaternionRotatePoint(cam_from_hand, point, in_cam);
+      for (int r = 0; r < 2; ++r) xy[k][r] = scale[0] * in_cam[r] + shift[r];
+    }
+    T* inside = residuals;
+    T* edges = residuals + num_inside_;
+    T* cover = edges + num_edges_;
+    for (const HandCapsule& c : capsules_) {
+      const T* a = xy[c.from];
+      const T* b = xy[c.to];
+      const T radius = scale[0] * c.radius;
+      const T dx = b[0] - a[0], dy = b[1] - a[1];
+      // A link seen end-on has no direction in the picture: a tiny length keeps its normal
+      // finite (its sides are then any two opposite points of its disc).
+      const T length = sqrt(dx * dx + dy * dy + T(1e-6));
+      const T nx = -dy / length * radius, ny = dx / length * radius;
+      for (const double t : kAlong) {
+        const T cx = a[0] + t * dx, cy = a[1] + t * dy;
+        *inside++ = Read(hand_field_, cx, cy) * inside_weight_;
+        *inside++ = Read(hand_field_, cx + nx, cy + ny) * inside_weight_;
+        *inside++ = Read(hand_field_, cx - nx, cy - ny) * inside_weight_;
+        if (c.outline) {
+          *edges++ = Read(edge_field_, cx + nx, cy + ny) * edge_weight_;
+          *edges++ = Read(edge_field_, cx - nx, cy - ny) * edge_weight_;
+        }
+      }
+    }
+    for (const std::array<double, 2>& q : outline_) {
+      // The nearest capsule by value; the residual and its derivatives are that capsule's (the
+      // minimum's derivative where it is differentiable).
+      int nearest = 0;
+      double best = std::numeric_limits<double>::infinity();
+      for (size_t i = 0; i < capsules_.size(); ++i) {
+        const double d = OutsideCapsule(capsules_[i], xy, ValueOf(scale[0]), q);
+        if (d < best) {
+          best = d;
+          nearest = static_cast<int>(i);
+        }
+      }
+      if (best <= 0) {
+        *cover++ = T(0.0);
+        continue;
+      }
+      const HandCapsule& c = capsules_[nearest];
+      const T* a = xy[c.from];
+      const T* b = xy[c.to];
+      const T dx = b[0] - a[0], dy = b[1] - a[1];
+      const T ex = T(q[0]) - a[0], ey = T(q[1]) - a[1];
+      T t = (ex * dx + ey * dy) / (dx * dx + dy * dy + T(1e-9));
+      if (t < T(0.0)) t = T(0.0);
+      if (t > T(1.0)) t = T(1.0);
+      const T fx = ex - t * dx, fy = ey - t * dy;
+      const T distance = sqrt(fx * fx + fy * fy + T(1e-9)) - scale[0] * c.radius;
+      *cover++ = Bounded(distance * inverse_sigma_, loss_scale_) * cover_weight_;
+    }
+    return true;
+  }
+
+  static ceres::CostFunction* Create(SilhouetteResidual* functor) {
+    const int n = functor->num_residuals();
+    return new ceres::
+        AutoDiffCostFunction<SilhouetteResidual, ceres::DYNAMIC, kNumJointAngles, 4, 1, 2>(functor,
+                                                                                           n);
+  }
+
+ private:
+  using Grid = ceres::Grid2D<float, 1>;
+  using Field = ceres::BiCubicInterpolator<Grid>;
+
+  // The field at normalised (x, y), over sigma and bounded.
+  template <typename T>
+  T Read(const Field& field, const T& x, const T& y) const {
+    const T col = (x * mirror_ - fields_->origin_px) / fields_->cell_px;
+    const T row = (y - fields_->origin_px) / fields_->cell_px;
+    T value;
+    field.Evaluate(row, col, &value);
+    return Bounded(value * inverse_sigma_, loss_scale_);
+  }
+
+  template <typename T>
+  static double OutsideCapsule(const HandCapsule& c,
+                               const T (&xy)[kNumKeypoints][2],
+                               double scale,
+                               const std::array<double, 2>& q) {
+    const double ax = ValueOf(xy[c.from][0]), ay = ValueOf(xy[c.from][1]);
+    const double dx = ValueOf(xy[c.to][0]) - ax, dy = ValueOf(xy[c.to][1]) - ay;
+    const double ex = q[0] - ax, ey = q[1] - ay;
+    const double t = std::clamp((ex * dx + ey * dy) / (dx * dx + dy * dy + 1e-9), 0.0, 1.0);
+    return std::hypot(ex - t * dx, ey - t * dy) - scale * c.radius;
+  }
+
+  const FitKinematics* kinematics_;
+  std::vector<HandCapsule> capsules_;
+  Vec3d look_at_;
+  std::shared_ptr<const SilhouetteFields> fields_;
+  double mirror_;
+  Grid hand_grid_;
+  Grid edge_grid_;
+  Field hand_field_;
+  Field edge_field_;
+  double inverse_sigma_;
+  double loss_scale_;
+  std::vector<std::array<double, 2>> outline_;  // in the fitted (possibly mirrored) frame
+  int num_inside_ = 0;
+  int num_edges_ = 0;
+  int num_cover_ = 0;
+  double inside_weight_ = 0;
+  double edge_weight_ = 0;
+  double cover_weight_ = 0;
 };
 
 Status InvalidArgument(const std::string& message) {
@@ -273,6 +447,11 @@ bool PoseFitOptions::Check() const {
   CHECK_OPTION(std::isfinite(landmark_loss_scale) && landmark_loss_scale > 0);
   CHECK_OPTION(std::isfinite(joint_prior_sigma) && joint_prior_sigma > 0);
   CHECK_OPTION(std::isfinite(rotation_prior_sigma) && rotation_prior_sigma > 0);
+  CHECK_OPTION(std::isfinite(silhouette_sigma_px) && silhouette_sigma_px > 0);
+  CHECK_OPTION(std::isfinite(silhouette_loss_scale) && silhouette_loss_scale > 0);
+  CHECK_OPTION(std::isfinite(inside_weight) && inside_weight >= 0);
+  CHECK_OPTION(std::isfinite(edge_weight) && edge_weight >= 0);
+  CHECK_OPTION(std::isfinite(cover_weight) && cover_weight >= 0);
   CHECK_OPTION_GE(max_iterations, 1);
   CHECK_OPTION(function_tolerance > 0 && function_tolerance < 1);
   CHECK_OPTION_GE(num_threads, 1);
@@ -298,6 +477,53 @@ Status ViewOfCamFromHand(const HandRig& rig,
   *view_direction = direction;
   *roll = std::atan2(s, c);
   return Status::Ok();
+}
+
+double SilhouetteTermCost(const HandRig& rig,
+                          const SilhouetteFields& fields,
+                          bool mirrored,
+                          const PoseFitOptions& options,
+                          const JointVector& joints,
+                          const std::array<double, 4>& cam_from_hand,
+                          double scale,
+                          const std::array<double, 2>& shift,
+                          std::vector<double>* gradient) {
+  const FitKinematics kinematics(rig);
+  const std::unique_ptr<ceres::CostFunction> cost(SilhouetteResidual::Create(
+      new SilhouetteResidual(&kinematics,
+                             HandCapsules(rig),
+                             rig.look_at(),
+                             std::make_shared<const SilhouetteFields>(fields),
+                             mirrored,
+                             options)));
+  const int n = cost->num_residuals();
+  std::vector<double> residuals(n);
+  const double* parameters[] = {joints.data(), cam_from_hand.data(), &scale, shift.data()};
+  constexpr int kSizes[] = {kNumJointAngles, 4, 1, 2};
+  std::vector<std::vector<double>> jacobians;
+  std::vector<double*> jacobian_ptrs;
+  if (gradient != nullptr) {
+    for (const int size : kSizes) {
+      jacobians.emplace_back(static_cast<size_t>(n) * size);
+      jacobian_ptrs.push_back(jacobians.back().data());
+    }
+  }
+  THROW_CHECK(cost->Evaluate(
+      parameters, residuals.data(), gradient != nullptr ? jacobian_ptrs.data() : nullptr));
+  double sum = 0;
+  for (const double r : residuals) sum += r * r;
+  if (gradient != nullptr) {
+    gradient->clear();
+    for (int b = 0; b < 4; ++b) {
+      for (int j = 0; j < kSizes[b]; ++j) {
+        double g = 0;
+        for (int i = 0; i < n; ++i)
+          g += residuals[i] * jacobians[b][static_cast<size_t>(i) * kSizes[b] + j];
+        gradient->push_back(g);
+      }
+    }
+  }
+  return sum / 2;
 }
 
 Result<PoseFitStart> PoseFitStartFromLabel(const HandRig& rig,
@@ -358,6 +584,23 @@ Result<PoseFit> FitPose(const HandRig& rig,
                                    shift.data()));
     }
   }
+  std::vector<ceres::ResidualBlockId> silhouette_blocks;
+  const bool silhouette = evidence.silhouette != nullptr &&
+                          options.inside_weight + options.edge_weight + options.cover_weight > 0;
+  if (silhouette) {
+    silhouette_blocks.push_back(problem.AddResidualBlock(
+        SilhouetteResidual::Create(new SilhouetteResidual(&kinematics,
+                                                          HandCapsules(rig),
+                                                          rig.look_at(),
+                                                          evidence.silhouette,
+                                                          evidence.silhouette_mirrored,
+                                                          options)),
+        nullptr,
+        joints.data(),
+        cam_from_hand.data(),
+        &scale,
+        shift.data()));
+  }
   const std::vector<ceres::ResidualBlockId> prior_blocks = {problem.AddResidualBlock(
       PosePrior::Create(
           frame->joints, cam_from_hand, options.joint_prior_sigma, options.rotation_prior_sigma),
@@ -369,7 +612,7 @@ Result<PoseFit> FitPose(const HandRig& rig,
     problem.SetParameterLowerBound(joints.data(), i, rig.limits().min[i]);
     problem.SetParameterUpperBound(joints.data(), i, rig.limits().max[i]);
   }
-  if (*used > 0) {
+  if (*used > 0 || silhouette) {
     // The scale cannot flip the hand or collapse it; a factor 4 either way is far beyond any
     // candidate the search returns.
     problem.SetParameterLowerBound(&scale, 0, frame->scale / 4);
@@ -410,6 +653,7 @@ Result<PoseFit> FitPose(const HandRig& rig,
   }
   fit.landmark_cost = CostOf(&problem, landmark_blocks, options.num_threads);
   fit.prior_cost = CostOf(&problem, prior_blocks, options.num_threads);
+  fit.silhouette_cost = CostOf(&problem, silhouette_blocks, options.num_threads);
   FillPose(rig, joints, RotationOf(cam_from_hand), scale, shift, &fit);
   return fit;
 }

@@ -13,13 +13,16 @@
 #pragma once
 
 #include <array>
+#include <memory>
 #include <string>
+#include <vector>
 
 #include "base/status.h"
 #include "format/roll.h"
 #include "format/view.h"
 #include "generator/hand/camera.h"
 #include "generator/hand/kinematics.h"
+#include "pose/fit_silhouette.h"
 
 namespace handdb {
 
@@ -35,6 +38,21 @@ struct PoseFitOptions {
   // and the candidate's camera) cost (change / sigma)^2 / 2.
   double joint_prior_sigma = 0.5;
   double rotation_prior_sigma = 0.35;
+  // The silhouette term (pose/fit_silhouette.h), read where the evidence has the fields: points
+  // on the projected capsules (along each link's axis and sides) cost their distance outside the
+  // hand's region, the sides of the finger links their distance from the nearest edge, and points
+  // of the silhouette's outline their distance outside the nearest capsule, each over this sigma
+  // (normalised px). Each point's cost is bounded (Geman-McClure, its scale in sigmas), so a
+  // side hidden behind another finger, or a patch the segmentation got wrong, pulls with at most
+  // a fixed force.
+  double silhouette_sigma_px = 3.0;
+  double silhouette_loss_scale = 3.0;
+  // Each part's total weight, in squared sigmas: all of a part's points off by e px cost
+  // weight * (e / sigma)^2 / 2, however many points it has (the landmark term's 21 landmarks off
+  // by e cost 21 * (e / landmark_sigma_px)^2 / 2, before their presence weight).
+  double inside_weight = 10;
+  double edge_weight = 10;
+  double cover_weight = 10;
   // Caps the work of one fit (each iteration is a few dozen microseconds).
   int max_iterations = 50;
   // Ceres' stop on the cost's relative decrease in one step (its function_tolerance).
@@ -49,6 +67,12 @@ struct PoseFitEvidence {
   NormalisedKeypoints2d landmarks_px{};  // docs/conventions.md keypoint order
   // Per landmark, >= 0 (e.g. the network's presence times a per-joint confidence); 0 ignores it.
   std::array<float, kNumKeypoints> weights{};
+
+  // The hand's silhouette and edges (MakeSilhouetteFields); null: no silhouette term. With
+  // `silhouette_mirrored` the fields are read at (-x, y): a left-hand match is fitted as the
+  // right hand to the mirrored picture.
+  std::shared_ptr<const SilhouetteFields> silhouette;
+  bool silhouette_mirrored = false;
 
   PoseFitEvidence() { weights.fill(1.0f); }
 };
@@ -89,6 +113,7 @@ struct PoseFit {
   double final_cost = 0;
   double landmark_cost = 0;
   double prior_cost = 0;
+  double silhouette_cost = 0;  // 0 without the silhouette term
   int iterations = 0;
   std::string termination;  // Ceres' termination type: CONVERGENCE, NO_CONVERGENCE, FAILURE, ...
   std::string message;      // Ceres' own words about why it stopped
@@ -100,11 +125,26 @@ struct PoseFit {
 // Fits the rig to the evidence from `start`. kInvalidArgument for options that fail Check(),
 // non-finite or negative evidence, or a start whose pose or keypoints are unusable; a solver that
 // fails or does not converge is reported in the answer, never thrown. Without landmarks (or with
-// every weight 0) nothing pulls away from the start and the answer is the start.
+// every weight 0) and without a silhouette nothing pulls away from the start and the answer is
+// the start.
 Result<PoseFit> FitPose(const HandRig& rig,
                         const PoseFitStart& start,
                         const PoseFitEvidence& evidence,
                         const PoseFitOptions& options);
+
+// The silhouette term's cost (1/2 the sum of its squared residuals) at a pose, and with `gradient`
+// its gradient over the fit's parameters in the solver's order: the 20 joint angles, the rotation
+// as a unit quaternion (w, x, y, z, of cam_from_hand), the scale, the shift (x, y). What the
+// solver differentiates, open to tests and studies.
+double SilhouetteTermCost(const HandRig& rig,
+                          const SilhouetteFields& fields,
+                          bool mirrored,
+                          const PoseFitOptions& options,
+                          const JointVector& joints,
+                          const std::array<double, 4>& cam_from_hand,
+                          double scale,
+                          const std::array<double, 2>& shift,
+                          std::vector<double>* gradient = nullptr);
 
 // The view direction and roll of a camera rotation, the inverse of CamFromHand.
 Status ViewOfCamFromHand(const HandRig& rig,

@@ -1,6 +1,7 @@
 #include "pose/fit_matches.h"
 
 #include <cmath>
+#include <memory>
 #include <sstream>
 #include <utility>
 
@@ -52,6 +53,18 @@ void MirrorFit(PoseFit* fit) {
   for (auto& p : fit->keypoints_normalised) p.x = -p.x;
 }
 
+// The silhouette's outline pixels in the normalised frame (x negated for the mirrored picture is
+// left to the fit, which reads the fields mirrored).
+std::vector<Point2f> OutlineNormalised(const QueryEdges& q) {
+  std::vector<Point2f> out;
+  out.reserve(q.contour_pixels.size());
+  for (const EdgePixelXY& p : q.contour_pixels) {
+    out.push_back({static_cast<float>((p.x + 0.5 - q.centre_x) * q.scale),
+                   static_cast<float>((p.y + 0.5 - q.centre_y) * q.scale)});
+  }
+  return out;
+}
+
 std::string PresenceReason(float presence, float min_presence) {
   std::ostringstream s;
   s.precision(3);
@@ -71,10 +84,18 @@ Mat3d MirrorCamFromHand(const Mat3d& cam_from_hand) {
   return out;
 }
 
+Result<SilhouetteFields> PictureSilhouetteFields(const PictureEvidence& picture,
+                                                 const SilhouetteFieldOptions& options) {
+  return MakeSilhouetteFields(OutlineNormalised(picture.edges), picture.edges.points, options);
+}
+
 bool MatchFitOptions::Check() const {
   if (!fit.Check()) return false;
   CHECK_OPTION_GE(max_matches, 0);
   CHECK_OPTION(min_presence >= 0.0f && min_presence <= 1.0f);
+  if (!silhouette.Check()) return false;
+  if (!silhouette_fit.Check()) return false;
+  CHECK_OPTION_GE(max_silhouette_matches, 0);
   return true;
 }
 
@@ -90,11 +111,32 @@ Result<PictureFit> FitPictureMatches(const DatabaseRig& rig,
   const size_t n = std::min(matches.size(), static_cast<size_t>(options.max_matches));
   out.fits.resize(n);
 
-  std::string no_evidence;
+  std::string no_landmarks;
   if (!picture.landmarks.has_value() || !(picture.edges.scale > 0)) {
-    no_evidence = "no landmarks";
+    no_landmarks = "no landmarks";
   } else if (!(picture.landmarks->presence >= options.min_presence)) {
-    no_evidence = PresenceReason(picture.landmarks->presence, options.min_presence);
+    no_landmarks = PresenceReason(picture.landmarks->presence, options.min_presence);
+  }
+  std::shared_ptr<const SilhouetteFields> fields;
+  std::string no_silhouette;
+  if (!options.use_silhouette) {
+    no_silhouette = "the silhouette term is off";
+  } else if (!(picture.edges.scale > 0)) {
+    no_silhouette = "no normalisation";
+  } else if (n > 0 && (options.silhouette_with_landmarks || !no_landmarks.empty())) {
+    auto made = PictureSilhouetteFields(picture, options.silhouette);
+    if (made.ok()) {
+      fields = std::make_shared<const SilhouetteFields>(std::move(made).value());
+    } else {
+      no_silhouette = made.status().message();
+    }
+  }
+  out.landmarks_used = no_landmarks.empty() && n > 0;
+  if (out.landmarks_used && !options.silhouette_with_landmarks) fields.reset();
+  out.silhouette_used = fields != nullptr;
+  std::string no_evidence;
+  if (!out.landmarks_used && !out.silhouette_used) {
+    no_evidence = no_landmarks + " and no silhouette (" + no_silhouette + ")";
   }
 
   for (size_t i = 0; i < n; ++i) {
@@ -102,6 +144,11 @@ Result<PictureFit> FitPictureMatches(const DatabaseRig& rig,
     MatchFit& mf = out.fits[i];
     if (!no_evidence.empty()) {
       mf.reason = no_evidence;
+      continue;
+    }
+    if (!out.landmarks_used && i >= static_cast<size_t>(options.max_silhouette_matches)) {
+      mf.reason = "a silhouette fit is made of the first " +
+                  std::to_string(options.max_silhouette_matches) + " matches only";
       continue;
     }
     const bool mirrored = match.hand == Hand::kLeft;
@@ -113,10 +160,15 @@ Result<PictureFit> FitPictureMatches(const DatabaseRig& rig,
       continue;
     }
     PoseFitEvidence evidence;
-    evidence.has_landmarks = true;
-    evidence.landmarks_px = LandmarksNormalised(picture, mirrored);
-    evidence.weights.fill(picture.landmarks->presence);
-    auto fit = FitPose(rig.rig, *start, evidence, options.fit);
+    if (out.landmarks_used) {
+      evidence.has_landmarks = true;
+      evidence.landmarks_px = LandmarksNormalised(picture, mirrored);
+      evidence.weights.fill(picture.landmarks->presence);
+    }
+    evidence.silhouette = fields;
+    evidence.silhouette_mirrored = mirrored;
+    auto fit = FitPose(
+        rig.rig, *start, evidence, out.landmarks_used ? options.fit : options.silhouette_fit);
     if (!fit.ok()) {
       mf.reason = fit.status().message();
       continue;
@@ -125,8 +177,10 @@ Result<PictureFit> FitPictureMatches(const DatabaseRig& rig,
       mf.reason = "the solver failed: " + fit->message;
       continue;
     }
-    mf.landmark_error_start_px = MeanDistance(start->keypoints_normalised, evidence.landmarks_px);
-    mf.landmark_error_px = MeanDistance(fit->keypoints_normalised, evidence.landmarks_px);
+    if (out.landmarks_used) {
+      mf.landmark_error_start_px = MeanDistance(start->keypoints_normalised, evidence.landmarks_px);
+      mf.landmark_error_px = MeanDistance(fit->keypoints_normalised, evidence.landmarks_px);
+    }
     const std::array<double, kNumKeypoints> depth = Depths(rig.rig, *fit);
     mf.fit = std::move(fit).value();
     if (mirrored) MirrorFit(&mf.fit);
@@ -136,7 +190,10 @@ Result<PictureFit> FitPictureMatches(const DatabaseRig& rig,
       mf.keypoints_image_px[k] = picture.edges.ImageFromNormalised(p);
     }
     mf.fitted = true;
-    if (out.best < 0) out.best = static_cast<int>(i);
+    if (out.best < 0 || (options.choice == FitChoice::kLeastCost &&
+                         mf.fit.final_cost < out.fits[out.best].fit.final_cost)) {
+      out.best = static_cast<int>(i);
+    }
   }
   return out;
 }

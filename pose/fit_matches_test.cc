@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "generator/hand/camera.h"
@@ -154,7 +155,9 @@ TEST_F(FitMatchesTest, WithoutUsableLandmarksTheMatchStandsWithAReason) {
   ASSERT_TRUE(fit.ok());
   EXPECT_EQ(fit->best, -1);
   EXPECT_FALSE(fit->fits[0].fitted);
-  EXPECT_EQ(fit->fits[0].reason, "no landmarks");
+  // The picture has neither landmarks nor a hand region (no outline pixels): nothing to fit to.
+  EXPECT_EQ(fit->fits[0].reason.rfind("no landmarks and no silhouette (", 0), 0u)
+      << fit->fits[0].reason;
 
   const PictureEvidence weak = PictureOf(truth_, false, 0.2f);
   fit = FitPictureMatches(rig_, *db_, weak, {MatchOf(Hand::kRight)}, MatchFitOptions{});
@@ -170,6 +173,88 @@ TEST_F(FitMatchesTest, WithoutUsableLandmarksTheMatchStandsWithAReason) {
   ASSERT_TRUE(fit.ok());
   EXPECT_FALSE(fit->fits[0].fitted);
   EXPECT_FALSE(fit->fits[0].reason.empty());
+}
+
+TEST_F(FitMatchesTest, WithoutLandmarksTheSilhouetteIsFitted) {
+  // The picture's hand region: the truth's capsules (the fit's own model) drawn as an outline.
+  PictureEvidence picture = PictureOf(truth_, false, 0.99f);
+  picture.landmarks.reset();
+  const HandKeypoints3d points = rig_.rig.Keypoints3d(truth_joints_);
+  auto start = PoseFitStartFromLabel(rig_.rig, db_->label(0), rig_.render, RollAngle(2, kRolls));
+  ASSERT_TRUE(start.ok());
+  auto at_truth = FitPose(rig_.rig,
+                          {truth_joints_, start->view_direction, start->roll, {}},
+                          PoseFitEvidence{},
+                          PoseFitOptions{});
+  // (keypoints {} would give no scale: take the truth's own)
+  PoseFitStart truth_start = *start;
+  truth_start.joints = truth_joints_;
+  for (int k = 0; k < kNumKeypoints; ++k) {
+    truth_start.keypoints_normalised[k] = {static_cast<float>(truth_[k][0]),
+                                           static_cast<float>(truth_[k][1])};
+  }
+  at_truth = FitPose(rig_.rig, truth_start, PoseFitEvidence{}, PoseFitOptions{});
+  ASSERT_TRUE(at_truth.ok()) << at_truth.status().ToString();
+  const std::vector<ProjectedCapsule> capsules = ProjectCapsules(HandCapsules(rig_.rig),
+                                                                 points,
+                                                                 at_truth->cam_from_hand,
+                                                                 rig_.rig.look_at(),
+                                                                 at_truth->scale,
+                                                                 at_truth->shift);
+  // The outline of the union is the silhouette; each capsule's own outline inside it stands for
+  // the label render's occlusion edges between links.
+  const auto in_capsule = [&](const ProjectedCapsule& c, int px, int py) {
+    const double dx = c.to.x - c.from.x, dy = c.to.y - c.from.y;
+    const double ex = px + 0.5 - c.from.x, ey = py + 0.5 - c.from.y;
+    const double t = std::clamp((ex * dx + ey * dy) / (dx * dx + dy * dy + 1e-9), 0.0, 1.0);
+    return std::hypot(ex - t * dx, ey - t * dy) <= c.radius;
+  };
+  const auto inside = [&](int px, int py) {
+    return std::any_of(capsules.begin(), capsules.end(), [&](const ProjectedCapsule& c) {
+      return in_capsule(c, px, py);
+    });
+  };
+  for (int y = -150; y <= 150; ++y) {
+    for (int x = -150; x <= 150; ++x) {
+      if (!inside(x, y)) continue;
+      if (!inside(x - 1, y) || !inside(x + 1, y) || !inside(x, y - 1) || !inside(x, y + 1)) {
+        picture.edges.contour_pixels.push_back({x, y});
+      }
+      for (const ProjectedCapsule& c : capsules) {
+        if (in_capsule(c, x, y) && (!in_capsule(c, x - 1, y) || !in_capsule(c, x + 1, y) ||
+                                    !in_capsule(c, x, y - 1) || !in_capsule(c, x, y + 1))) {
+          picture.edges.points.push_back({static_cast<int16_t>((x + 0.5) * kPointScale),
+                                          static_cast<int16_t>((y + 0.5) * kPointScale)});
+          break;
+        }
+      }
+    }
+  }
+  auto fit = FitPictureMatches(rig_, *db_, picture, {MatchOf(Hand::kRight)}, MatchFitOptions{});
+  ASSERT_TRUE(fit.ok());
+  EXPECT_FALSE(fit->landmarks_used);
+  EXPECT_TRUE(fit->silhouette_used);
+  ASSERT_EQ(fit->best, 0);
+  const MatchFit& f = fit->fits[0];
+  ASSERT_TRUE(f.fitted) << f.reason;
+  EXPECT_GT(f.fit.silhouette_cost, 0);
+  EXPECT_EQ(f.fit.landmark_cost, 0);
+  EXPECT_LT(f.fit.final_cost, f.fit.initial_cost);
+  // The keypoints move towards the truth's (the start is several px off).
+  double start_px = 0;
+  for (int k = 0; k < kNumKeypoints; ++k) {
+    start_px += std::hypot(start->keypoints_normalised[k].x - truth_[k][0],
+                           start->keypoints_normalised[k].y - truth_[k][1]);
+  }
+  EXPECT_LT(MeanDistance2d(f.keypoints_image_px, truth_), start_px / kNumKeypoints);
+
+  // The silhouette term off: nothing to fit to, and the reason says so.
+  MatchFitOptions off;
+  off.use_silhouette = false;
+  fit = FitPictureMatches(rig_, *db_, picture, {MatchOf(Hand::kRight)}, off);
+  ASSERT_TRUE(fit.ok());
+  EXPECT_EQ(fit->best, -1);
+  EXPECT_NE(fit->fits[0].reason.find("the silhouette term is off"), std::string::npos);
 }
 
 TEST_F(FitMatchesTest, FitsOnlyTheFirstMatchesAndAnswersWithTheFirstFitted) {

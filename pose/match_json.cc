@@ -86,7 +86,8 @@ nlohmann::json MatchFitToJson(const MatchFit& mf) {
            {{"initial", f.initial_cost},
             {"final", f.final_cost},
             {"landmarks", f.landmark_cost},
-            {"prior", f.prior_cost}}}};
+            {"prior", f.prior_cost},
+            {"silhouette", f.silhouette_cost}}}};
 }
 
 }  // namespace handdb

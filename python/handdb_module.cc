@@ -1393,7 +1393,8 @@ void BindDatabase(py::module_& m) {
           "whose QueryEdges carry hand landmarks (query_edges(landmarks='auto'), the default) is "
           "re-ranked by them as `handdb query` does (Match.score; landmark_weight as "
           "--landmark-weight). fit: for an image path, 'auto' (default) fits the pose of the "
-          "first fit_matches matches to the photo's landmarks as `handdb query --fit` does "
+          "first fit_matches matches to the photo's landmarks (or, without them, to the "
+          "picture's silhouette) as `handdb query --fit` does "
           "(Match.fit; 'on' raises if the database carries no rig, 'off' skips it).")
       .def("track",
            &Track,
