@@ -259,6 +259,7 @@ bool EvaluateFlags::Finish(const std::string& cmd, bool quiet) {
 bool EvaluateFlags::LoadFit(const fs::path& db_dir, const std::string& cmd) {
   // A clean label render has no landmarks: its fit (silhouette and edges alone) is asked for.
   if (fit == "off" || (query_input() != QueryInput::kPhoto && fit != "on")) return true;
+  options.fit.use_silhouette = fit == "on";
   auto rig = LoadDatabaseRig(db_dir);
   if (rig.ok()) {
     options.fit_rig = std::make_shared<const DatabaseRig>(std::move(rig).value());

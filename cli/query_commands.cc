@@ -285,11 +285,10 @@ void QueryFlags::Add(CLI::App& app) {
       ->capture_default_str();
   app.add_option("--fit",
                  fit,
-                 "fit the pose of the first --fit-matches matches to the picture's hand landmarks, "
-                 "or without them to its silhouette (pose/fit_matches.h): joint angles, rotation "
-                 "and keypoints off the database's "
-                 "grid; auto: when the database carries its rig (hand_model.json); off: the "
-                 "stored views alone")
+                 "fit the pose of the first --fit-matches matches to the picture's hand landmarks "
+                 "(pose/fit_matches.h): joint angles, rotation and keypoints off the database's "
+                 "grid; auto: when the database carries its rig (hand_model.json); on: also a "
+                 "picture without landmarks, to its silhouette; off: the stored views alone")
       ->check(CLI::IsMember({"auto", "on", "off"}))
       ->capture_default_str();
   app.add_option(
@@ -730,6 +729,9 @@ int RunQuery(int argc, char** argv) {
     if (rig.ok()) {
       flags.rig = std::make_shared<const DatabaseRig>(std::move(rig).value());
       if (flags.fit != "off") flags.picture.options.rig = flags.rig;
+      // A picture without landmarks is fitted to its silhouette only when asked for: that fit
+      // does not yet improve on its match (docs/decisions/0016).
+      flags.picture.options.fit.use_silhouette = flags.fit == "on";
     } else if (flags.fit == "on" || !flags.export_glb.empty()) {
       return Fail("query", rig.status());
     }

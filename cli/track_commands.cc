@@ -203,6 +203,7 @@ int RunTrack(int argc, char** argv) {
     auto rig = LoadDatabaseRig(flags.db_dir);
     if (rig.ok()) {
       flags.picture.options.rig = std::make_shared<const DatabaseRig>(std::move(rig).value());
+      flags.picture.options.fit.use_silhouette = flags.fit == "on";
     } else if (flags.fit == "on") {
       return Fail("track", rig.status());
     }

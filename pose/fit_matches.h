@@ -56,9 +56,11 @@ struct MatchFitOptions {
   // The silhouette term (pose/fit_silhouette.h): a picture without usable landmarks (an edge
   // image, a label EXR, a photo whose presence is below min_presence) is fitted to its
   // silhouette alone, with `silhouette_fit`, from its first `max_silhouette_matches` matches.
-  // Beside the landmarks it is off: it did not lower the photo renders' 3D error (0.378 with it,
-  // 0.374 without, wrist-to-middle-knuckle lengths; docs/decisions/0016).
-  bool use_silhouette = true;
+  // Off unless asked for (`--fit on`): alone it does not yet improve on the match (label renders
+  // 0.310 -> 0.325, photos without their landmarks 0.442 -> 0.472, median wrist-to-middle-knuckle
+  // lengths), and beside the landmarks it did not lower the photo renders' 3D error (0.378 with
+  // it, 0.374 without; docs/decisions/0016).
+  bool use_silhouette = false;
   bool silhouette_with_landmarks = false;
   SilhouetteFieldOptions silhouette;
   // The silhouette is 2D and says little about depth: with the landmark fit's priors (0.5 rad a

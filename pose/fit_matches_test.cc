@@ -230,7 +230,9 @@ TEST_F(FitMatchesTest, WithoutLandmarksTheSilhouetteIsFitted) {
       }
     }
   }
-  auto fit = FitPictureMatches(rig_, *db_, picture, {MatchOf(Hand::kRight)}, MatchFitOptions{});
+  MatchFitOptions on;
+  on.use_silhouette = true;  // off by default (docs/decisions/0016)
+  auto fit = FitPictureMatches(rig_, *db_, picture, {MatchOf(Hand::kRight)}, on);
   ASSERT_TRUE(fit.ok());
   EXPECT_FALSE(fit->landmarks_used);
   EXPECT_TRUE(fit->silhouette_used);
@@ -248,10 +250,8 @@ TEST_F(FitMatchesTest, WithoutLandmarksTheSilhouetteIsFitted) {
   }
   EXPECT_LT(MeanDistance2d(f.keypoints_image_px, truth_), start_px / kNumKeypoints);
 
-  // The silhouette term off: nothing to fit to, and the reason says so.
-  MatchFitOptions off;
-  off.use_silhouette = false;
-  fit = FitPictureMatches(rig_, *db_, picture, {MatchOf(Hand::kRight)}, off);
+  // The silhouette term off (the default): nothing to fit to, and the reason says so.
+  fit = FitPictureMatches(rig_, *db_, picture, {MatchOf(Hand::kRight)}, MatchFitOptions{});
   ASSERT_TRUE(fit.ok());
   EXPECT_EQ(fit->best, -1);
   EXPECT_NE(fit->fits[0].reason.find("the silhouette term is off"), std::string::npos);

@@ -638,6 +638,8 @@ void FitFromArgs(const PyDatabase& self,
   }
   if (fit_matches < 1) throw py::value_error("fit_matches must be >= 1");
   options->fit.max_matches = fit_matches;
+  // As `handdb query --fit on`: a picture without landmarks fitted to its silhouette.
+  options->fit.use_silhouette = fit == "on";
   if (fit != "off") options->rig = self.rig(fit == "on");
 }
 
