@@ -1,10 +1,12 @@
-// Helpers for unit tests only (header-only; no library links it): fresh temporary directories and
-// whole-file byte reads and writes.
+// Helpers for unit tests only (header-only; no library links it): fresh temporary directories,
+// whole-file byte reads and writes, and a shell command's exit code and output.
 #pragma once
 
 #include <gtest/gtest.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cstdint>
 #include <cstdlib>
 #include <filesystem>
@@ -69,6 +71,32 @@ inline void WriteBytes(const std::filesystem::path& path, const std::vector<uint
   const Status s = WriteFileAtomic(
       path, std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
   THROW_CHECK_MSG(s.ok(), s.ToString());
+}
+
+// A command's exit code (-1 when a signal ended it) and what it wrote.
+struct CliRun {
+  int code = -1;
+  std::string out;
+  std::string err;
+};
+
+// Runs `command` with /bin/sh, its stdout and stderr captured in temporary files (removed).
+inline CliRun RunShell(const std::string& command) {
+  static std::atomic<int> n{0};
+  const std::filesystem::path base =
+      std::filesystem::temp_directory_path() /
+      ("handdb-run-" + std::to_string(::getpid()) + "-" + std::to_string(n++));
+  const std::string out = base.string() + ".out", err = base.string() + ".err";
+  const int status = std::system((command + " >" + out + " 2>" + err).c_str());
+  CliRun r;
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  for (auto [path, text] : {std::pair{&out, &r.out}, std::pair{&err, &r.err}}) {
+    auto s = ReadFileToString(*path);
+    if (s.ok()) *text = std::move(s).value();
+    std::error_code ignored;
+    std::filesystem::remove(*path, ignored);
+  }
+  return r;
 }
 
 }  // namespace handdb::testing

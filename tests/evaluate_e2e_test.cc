@@ -18,6 +18,7 @@
 #include <string>
 
 #include "base/json_schema.h"
+#include "base/testing.h"
 #include "generator/plan/plan.h"
 #include "generator/testset/testset.h"
 
@@ -29,29 +30,11 @@ using json = nlohmann::json;
 
 constexpr int kRolls = 8;
 
-struct CliRun {
-  int code = -1;
-  std::string out;
-  std::string err;
-};
+using handdb::testing::CliRun;
 
+// `handdb ARGS`, stdout and stderr captured.
 CliRun Handdb(const std::string& args) {
-  static int n = 0;
-  const fs::path base = fs::temp_directory_path() /
-                        ("handdb-eval-e2e-" + std::to_string(getpid()) + "-" + std::to_string(n++));
-  const std::string cmd = std::string(HANDDB_BINARY) + " " + args + " >" + base.string() +
-                          ".out 2>" + base.string() + ".err";
-  const int status = std::system(cmd.c_str());
-  CliRun r;
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  for (auto [suffix, target] : {std::pair{".out", &r.out}, std::pair{".err", &r.err}}) {
-    std::ifstream f(base.string() + suffix);
-    std::stringstream s;
-    s << f.rdbuf();
-    *target = s.str();
-    fs::remove(base.string() + suffix);
-  }
-  return r;
+  return handdb::testing::RunShell(std::string(HANDDB_BINARY) + " " + args);
 }
 
 bool HaveBlender() { return std::system("command -v blender >/dev/null 2>&1") == 0; }

@@ -21,6 +21,7 @@
 #include <string>
 
 #include "base/json_schema.h"
+#include "base/testing.h"
 #include "format/manifest.h"
 #include "format/roll.h"
 #include "format/shard_writer.h"
@@ -31,31 +32,11 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct CliRun {
-  int code = -1;
-  std::string out;
-  std::string err;
-};
+using handdb::testing::CliRun;
 
+// `handdb evaluate ARGS`, stdout and stderr captured.
 CliRun Handdb(const std::string& args) {
-  static int n = 0;
-  const std::string tag = std::to_string(getpid()) + "-" + std::to_string(n++);
-  const fs::path out = fs::temp_directory_path() / ("handdb-pcli-out-" + tag);
-  const fs::path err = fs::temp_directory_path() / ("handdb-pcli-err-" + tag);
-  const std::string cmd =
-      std::string(HANDDB_BINARY) + " evaluate " + args + " >" + out.string() + " 2>" + err.string();
-  const int status = std::system(cmd.c_str());
-  CliRun r;
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  std::ifstream fo(out), fe(err);
-  std::stringstream so, se;
-  so << fo.rdbuf();
-  se << fe.rdbuf();
-  r.out = so.str();
-  r.err = se.str();
-  fs::remove(out);
-  fs::remove(err);
-  return r;
+  return handdb::testing::RunShell(std::string(HANDDB_BINARY) + " evaluate " + args);
 }
 
 class EvaluatePhotosCli : public ::testing::Test {

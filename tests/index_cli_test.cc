@@ -12,6 +12,7 @@
 #include <sstream>
 #include <string>
 
+#include "base/testing.h"
 #include "format/manifest.h"
 #include "format/roll.h"
 #include "format/shard_writer.h"
@@ -22,29 +23,11 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct CliRun {
-  int code = -1;
-  std::string out, err;
-};
+using handdb::testing::CliRun;
 
 // `handdb ARGS`, stdout and stderr captured.
 CliRun Handdb(const std::string& args) {
-  static int n = 0;
-  const fs::path base = fs::temp_directory_path() /
-                        ("handdb-icli-" + std::to_string(getpid()) + "-" + std::to_string(n++));
-  const std::string cmd = std::string(HANDDB_BINARY) + " " + args + " >" + base.string() +
-                          ".out 2>" + base.string() + ".err";
-  const int status = std::system(cmd.c_str());
-  CliRun r;
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  for (auto [suffix, text] : {std::pair{".out", &r.out}, std::pair{".err", &r.err}}) {
-    std::ifstream f(base.string() + suffix);
-    std::stringstream ss;
-    ss << f.rdbuf();
-    *text = ss.str();
-    fs::remove(base.string() + suffix);
-  }
-  return r;
+  return handdb::testing::RunShell(std::string(HANDDB_BINARY) + " " + args);
 }
 
 constexpr uint32_t kViews = 80;

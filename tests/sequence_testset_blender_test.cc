@@ -20,6 +20,7 @@
 #include "base/atomic_file.h"
 #include "base/json_schema.h"
 #include "base/repo_root.h"
+#include "base/testing.h"
 
 namespace handdb {
 namespace {
@@ -27,29 +28,11 @@ namespace {
 namespace fs = std::filesystem;
 using json = nlohmann::json;
 
-struct CliRun {
-  int code = -1;
-  std::string out;
-  std::string err;
-};
+using handdb::testing::CliRun;
 
+// `handdb ARGS`, stdout and stderr captured.
 CliRun Handdb(const std::string& args) {
-  static int n = 0;
-  const fs::path base = fs::temp_directory_path() /
-                        ("handdb-seq-e2e-" + std::to_string(getpid()) + "-" + std::to_string(n++));
-  const std::string cmd = std::string(HANDDB_BINARY) + " " + args + " >" + base.string() +
-                          ".out 2>" + base.string() + ".err";
-  const int status = std::system(cmd.c_str());
-  CliRun r;
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  for (auto [suffix, target] : {std::pair{".out", &r.out}, std::pair{".err", &r.err}}) {
-    std::ifstream f(base.string() + suffix);
-    std::stringstream s;
-    s << f.rdbuf();
-    *target = s.str();
-    fs::remove(base.string() + suffix);
-  }
-  return r;
+  return handdb::testing::RunShell(std::string(HANDDB_BINARY) + " " + args);
 }
 
 bool HaveBlender() { return std::system("command -v blender >/dev/null 2>&1") == 0; }

@@ -30,32 +30,11 @@ namespace {
 namespace fs = std::filesystem;
 using json = nlohmann::json;
 
-struct CliRun {
-  int code = -1;
-  std::string out;
-  std::string err;
-};
+using handdb::testing::CliRun;
 
+// `ENV handdb track ARGS`, stdout and stderr captured.
 CliRun Handdb(const std::string& args, const std::string& env = "") {
-  static int n = 0;
-  const fs::path dir = fs::temp_directory_path();
-  const std::string tag = std::to_string(getpid()) + "-" + std::to_string(n++);
-  const fs::path out = dir / ("handdb-tcli-out-" + tag);
-  const fs::path err = dir / ("handdb-tcli-err-" + tag);
-  const std::string cmd = env + " " + std::string(HANDDB_BINARY) + " track " + args + " >" +
-                          out.string() + " 2>" + err.string();
-  const int status = std::system(cmd.c_str());
-  CliRun r;
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  std::ifstream fo(out), fe(err);
-  std::stringstream so, se;
-  so << fo.rdbuf();
-  se << fe.rdbuf();
-  r.out = so.str();
-  r.err = se.str();
-  fs::remove(out);
-  fs::remove(err);
-  return r;
+  return handdb::testing::RunShell(env + " " + std::string(HANDDB_BINARY) + " track " + args);
 }
 
 std::vector<json> Lines(const std::string& text) {
