@@ -29,7 +29,7 @@ constexpr CapsuleRow kCapsules[] = {
     {0, 1, 0.0167, false},
 };
 
-Status InvalidArgument(const std::string& message) {
+Status SilhouetteError(const std::string& message) {
   return Status(StatusCode::kInvalidArgument, "silhouette: " + message);
 }
 
@@ -134,20 +134,20 @@ bool SilhouetteFieldOptions::Check() const {
 Result<SilhouetteFields> MakeSilhouetteFields(std::span<const Point2f> outline,
                                               std::span<const PointQ> edges,
                                               const SilhouetteFieldOptions& options) {
-  if (!options.Check()) return InvalidArgument("options fail their checks (see above)");
-  if (outline.empty()) return InvalidArgument("no outline");
-  if (edges.empty()) return InvalidArgument("no edge points");
+  if (!options.Check()) return SilhouetteError("options fail their checks (see above)");
+  if (outline.empty()) return SilhouetteError("no outline");
+  if (edges.empty()) return SilhouetteError("no edge points");
   // One grid extent for both fields, so their nodes coincide: the query's frame reaches
   // +-166 px, a margin beyond the farthest point otherwise.
   double reach = 0;
   for (const Point2f& p : outline) {
-    if (!std::isfinite(p.x) || !std::isfinite(p.y)) return InvalidArgument("non-finite outline");
+    if (!std::isfinite(p.x) || !std::isfinite(p.y)) return SilhouetteError("non-finite outline");
     reach = std::max({reach, std::abs(double(p.x)), std::abs(double(p.y))});
   }
   for (const PointQ& p : edges) {
     reach = std::max({reach, std::abs(double(PointQToPx(p.x))), std::abs(double(PointQToPx(p.y)))});
   }
-  if (reach > 1000) return InvalidArgument("points beyond 1000 px of the normalised frame");
+  if (reach > 1000) return SilhouetteError("points beyond 1000 px of the normalised frame");
   const double half = std::max(170.0, std::ceil(reach) + 8);
 
   const double cell = options.region_cell_px;
@@ -167,7 +167,7 @@ Result<SilhouetteFields> MakeSilhouetteFields(std::span<const Point2f> outline,
       }
     }
   }
-  if (inside.empty()) return InvalidArgument("the outline encloses no region");
+  if (inside.empty()) return SilhouetteError("the outline encloses no region");
 
   DistanceGridOptions grid_options;
   grid_options.cell_px = 1.0f;
