@@ -41,16 +41,12 @@ FramePrediction PredictionOfTrackFrame(const TrackFrame& frame) {
     return p;
   p.found = true;
   p.keypoints_px = frame.keypoints_image_px;
+  p.keypoints = frame.keypoints_3d;
   if (frame.fit.best == 0) {
-    const MatchFit& fit = frame.fit.fits[0];
-    for (int j = 0; j < kNumKeypoints; ++j) {
-      for (int c = 0; c < 3; ++c) p.keypoints[j][c] = static_cast<float>(fit.keypoints_3d[j][c]);
-    }
-    p.joint_angles = fit.fit.joints;
+    p.joint_angles = frame.fit.fits[0].fit.joints;
     return p;
   }
   const Match& m = frame.matches[frame.chosen];
-  p.keypoints = m.label.keypoints;
   for (int k = 0; k < kNumJointAngles; ++k) p.joint_angles[k] = m.label.joint_angles[k];
   return p;
 }

@@ -8,9 +8,9 @@
 
 namespace handdb {
 
-// A frame's prediction is the tracker's answer: found when it has a pose; the 3D keypoints and
-// joint angles of the chosen match's fit (the match itself when unfitted); the 2D keypoints as
-// the tracker reports them (filtered over time unless smoothing is off). The searcher must
+// A frame's prediction is the tracker's answer: found when it has a pose; its 2D and 3D keypoints
+// as the tracker reports them (the chosen match's fit, or the match when unfitted, filtered over
+// time unless smoothing is off); the fit's (or the match's) joint angles. The searcher must
 // outlive the predictor.
 SequencePredictor MakeTrackerPredictor(const Searcher& searcher, TrackOptions options);
 

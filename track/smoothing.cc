@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <span>
 
 namespace handdb {
 namespace {
@@ -123,41 +124,55 @@ std::vector<int> ChooseByDynamicProgramming(const std::vector<std::vector<PoseCa
   return choice;
 }
 
-Keypoints2d KeypointFilter::Filter(const Keypoints2d& raw, double t) {
+namespace {
+
+// A keypoint set's coordinates as floats, in order (Point2f and std::array<float, 3> are plain
+// floats).
+template <typename K>
+std::span<const float> Values(const K& k) {
+  static_assert(sizeof(K) == sizeof(float) * kNumKeypoints * (sizeof(k[0]) / sizeof(float)));
+  return {reinterpret_cast<const float*>(k.data()), sizeof(K) / sizeof(float)};
+}
+template <typename K>
+std::span<float> Values(K& k) {
+  return {reinterpret_cast<float*>(k.data()), sizeof(K) / sizeof(float)};
+}
+
+}  // namespace
+
+template <typename K>
+K KeypointFilter<K>::Filter(const K& raw, double t) {
+  const std::span<const float> in = Values(raw);
+  K out{};
+  const std::span<float> o = Values(out);
   if (!last_t_ || t <= *last_t_) {
-    const bool first = !last_t_;
-    last_t_ = t;
-    if (first) {
-      x_ = raw;
-      for (auto& d : dx_) d = {0, 0};
+    if (!last_t_) {
+      for (size_t i = 0; i < kValues; ++i) x_[i] = in[i];
+      dx_.fill(0);
     }
-    return x_;
+    last_t_ = t;
+    for (size_t i = 0; i < kValues; ++i) o[i] = static_cast<float>(x_[i]);
+    return out;
   }
   const double dt = t - *last_t_;
   last_t_ = t;
   const double ad = Alpha(options_.d_cutoff_hz, dt);
-  for (int k = 0; k < kNumKeypoints; ++k) {
-    const double raw_xy[2] = {raw[k].x, raw[k].y};
-    const double old_xy[2] = {x_[k].x, x_[k].y};
-    double out[2];
-    for (int c = 0; c < 2; ++c) {
-      const double d = (raw_xy[c] - old_xy[c]) / dt;
-      dx_[k][c] = dx_[k][c] + ad * (d - dx_[k][c]);
-      const double cutoff = options_.min_cutoff_hz + options_.beta * std::fabs(dx_[k][c]);
-      const double a = Alpha(cutoff, dt);
-      out[c] = old_xy[c] + a * (raw_xy[c] - old_xy[c]);
-    }
-    x_[k] = {static_cast<float>(out[0]), static_cast<float>(out[1])};
+  for (size_t i = 0; i < kValues; ++i) {
+    const double d = (in[i] - x_[i]) / dt;
+    dx_[i] += ad * (d - dx_[i]);
+    const double cutoff = options_.min_cutoff_hz + options_.beta * std::fabs(dx_[i]);
+    x_[i] += Alpha(cutoff, dt) * (in[i] - x_[i]);
+    o[i] = static_cast<float>(x_[i]);
   }
-  return x_;
+  return out;
 }
 
-std::vector<std::optional<Keypoints2d>> FilterSequence(
-    const std::vector<std::optional<Keypoints2d>>& keypoints,
-    const std::vector<double>& times,
-    const KeypointFilterOptions& options) {
+template <typename K>
+std::vector<std::optional<K>> FilterSequence(const std::vector<std::optional<K>>& keypoints,
+                                             const std::vector<double>& times,
+                                             const KeypointFilterOptions& options) {
   THROW_CHECK_EQ(keypoints.size(), times.size());
-  std::vector<std::optional<Keypoints2d>> out = keypoints;
+  std::vector<std::optional<K>> out = keypoints;
   if (!options.enabled) return out;
   const size_t n = keypoints.size();
   size_t begin = 0;
@@ -168,22 +183,33 @@ std::vector<std::optional<Keypoints2d>> FilterSequence(
     }
     size_t end = begin;
     while (end < n && keypoints[end]) ++end;
-    std::vector<Keypoints2d> forward(end - begin), backward(end - begin);
-    KeypointFilter f(options), b(options);
+    std::vector<K> forward(end - begin), backward(end - begin);
+    KeypointFilter<K> f(options), b(options);
     for (size_t t = begin; t < end; ++t) forward[t - begin] = f.Filter(*keypoints[t], times[t]);
     // Backward in time: the same filter on negated times.
     for (size_t t = end; t-- > begin;) backward[t - begin] = b.Filter(*keypoints[t], -times[t]);
     for (size_t t = begin; t < end; ++t) {
-      Keypoints2d avg;
-      for (int k = 0; k < kNumKeypoints; ++k) {
-        avg[k] = {(forward[t - begin][k].x + backward[t - begin][k].x) / 2,
-                  (forward[t - begin][k].y + backward[t - begin][k].y) / 2};
-      }
+      K avg{};
+      const std::span<const float> fw = Values(forward[t - begin]),
+                                   bw = Values(backward[t - begin]);
+      const std::span<float> a = Values(avg);
+      for (size_t i = 0; i < a.size(); ++i) a[i] = (fw[i] + bw[i]) / 2;
       out[t] = avg;
     }
     begin = end;
   }
   return out;
 }
+
+template class KeypointFilter<Keypoints2d>;
+template class KeypointFilter<Keypoints3d>;
+template std::vector<std::optional<Keypoints2d>> FilterSequence(
+    const std::vector<std::optional<Keypoints2d>>&,
+    const std::vector<double>&,
+    const KeypointFilterOptions&);
+template std::vector<std::optional<Keypoints3d>> FilterSequence(
+    const std::vector<std::optional<Keypoints3d>>&,
+    const std::vector<double>&,
+    const KeypointFilterOptions&);
 
 }  // namespace handdb

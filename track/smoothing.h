@@ -8,9 +8,10 @@
 // sequence, online over a short look-back window that ends at the newest frame. A frame without
 // candidates (no hand) breaks the chain.
 //
-// Then the chosen pose's keypoints (in the frame's px) are filtered (a One Euro filter: a
-// low-pass whose cut-off rises with the speed, so a still hand stops shaking and a moving one
-// does not lag): forward only online, forward and backward averaged offline.
+// Then the chosen pose's keypoints, in the frame's px and in 3D (the fit's, in the picture's
+// normalised frame), are filtered (a One Euro filter: a low-pass whose cut-off rises with the
+// speed, so a still hand stops shaking and a moving one does not lag): forward only online,
+// forward and backward averaged offline.
 #pragma once
 
 #include <array>
@@ -66,27 +67,37 @@ struct KeypointFilterOptions {
 };
 
 using Keypoints2d = std::array<Point2f, kNumKeypoints>;
+// Normalised px with depth, as a view label's keypoints (format/view.h).
+using Keypoints3d = std::array<std::array<float, 3>, kNumKeypoints>;
 
-// A One Euro filter of 21 2D keypoints.
+// A One Euro filter of 21 keypoints, each coordinate on its own (its speed, its cut-off); K is
+// Keypoints2d or Keypoints3d. The options' units are px: the frame's, or the normalised frame's
+// (a hand ~192 px across).
+template <typename K>
 class KeypointFilter {
  public:
   explicit KeypointFilter(const KeypointFilterOptions& options) : options_(options) {}
-  // The filtered keypoints at time t (seconds, increasing).
-  Keypoints2d Filter(const Keypoints2d& raw, double t);
+  // The filtered keypoints at time t (seconds, increasing; a time not after the last one's
+  // returns the last output).
+  K Filter(const K& raw, double t);
   void Reset() { last_t_.reset(); }
 
  private:
+  static constexpr size_t kValues = sizeof(K) / sizeof(float);
   KeypointFilterOptions options_;
   std::optional<double> last_t_;
-  Keypoints2d x_{};
-  std::array<std::array<double, 2>, kNumKeypoints> dx_{};
+  std::array<double, kValues> x_{};
+  std::array<double, kValues> dx_{};
 };
 
 // Offline: each run of consecutive frames with keypoints (nullopt ends a run) filtered forward
 // and backward, the two averaged (no lag either way).
-std::vector<std::optional<Keypoints2d>> FilterSequence(
-    const std::vector<std::optional<Keypoints2d>>& keypoints,
-    const std::vector<double>& times,
-    const KeypointFilterOptions& options);
+template <typename K>
+std::vector<std::optional<K>> FilterSequence(const std::vector<std::optional<K>>& keypoints,
+                                             const std::vector<double>& times,
+                                             const KeypointFilterOptions& options);
+
+extern template class KeypointFilter<Keypoints2d>;
+extern template class KeypointFilter<Keypoints3d>;
 
 }  // namespace handdb

@@ -79,7 +79,7 @@ TEST(CandidatesOf, UnaryFromTheScoreOrTheDistanceRatio) {
 
 // A still hand's noisy keypoints come out steadier; a step is followed within a second.
 TEST(KeypointFilter, SteadiesAStillHandAndFollowsAMove) {
-  KeypointFilter f(KeypointFilterOptions{});
+  KeypointFilter<Keypoints2d> f(KeypointFilterOptions{});
   std::mt19937 rng(1);
   std::normal_distribution<double> noise(0, 2);
   double raw_jitter = 0, out_jitter = 0;
@@ -104,6 +104,37 @@ TEST(KeypointFilter, SteadiesAStillHandAndFollowsAMove) {
   EXPECT_NEAR(out[0].x, 200, 5);
 }
 
+// The 3D filter treats each coordinate as the 2D one does: the same x and y out of the same x
+// and y in, and a noisy still depth steadied.
+TEST(KeypointFilter, FiltersThreeDimensionalKeypointsLikeTwoDimensionalOnes) {
+  KeypointFilter<Keypoints2d> f2(KeypointFilterOptions{});
+  KeypointFilter<Keypoints3d> f3(KeypointFilterOptions{});
+  std::mt19937 rng(2);
+  std::normal_distribution<double> noise(0, 2);
+  double raw_jitter = 0, out_jitter = 0, prev_raw = 0, prev_out = 0;
+  for (int t = 0; t < 60; ++t) {
+    Keypoints2d raw2;
+    Keypoints3d raw3;
+    for (int k = 0; k < kNumKeypoints; ++k) {
+      raw2[k] = {static_cast<float>(10 * k + noise(rng)), static_cast<float>(5 + noise(rng))};
+      raw3[k] = {raw2[k].x, raw2[k].y, static_cast<float>(-20 + noise(rng))};
+    }
+    const Keypoints2d out2 = f2.Filter(raw2, t / 30.0);
+    const Keypoints3d out3 = f3.Filter(raw3, t / 30.0);
+    for (int k = 0; k < kNumKeypoints; ++k) {
+      EXPECT_FLOAT_EQ(out3[k][0], out2[k].x);
+      EXPECT_FLOAT_EQ(out3[k][1], out2[k].y);
+    }
+    if (t > 0) {
+      raw_jitter += std::fabs(raw3[7][2] - prev_raw);
+      out_jitter += std::fabs(out3[7][2] - prev_out);
+    }
+    prev_raw = raw3[7][2];
+    prev_out = out3[7][2];
+  }
+  EXPECT_LT(out_jitter, raw_jitter / 2);
+}
+
 TEST(FilterSequence, RunsBetweenGapsAndKeepsGaps) {
   std::vector<std::optional<Keypoints2d>> k(5);
   Keypoints2d a;
@@ -113,6 +144,15 @@ TEST(FilterSequence, RunsBetweenGapsAndKeepsGaps) {
   EXPECT_FALSE(out[2].has_value());
   ASSERT_TRUE(out[3].has_value());
   EXPECT_FLOAT_EQ((*out[3])[5].x, 10);
+
+  std::vector<std::optional<Keypoints3d>> k3(3);
+  Keypoints3d b;
+  for (auto& p : b) p = {1, 2, 3};
+  k3[0] = k3[2] = b;
+  const auto out3 = FilterSequence(k3, {0, 0.1, 0.2}, KeypointFilterOptions{});
+  EXPECT_FALSE(out3[1].has_value());
+  ASSERT_TRUE(out3[2].has_value());
+  EXPECT_FLOAT_EQ((*out3[2])[20][2], 3);
 }
 
 }  // namespace

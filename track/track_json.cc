@@ -24,6 +24,8 @@ nlohmann::json TrackFrameToJson(const TrackFrame& frame) {
     const Match& m = frame.matches[frame.chosen];
     json kps = json::array();
     for (const Point2f& p : frame.keypoints_image_px) kps.push_back({p.x, p.y});
+    json kps_3d = json::array();
+    for (const auto& p : frame.keypoints_3d) kps_3d.push_back({p[0], p[1], p[2]});
     json pose = {{"match", frame.chosen + 1},
                  {"view_id", m.view_id},
                  {"roll", m.roll},
@@ -32,7 +34,8 @@ nlohmann::json TrackFrameToJson(const TrackFrame& frame) {
                  {"distance", m.distance},
                  {"joint_angles", m.label.joint_angles},
                  {"view_direction", m.label.view_direction},
-                 {"keypoints_image_px", std::move(kps)}};
+                 {"keypoints_image_px", std::move(kps)},
+                 {"keypoints_3d", std::move(kps_3d)}};
     if (!frame.fit.fits.empty()) pose["fit"] = MatchFitToJson(frame.fit.fits.front());
     j["pose"] = std::move(pose);
   }

@@ -27,7 +27,10 @@ double BestDistance(const std::vector<Match>& matches) {
 class Tracker {
  public:
   Tracker(const Searcher& searcher, const TrackOptions& options)
-      : searcher_(searcher), options_(options), filter_(options.keypoint_filter) {
+      : searcher_(searcher),
+        options_(options),
+        filter_(options.keypoint_filter),
+        filter_3d_(options.keypoint_filter) {
     if (options_.local_search) {
       neighbourhood_ = std::make_unique<ViewNeighbourhood>(searcher.database());
     }
@@ -110,13 +113,22 @@ class Tracker {
     for (int k = 0; k < kNumKeypoints; ++k) {
       frame->keypoints_image_px[k] =
           edges.ImageFromNormalised({m.label.keypoints[k][0], m.label.keypoints[k][1]});
+      for (int c = 0; c < 3; ++c) frame->keypoints_3d[k][c] = m.label.keypoints[k][c];
     }
     if (options_.picture.rig != nullptr) {
       auto fit = FitPictureMatches(
           *options_.picture.rig, searcher_.database(), *frame->evidence, {m}, options_.picture.fit);
       if (fit.ok()) {
         frame->fit = std::move(fit).value();
-        if (frame->fit.best == 0) frame->keypoints_image_px = frame->fit.fits[0].keypoints_image_px;
+        if (frame->fit.best == 0) {
+          const MatchFit& fitted = frame->fit.fits[0];
+          frame->keypoints_image_px = fitted.keypoints_image_px;
+          for (int k = 0; k < kNumKeypoints; ++k) {
+            for (int c = 0; c < 3; ++c) {
+              frame->keypoints_3d[k][c] = static_cast<float>(fitted.keypoints_3d[k][c]);
+            }
+          }
+        }
       }
     }
     frame->has_pose = true;
@@ -127,10 +139,12 @@ class Tracker {
   void FilterOnline(TrackFrame* frame) {
     if (!frame->has_pose) {
       filter_.Reset();
+      filter_3d_.Reset();
       return;
     }
     if (options_.keypoint_filter.enabled && options_.smoothing != Smoothing::kOff) {
       frame->keypoints_image_px = filter_.Filter(frame->keypoints_image_px, frame->time_s);
+      frame->keypoints_3d = filter_3d_.Filter(frame->keypoints_3d, frame->time_s);
     }
   }
 
@@ -208,7 +222,8 @@ class Tracker {
     return recent_best_.empty() ? 0.0 : *std::max_element(recent_best_.begin(), recent_best_.end());
   }
   std::deque<std::vector<PoseCandidate>> window_;
-  KeypointFilter filter_;
+  KeypointFilter<Keypoints2d> filter_;
+  KeypointFilter<Keypoints3d> filter_3d_;
 };
 
 }  // namespace
@@ -317,16 +332,22 @@ Result<TrackSummary> TrackFrames(const Searcher& searcher,
     for (const TrackFrame& f : held) candidates.push_back(CandidatesOf(f.matches));
     const std::vector<int> choice = ChooseByDynamicProgramming(candidates, options.transition);
     std::vector<std::optional<Keypoints2d>> keypoints(held.size());
+    std::vector<std::optional<Keypoints3d>> keypoints_3d(held.size());
     std::vector<double> times(held.size());
     for (size_t i = 0; i < held.size(); ++i) {
       held[i].chosen = choice[i];
       tracker.Pose(&held[i]);
-      if (held[i].has_pose) keypoints[i] = held[i].keypoints_image_px;
+      if (held[i].has_pose) {
+        keypoints[i] = held[i].keypoints_image_px;
+        keypoints_3d[i] = held[i].keypoints_3d;
+      }
       times[i] = held[i].time_s;
     }
     keypoints = FilterSequence(keypoints, times, options.keypoint_filter);
+    keypoints_3d = FilterSequence(keypoints_3d, times, options.keypoint_filter);
     for (size_t i = 0; i < held.size(); ++i) {
       if (keypoints[i]) held[i].keypoints_image_px = *keypoints[i];
+      if (keypoints_3d[i]) held[i].keypoints_3d = *keypoints_3d[i];
       HANDDB_RETURN_IF_ERROR(on_frame(held[i]));
     }
   }

@@ -77,10 +77,12 @@ struct TrackFrame {
   int chosen = -1;  // the smoother's choice among `matches`
   // The chosen match's fit (with the database's rig): fit.fits[0] fits matches[chosen].
   PictureFit fit;
-  // The answer's 21 keypoints in the frame's px (the fit's when fitted, else the chosen match's),
-  // filtered over time.
+  // The answer's 21 keypoints in the frame's px and in 3D (the picture's normalised frame with
+  // depth, as a label's keypoints): the fit's when fitted, else the chosen match's, filtered over
+  // time (smoothing off: as they are).
   bool has_pose = false;
   std::array<Point2f, kNumKeypoints> keypoints_image_px{};
+  Keypoints3d keypoints_3d{};
   // With TrackOptions::keep_pixels, a video frame's pixels (8-bit BGR, rows packed).
   std::vector<uint8_t> frame_bgr;
   int frame_width = 0, frame_height = 0;
