@@ -6,19 +6,13 @@
 #include "base/status.h"
 
 namespace handdb {
-namespace {
 
-// Keypoints (docs/conventions.md): 0 wrist, 9 middle-finger MCP.
-constexpr int kWrist = 0;
-constexpr int kMiddleKnuckle = 9;
-
-float AxisAngle(const ViewLabel& label) {
-  const auto& w = label.keypoints[kWrist];
-  const auto& m = label.keypoints[kMiddleKnuckle];
+float HandAxisAngle(const ViewLabel& label) {
+  // Keypoints (docs/conventions.md): 0 wrist, 9 middle-finger MCP.
+  const auto& w = label.keypoints[0];
+  const auto& m = label.keypoints[9];
   return std::atan2(m[1] - w[1], m[0] - w[0]);
 }
-
-}  // namespace
 
 bool NeighbourhoodOptions::Check() const {
   CHECK_OPTION(direction_deg >= 0 && direction_deg <= 180);
@@ -35,7 +29,7 @@ ViewNeighbourhood::ViewNeighbourhood(const Database& db)
     ViewInfo& info = views_[v];
     info.direction = label.view_direction;
     info.joints = label.joint_angles;
-    info.axis_angle = AxisAngle(label);
+    info.axis_angle = HandAxisAngle(label);
   }
 }
 

@@ -31,6 +31,10 @@ struct NeighbourhoodOptions {
   bool Check() const;
 };
 
+// The in-picture angle (radians, atan2 of y down over x) of a label's hand axis, wrist -> middle
+// knuckle: what the neighbourhood's rolls and the smoother's roll cost compare.
+float HandAxisAngle(const ViewLabel& label);
+
 class ViewNeighbourhood {
  public:
   // Reads every view's label once.

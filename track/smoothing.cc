@@ -5,11 +5,10 @@
 #include <limits>
 #include <span>
 
+#include "track/neighbourhood.h"
+
 namespace handdb {
 namespace {
-
-constexpr int kWrist = 0;
-constexpr int kMiddleKnuckle = 9;
 
 double WrappedAngle(double a) {
   a = std::fmod(std::fabs(a), 2 * M_PI);
@@ -49,9 +48,7 @@ std::vector<PoseCandidate> CandidatesOf(const std::vector<Match>& matches) {
     }
     c.joints = m.label.joint_angles;
     c.view_direction = m.label.view_direction;
-    const auto& w = m.label.keypoints[kWrist];
-    const auto& k = m.label.keypoints[kMiddleKnuckle];
-    c.axis_angle = std::atan2(k[1] - w[1], k[0] - w[0]);
+    c.axis_angle = HandAxisAngle(m.label);
     c.hand = m.hand;
     out.push_back(c);
   }
