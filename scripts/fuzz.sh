@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Builds the libFuzzer targets with clang and runs them for SECONDS in total (default 75), split
-# evenly over the targets (at least 10 s each), so adding a target keeps the run short.
+# evenly over the targets (at least 5 s each), so adding a target keeps the run short.
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 total="${1:-75}"
@@ -17,7 +17,7 @@ cmake --build "$build" -j "$(nproc)" --target "${targets[@]}"
 count=0
 for target in "$build"/tests/fuzz/*_fuzzer; do [ -x "$target" ] && count=$((count + 1)); done
 seconds=$(( count > 0 ? total / count : total ))
-[ "$seconds" -ge 10 ] || seconds=10
+[ "$seconds" -ge 5 ] || seconds=5
 found=0
 for target in "$build"/tests/fuzz/*_fuzzer; do
   [ -x "$target" ] || continue
