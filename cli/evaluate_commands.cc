@@ -401,8 +401,9 @@ int RunEvaluate(int argc, char** argv) {
       "table, confusion matrix, contact sheets), searched as --hand right, left or either, with "
       "the photo flags of handdb query; --keypoints FILE adds the 2D keypoint error on annotated "
       "photos; --slurm splits the photos over a job array the same way. A test set of sequences "
-      "(handdb testset with a \"sequence\" config) is scored per frame from its photos, each "
-      "frame alone: keypoint error, jitter, recovery after the hand left the picture, frames/s.",
+      "(handdb testset with a \"sequence\" config) is scored per frame from its photos, "
+      "answered by the tracker of handdb track (--predictor alone: each frame alone): keypoint "
+      "error, jitter, recovery after the hand left the picture, frames/s.",
       "handdb evaluate");
   // Bound to the request of a Slurm run; a local run reads the same fields.
   EvaluateSlurmRequest request;
