@@ -11,6 +11,18 @@
 #include "base/atomic_file.h"
 #include "base/testing.h"
 
+// GCC names AddressSanitizer with __SANITIZE_ADDRESS__, clang with __has_feature.
+#if defined(__SANITIZE_ADDRESS__)
+#define HANDDB_TEST_UNDER_ASAN 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define HANDDB_TEST_UNDER_ASAN 1
+#endif
+#endif
+#ifndef HANDDB_TEST_UNDER_ASAN
+#define HANDDB_TEST_UNDER_ASAN 0
+#endif
+
 namespace handdb {
 namespace {
 
@@ -80,7 +92,7 @@ TEST(MappedFileDeathTest, TruncatedWhileMappedIsOneLineAndExitOne) {
       "read\n$");
   // A SIGBUS outside every mapping goes on to the handler installed before ours: the default
   // one kills the process; AddressSanitizer's (a sanitizer build) reports and aborts instead.
-#ifndef __SANITIZE_ADDRESS__
+#if !HANDDB_TEST_UNDER_ASAN
   EXPECT_EXIT(
       {
         auto file = MappedFile::Open(path);

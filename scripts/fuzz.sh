@@ -1,18 +1,22 @@
 #!/usr/bin/env bash
-# Builds the libFuzzer targets with clang and runs them for SECONDS in total (default 75), split
-# evenly over the targets (at least 5 s each), so adding a target keeps the run short.
+# Runs the libFuzzer targets for SECONDS in total (default 75), split evenly over the targets (at
+# least 5 s each), so adding a target keeps the run short.
+#   scripts/fuzz.sh [SECONDS] [BUILD_DIR]
+# BUILD_DIR: a clang build configured with -DHANDDB_FUZZ=ON (scripts/test.sh passes its sanitizer
+# build); without it, build-fuzz is configured with the fuzz targets and what they link only.
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 total="${1:-75}"
-build="$here/build-fuzz"
-# Only the fuzz targets and what they link (the format library): a whole clang build would
-# cost CI minutes for nothing.
+build="${2:-}"
 targets=()
 for src in "$here"/tests/fuzz/*_fuzzer.cc; do targets+=("$(basename "${src%.cc}")"); done
-CC=clang CXX=clang++ cmake -S "$here" -B "$build" -G Ninja -DHANDDB_FUZZ=ON -DHANDDB_BUILD_TESTS=OFF \
-  -DHANDDB_BUILD_BENCH=OFF -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_UNITY_BUILD=ON \
-  "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1" "-DCMAKE_C_FLAGS_RELWITHDEBINFO=-O1 -g1" > "$build.cmake.log" 2>&1 \
-  || { cat "$build.cmake.log"; exit 1; }
+if [ -z "$build" ]; then
+  build="$here/build-fuzz"
+  CC=clang CXX=clang++ cmake -S "$here" -B "$build" -G Ninja -DHANDDB_FUZZ=ON -DHANDDB_BUILD_TESTS=OFF \
+    -DHANDDB_BUILD_BENCH=OFF -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_UNITY_BUILD=ON \
+    "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1" "-DCMAKE_C_FLAGS_RELWITHDEBINFO=-O1 -g1" > "$build.cmake.log" 2>&1 \
+    || { cat "$build.cmake.log"; exit 1; }
+fi
 cmake --build "$build" -j "$(nproc)" --target "${targets[@]}"
 count=0
 for target in "$build"/tests/fuzz/*_fuzzer; do [ -x "$target" ] && count=$((count + 1)); done

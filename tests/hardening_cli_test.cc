@@ -128,7 +128,7 @@ class HardeningCli : public ::testing::Test {
 };
 fs::path* HardeningCli::dir_ = nullptr;
 
-// Item 1: each --json command writing into a full disk.
+// Each --json command writing into a full disk.
 TEST_F(HardeningCli, StdoutOnFullDiskIsExitOneWithOneLine) {
   // The same commands succeed with a working stdout, so the failure below is the write's.
   const std::string q = (*dir_ / "q.pgm").string();
@@ -152,7 +152,7 @@ TEST_F(HardeningCli, StdoutOnFullDiskIsExitOneWithOneLine) {
   }
 }
 
-// Item 1, files: a command whose output file does not fit on the disk (a full 64 KiB tmpfs) is
+// A command whose output file does not fit on the disk (a full 64 KiB tmpfs) is
 // exit 1 with one line naming that file (not its temp file) and the reason, and leaves neither
 // the file nor a temp file behind. Needs mount(2) (root); skipped elsewhere.
 TEST_F(HardeningCli, OutputFilesOnAFullDiskAreExitOneNamingTheFile) {
@@ -185,7 +185,7 @@ TEST_F(HardeningCli, OutputFilesOnAFullDiskAreExitOneNamingTheFile) {
   std::system(("umount " + full.string()).c_str());
 }
 
-// Item 2: 100,000 nested '[' crashed plan / validate / info / query (stack overflow).
+// 100,000 nested '[' given to plan / validate / info / query: one line each, not a stack overflow.
 TEST_F(HardeningCli, DeeplyNestedJsonIsRefusedWithOneLine) {
   const std::string deep = std::string(100000, '[') + std::string(100000, ']');
   const fs::path config = *dir_ / "deep-config.json";
@@ -210,7 +210,7 @@ TEST_F(HardeningCli, DeeplyNestedJsonIsRefusedWithOneLine) {
   }
 }
 
-// Item 7: a FIFO (nobody writing) or /dev/zero as the manifest, a FIFO as a shard.
+// A FIFO (nobody writing) or /dev/zero as the manifest, a FIFO as a shard: refused, not opened.
 TEST_F(HardeningCli, FifosAndDevicesAreRefusedNotOpened) {
   const std::string fifo_db =
       DbWithManifest("fifo-db", [](const fs::path& m) { ASSERT_EQ(::mkfifo(m.c_str(), 0644), 0); });
@@ -237,8 +237,8 @@ TEST_F(HardeningCli, FifosAndDevicesAreRefusedNotOpened) {
   }
 }
 
-// Item 6: a truncated PNG / JPEG was searched with only a libpng / libjpeg warning. Item 8: a
-// directory or a symlink loop given as the image said "no such image file".
+// A truncated PNG / JPEG is refused, not searched past the codec's warning; a directory or a
+// symlink loop given as the image is named as what it is, not as a missing file.
 TEST_F(HardeningCli, TruncatedOrMissingImagesAreRefusedWithOneLine) {
   const cv::Mat img = cv::imread((*dir_ / "q.pgm").string(), cv::IMREAD_GRAYSCALE);
   ASSERT_FALSE(img.empty());
@@ -275,8 +275,8 @@ TEST_F(HardeningCli, TruncatedOrMissingImagesAreRefusedWithOneLine) {
       "handdb query: " + loop.string() + ": too many levels of symbolic links (a symlink loop?)\n");
 }
 
-// Item 8: bad --skin / --canny / --dt-cell values printed the option checks' source paths and
-// three lines; now one line naming the flag, the value and the rule, exit 2 (bad usage).
+// Bad --skin / --canny / --dt-cell values: one line naming the flag, the value and the rule,
+// exit 2 (bad usage), no source paths of the option checks.
 TEST_F(HardeningCli, BadPhotoAndSearchFlagsAreOneLineNamingTheFlag) {
   const std::string query = "query " + Db() + " " + (*dir_ / "q.pgm").string() + " ";
   const std::vector<std::pair<std::string, std::string>> cases = {
@@ -351,7 +351,7 @@ std::string WriteDb(const fs::path& db, const std::string& metadata_json, uint32
   return db.string();
 }
 
-// Item 4: manifest rolls 24 over shards made with 48 passed validate; query searched 24 rolls.
+// A manifest saying 24 rolls over shards made with 48: validate reports it, query refuses it.
 TEST_F(HardeningCli, ValidateCrossChecksTheManifestAgainstTheShards) {
   const std::string db =
       WriteDb(*dir_ / "rolls-db", R"({"unit": 0, "rolls": 48})", 24, [](std::vector<uint8_t>*) {});
@@ -377,8 +377,8 @@ TEST_F(HardeningCli, ValidateCrossChecksTheManifestAgainstTheShards) {
   EXPECT_EQ(Handdb("query " + good + " " + q + " --input edges").code, 0);
 }
 
-// Item 5: a NaN joint angle / an infinite keypoint under recomputed checksums was served by
-// query (exit 0, `nan` / JSON null). The reader's open checks refuse it: one line naming the shard.
+// A NaN joint angle / an infinite keypoint under recomputed checksums: the reader's open checks
+// refuse it (one line naming the shard) instead of serving `nan` / JSON null.
 TEST_F(HardeningCli, LabelsOutOfRangeAreRefusedAtOpen) {
   const std::string q = (*dir_ / "q.pgm").string();
   for (const auto& [name, value] :
@@ -386,6 +386,7 @@ TEST_F(HardeningCli, LabelsOutOfRangeAreRefusedAtOpen) {
         std::pair{std::string("inf"), std::numeric_limits<float>::infinity()}}) {
     SCOPED_TRACE(name);
     const float v = value;
+    const bool is_nan = name == "nan";  // a lambda cannot capture a structured binding in C++20
     uint64_t field_at = 0;
     const std::string db =
         WriteDb(*dir_ / ("label-" + name), "{}", 12, [&](std::vector<uint8_t>* b) {
@@ -394,8 +395,7 @@ TEST_F(HardeningCli, LabelsOutOfRangeAreRefusedAtOpen) {
           for (const auto& sec : reader->sections()) {
             if (sec.name == "views") field_at = sec.offset + 1 * shard::kViewRecordSize;
           }
-          field_at +=
-              name == "nan" ? shard::kViewOffJointAngles : shard::kViewOffKeypoints + 12 * 3;
+          field_at += is_nan ? shard::kViewOffJointAngles : shard::kViewOffKeypoints + 12 * 3;
           StoreLittleEndian<float>(b->data() + field_at, v);
         });
     const std::string expected =
@@ -414,7 +414,7 @@ TEST_F(HardeningCli, LabelsOutOfRangeAreRefusedAtOpen) {
   }
 }
 
-// Item 3: counts that size an allocation are bounded before allocating, one line each.
+// Counts that size an allocation are bounded before allocating, one line each.
 TEST_F(HardeningCli, CountsThatSizeAllocationsAreBounded) {
   const std::string q = (*dir_ / "q.pgm").string();
   // A manifest with rolls = 10^8 and a matching virtual-view count.
@@ -477,8 +477,8 @@ std::vector<PointQ> AsConverted(const std::vector<PointQ>& points) {
   return NormalisePixels(contour, *norm);
 }
 
-// Item 11: `show -o v.png` then `query DB v.png` said "no hand found" (the anti-aliased caption
-// made auto-detection pick "photo"). The tool's own image finds its own view at rank 1, D_c ~ 0.
+// `show -o v.png` then `query DB v.png`: the tool's own image (an anti-aliased caption that
+// auto-detection must not take for a photo) finds its own view at rank 1, D_c ~ 0.
 TEST_F(HardeningCli, ShowOutputQueriedFindsItsOwnView) {
   const fs::path db = *dir_ / "show-db";
   fs::create_directories(db);
@@ -517,9 +517,8 @@ TEST_F(HardeningCli, ShowOutputQueriedFindsItsOwnView) {
       0);
 }
 
-// Item 10: two `generate` runs into one --out both rendered everything, unlocked. The output
-// directory is flock'ed: a second writer (generate or convert) is refused at once with one line.
-// Item 12: a bad config left an empty OUT/render/ behind.
+// The output directory is flock'ed: a second writer (generate or convert) into one --out is
+// refused at once with one line. A bad config leaves no OUT/render/ behind.
 TEST_F(HardeningCli, SecondWriterIsRefusedAndABadConfigLeavesNoDirectory) {
   const fs::path out = *dir_ / "locked-out";
   fs::create_directories(out);
