@@ -59,7 +59,11 @@ struct PoseFitOptions {
   // Cauchy loss at depth_loss_scale sigmas (the network's depths are often far off; a bounded
   // pull keeps a wrong one from turning the hand), scaled by the landmark's weight times
   // depth_weight. Scale-free: the fit's own scale sets the hand's size, the picture's px never
-  // meet the evidence's depths. depth_weight 0: no depth term.
+  // meet the evidence's depths. depth_weight 0 (the default): no depth term. Off because the
+  // landmark network's depths, the only source today, are worse than the fit's own: at weights
+  // 0.3-10 the natural-pose photo renders' fitted error moved by less than 0.01
+  // (docs/decisions/0019). Given true depths, weight 10 turns a finger bent the wrong way
+  // (pose/fit_test.cc).
   double depth_sigma = 0.25;
   double depth_loss_scale = 1.0;
   double depth_weight = 0;
