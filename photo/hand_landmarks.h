@@ -25,7 +25,8 @@ struct HandLandmarks {
   // The network's hand-presence score in [0, 1]: below ~0.9 the joints are unreliable (it sees
   // no hand, or a view it was not trained on) and the search does not use them.
   float presence = 0;
-  // Depth, which the 2D joints leave open (the pose fit reads it, pose/fit.h): the network's
+  // Depth, which the 2D joints leave open (the pose fit's optional depth term reads the world
+  // joints, pose/fit.h; docs/decisions/0019 measures both against the truth): the network's
   // world joints (metres, origin near the hand's centre, z away from the camera), turned from
   // the crop's axes into the picture's, so x is right and y down as in image_px. False when the
   // model has no world output; a NaN joint is the network's, kept as it is.

@@ -185,8 +185,8 @@ class DepthResidual {
   double inverse_sigma_;
 };
 
-// The keypoint a bone ends at is k; the one it starts from (docs/conventions.md order: each
-// finger's base hangs from the wrist, every other keypoint from the one before it).
+// Where the bone that ends at keypoint k starts (docs/conventions.md order: each digit's base
+// hangs from the wrist, every other keypoint from the one before it).
 int ParentKeypoint(int k) { return k % 4 == 1 ? 0 : k - 1; }
 
 // The depth term's residual blocks (PoseFitOptions), one per pair of keypoints with a weight.
