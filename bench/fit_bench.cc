@@ -3,7 +3,8 @@
 // evaluates (with derivatives) per landmark and iteration. Also how well the fits converge. The
 // silhouette term's cost besides: the truth's capsules (pose/fit_silhouette.h) rasterised as the
 // picture's hand region, its distance fields made once per picture (MakeSilhouetteFields), and
-// the fit to landmarks and silhouette, and to the silhouette alone.
+// the fit to landmarks and silhouette, and to the silhouette alone; and the fit with the depth
+// term beside the landmarks.
 //
 //   fit_bench [--fits N]
 #include <algorithm>
@@ -94,6 +95,10 @@ int Run(int fits) {
   std::vector<double> fit_ms, iterations, max_px, fields_ms, both_ms, silhouette_ms,
       silhouette_iterations;
   const std::vector<HandCapsule> capsules = HandCapsules(*rig);
+  std::vector<double> depth_ms, depth_iterations;
+  const HandKeypoints3d rest = rig->Keypoints3d(JointVector{});
+  const double rig_length =
+      std::hypot(rest[9][0] - rest[0][0], rest[9][1] - rest[0][1], rest[9][2] - rest[0][2]);
   int converged = 0;
   for (int n = 0; n < fits; ++n) {
     // A random pose inside the limits, a random view, and a start perturbed like a near match.
@@ -141,6 +146,25 @@ int Run(int fits) {
                               double{fit->keypoints_normalised[k].y} - evidence.landmarks_px[k].y));
     }
     max_px.push_back(worst);
+
+    // The same fit with the depth term (the truth's depths, weight 10: the weight that turns a
+    // bend in pose/fit_test.cc), what PoseFitOptions::depth_weight adds to a fit.
+    PoseFitEvidence with_depths = evidence;
+    with_depths.has_depths = true;
+    const HandKeypoints3d truth_in_hand = rig->Keypoints3d(truth);
+    for (int k = 0; k < kNumKeypoints; ++k) {
+      double z = 0;
+      for (int c = 0; c < 3; ++c) z += (*cam)[2][c] * truth_in_hand[k][c];
+      with_depths.depths[k] = static_cast<float>(z / rig_length);
+    }
+    PoseFitOptions depth_options = options;
+    depth_options.depth_weight = 10;
+    const auto d0 = Clock::now();
+    auto depth_fit = FitPose(*rig, start, with_depths, depth_options);
+    const auto d1 = Clock::now();
+    if (!depth_fit.ok()) return 1;
+    depth_ms.push_back(std::chrono::duration<double, std::milli>(d1 - d0).count());
+    depth_iterations.push_back(depth_fit->iterations);
 
     // The same fit with the truth's silhouette as the picture's (centred on the hand).
     const HandKeypoints3d truth_points = rig->Keypoints3d(truth);
@@ -192,6 +216,9 @@ int Run(int fits) {
   std::printf("iterations median         %.0f\n", Median(iterations));
   std::printf("worst keypoint median     %.3f px (normalised frame, hand diameter ~192 px)\n",
               Median(max_px));
+  std::printf("fit + depth median        %.3f ms (landmarks and depths; %.0f iterations)\n",
+              Median(depth_ms),
+              Median(depth_iterations));
   std::printf("silhouette fields median   %.3f ms (once per picture)\n", Median(fields_ms));
   std::printf("fit + silhouette median   %.3f ms (landmarks and silhouette)\n", Median(both_ms));
   std::printf("silhouette fit median     %.3f ms (no landmarks; %.0f iterations)\n",

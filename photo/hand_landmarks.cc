@@ -16,6 +16,13 @@ HandLandmarker::HandLandmarker(std::filesystem::path path, std::unique_ptr<Tflit
     : path_(std::move(path)), model_(std::move(model)) {
   input_h_ = model_->input_shape()[1];
   input_w_ = model_->input_shape()[2];
+  const std::vector<size_t> sizes = model_->output_sizes();
+  for (size_t i = sizes.size(); i-- > 2;) {
+    if (sizes[i] == 3 * kNumLandmarks) {
+      world_output_ = static_cast<int>(i);
+      break;
+    }
+  }
 }
 
 HandLandmarker::~HandLandmarker() = default;
@@ -78,6 +85,18 @@ HandLandmarks HandLandmarker::Detect(const uint8_t* rgb,
     const double x = out[0][3 * k], y = out[0][3 * k + 1];
     lm.image_px[k] = {static_cast<float>(inv(0, 0) * x + inv(0, 1) * y + inv(0, 2) + 0.5),
                       static_cast<float>(inv(1, 0) * x + inv(1, 1) * y + inv(1, 2) + 0.5)};
+    lm.depth_px[k] = static_cast<float>(out[0][3 * k + 2] / s);
+  }
+  if (world_output_ >= 0) {
+    // The world joints' x and y are the crop's axes: the crop's turn undone, as for image_px.
+    lm.has_world = true;
+    const double c = std::cos(a), sn = std::sin(a);
+    const std::vector<float>& w = out[static_cast<size_t>(world_output_)];
+    for (int k = 0; k < kNumLandmarks; ++k) {
+      const double x = w[3 * k], y = w[3 * k + 1];
+      lm.world_m[k] = {
+          static_cast<float>(c * x - sn * y), static_cast<float>(sn * x + c * y), w[3 * k + 2]};
+    }
   }
   lm.presence = out[1][0];
   lm.crop_centre = centre;

@@ -25,6 +25,16 @@ struct HandLandmarks {
   // The network's hand-presence score in [0, 1]: below ~0.9 the joints are unreliable (it sees
   // no hand, or a view it was not trained on) and the search does not use them.
   float presence = 0;
+  // Depth, which the 2D joints leave open (the pose fit's optional depth term reads the world
+  // joints, pose/fit.h; docs/decisions/0019 measures both against the truth): the network's
+  // world joints (metres, origin near the hand's centre, z away from the camera), turned from
+  // the crop's axes into the picture's, so x is right and y down as in image_px. False when the
+  // model has no world output; a NaN joint is the network's, kept as it is.
+  bool has_world = false;
+  std::array<std::array<float, 3>, kNumLandmarks> world_m{};
+  // The network's relative depth of each joint in the picture's px (its screen joints' z,
+  // scaled from the crop as x and y are; away from the camera, the wrist near 0).
+  std::array<float, kNumLandmarks> depth_px{};
   // The crop the network saw, in source px: centre, side and the turn (degrees, clockwise in
   // the picture) that brought the hand's up to the crop's up.
   Point2f crop_centre{};
@@ -37,7 +47,8 @@ class TfliteModel;
 class HandLandmarker {
  public:
   // Loads a landmark model: one 1xHxWx3 float input (RGB in [0, 1]), outputs 21 x 3 joint
-  // coordinates in the input's px and a presence score. Errors name the file.
+  // coordinates in the input's px and a presence score, and, when a later output has 21 x 3
+  // values (MediaPipe's fourth, after the handedness), the world joints. Errors name the file.
   static Result<std::shared_ptr<const HandLandmarker>> Open(const std::filesystem::path& model);
   // The installed default: $HANDDB_LANDMARK_MODEL if set, else
   // third_party/assets/mediapipe-hands/hand_landmark_full.tflite under the source tree
@@ -63,6 +74,7 @@ class HandLandmarker {
   std::filesystem::path path_;
   std::unique_ptr<TfliteModel> model_;
   int input_h_ = 0, input_w_ = 0;
+  int world_output_ = -1;  // the world joints' output, -1: none
 };
 
 }  // namespace handdb

@@ -927,6 +927,7 @@ void ScaleToSource(cv::Size source, cv::Size decoded, HandLandmarks* l) {
   l->crop_centre = {static_cast<float>(l->crop_centre.x * fx),
                     static_cast<float>(l->crop_centre.y * fy)};
   l->crop_side_px *= static_cast<float>(f);
+  for (float& z : l->depth_px) z *= static_cast<float>(f);
 }
 
 Result<PictureEvidence> FromDecoded(const std::filesystem::path& image,

@@ -136,6 +136,96 @@ class PosePrior {
   double inverse_rotation_sigma_;
 };
 
+// One pair of keypoints' change in depth (the camera's z), in the rig's wrist-to-middle-knuckle
+// lengths, minus the evidence's, over sigma. The projection's scale and shift do not enter: the
+// pose and the rotation alone set how a bone turns towards or away from the camera.
+class DepthResidual {
+ public:
+  DepthResidual(const FitKinematics* kinematics,
+                int keypoint,
+                int reference,
+                double target,
+                double inverse_length,
+                double inverse_sigma)
+      : kinematics_(kinematics),
+        keypoint_(keypoint),
+        reference_(reference),
+        target_(target),
+        inverse_length_(inverse_length),
+        inverse_sigma_(inverse_sigma) {}
+
+  template <typename T>
+  bool operator()(const T* joints, const T* cam_from_hand, T* residual) const {
+    T point[3], reference[3];
+    kinematics_->Keypoint(joints, keypoint_, point);
+    kinematics_->Keypoint(joints, reference_, reference);
+    for (int r = 0; r < 3; ++r) point[r] -= reference[r];
+    T in_cam[3];
+    ceres::UnitQuaternionRotatePoint(cam_from_hand, point, in_cam);
+    residual[0] = (in_cam[2] * inverse_length_ - T(target_)) * inverse_sigma_;
+    return true;
+  }
+
+  static ceres::CostFunction* Create(const FitKinematics* kinematics,
+                                     int keypoint,
+                                     int reference,
+                                     double target,
+                                     double inverse_length,
+                                     double inverse_sigma) {
+    return new ceres::AutoDiffCostFunction<DepthResidual, 1, kNumJointAngles, 4>(
+        new DepthResidual(kinematics, keypoint, reference, target, inverse_length, inverse_sigma));
+  }
+
+ private:
+  const FitKinematics* kinematics_;
+  int keypoint_;
+  int reference_;
+  double target_;
+  double inverse_length_;
+  double inverse_sigma_;
+};
+
+// Where the bone that ends at keypoint k starts (docs/conventions.md order: each digit's base
+// hangs from the wrist, every other keypoint from the one before it).
+int ParentKeypoint(int k) { return k % 4 == 1 ? 0 : k - 1; }
+
+// The depth term's residual blocks (PoseFitOptions), one per pair of keypoints with a weight.
+std::vector<ceres::ResidualBlockId> AddDepthBlocks(ceres::Problem* problem,
+                                                   const FitKinematics& kinematics,
+                                                   const HandRig& rig,
+                                                   const PoseFitEvidence& evidence,
+                                                   const PoseFitOptions& options,
+                                                   double* joints,
+                                                   double* cam_from_hand) {
+  std::vector<ceres::ResidualBlockId> blocks;
+  if (!evidence.has_landmarks || !evidence.has_depths || !(options.depth_weight > 0)) {
+    return blocks;
+  }
+  // The metacarpals carry no joint angle: this length is the rig's, whatever the pose.
+  const HandKeypoints3d rest = rig.Keypoints3d(JointVector{});
+  const double length =
+      std::hypot(rest[9][0] - rest[0][0], rest[9][1] - rest[0][1], rest[9][2] - rest[0][2]);
+  for (int k = 1; k < kNumKeypoints; ++k) {
+    const int reference = options.depth_from_wrist ? 0 : ParentKeypoint(k);
+    const double w =
+        std::min(evidence.weights[k], evidence.weights[reference]) * options.depth_weight;
+    if (!(w > 0)) continue;
+    ceres::LossFunction* loss = new ceres::ScaledLoss(
+        new ceres::CauchyLoss(options.depth_loss_scale), w, ceres::TAKE_OWNERSHIP);
+    blocks.push_back(problem->AddResidualBlock(
+        DepthResidual::Create(&kinematics,
+                              k,
+                              reference,
+                              double{evidence.depths[k]} - evidence.depths[reference],
+                              1.0 / length,
+                              1.0 / options.depth_sigma),
+        loss,
+        joints,
+        cam_from_hand));
+  }
+  return blocks;
+}
+
 // The value part of a scalar: a Jet's value, or the double itself.
 inline double ValueOf(double x) { return x; }
 template <typename J>
@@ -335,6 +425,10 @@ Result<int> CheckEvidence(const PoseFitEvidence& evidence) {
                              PointText(evidence.landmarks_px[k]) + ": not finite");
     }
     if (w > 0) ++used;
+    if (evidence.has_depths && !std::isfinite(evidence.depths[k])) {
+      return InvalidArgument("landmark " + std::to_string(k) + ": depth " +
+                             std::to_string(evidence.depths[k]) + " is not finite");
+    }
   }
   return used;
 }
@@ -452,6 +546,9 @@ bool PoseFitOptions::Check() const {
   CHECK_OPTION(std::isfinite(inside_weight) && inside_weight >= 0);
   CHECK_OPTION(std::isfinite(edge_weight) && edge_weight >= 0);
   CHECK_OPTION(std::isfinite(cover_weight) && cover_weight >= 0);
+  CHECK_OPTION(std::isfinite(depth_sigma) && depth_sigma > 0);
+  CHECK_OPTION(std::isfinite(depth_loss_scale) && depth_loss_scale > 0);
+  CHECK_OPTION(std::isfinite(depth_weight) && depth_weight >= 0);
   CHECK_OPTION_GE(max_iterations, 1);
   CHECK_OPTION(function_tolerance > 0 && function_tolerance < 1);
   CHECK_OPTION_GE(num_threads, 1);
@@ -524,6 +621,28 @@ double SilhouetteTermCost(const HandRig& rig,
     }
   }
   return sum / 2;
+}
+
+double DepthTermCost(const HandRig& rig,
+                     const PoseFitEvidence& evidence,
+                     const PoseFitOptions& options,
+                     const JointVector& joints,
+                     const std::array<double, 4>& cam_from_hand,
+                     std::vector<double>* gradient) {
+  const FitKinematics kinematics(rig);
+  JointVector j = joints;
+  Quaternion q = cam_from_hand;
+  ceres::Problem problem;
+  const std::vector<ceres::ResidualBlockId> blocks =
+      AddDepthBlocks(&problem, kinematics, rig, evidence, options, j.data(), q.data());
+  if (gradient != nullptr) gradient->assign(kNumJointAngles + 4, 0.0);
+  if (blocks.empty()) return 0;
+  ceres::Problem::EvaluateOptions evaluate;
+  evaluate.residual_blocks = blocks;
+  evaluate.parameter_blocks = {j.data(), q.data()};
+  double cost = 0;
+  THROW_CHECK(problem.Evaluate(evaluate, &cost, nullptr, gradient, nullptr));
+  return cost;
 }
 
 Result<PoseFitStart> PoseFitStartFromLabel(const HandRig& rig,
@@ -601,6 +720,8 @@ Result<PoseFit> FitPose(const HandRig& rig,
         &scale,
         shift.data()));
   }
+  const std::vector<ceres::ResidualBlockId> depth_blocks = AddDepthBlocks(
+      &problem, kinematics, rig, evidence, options, joints.data(), cam_from_hand.data());
   const std::vector<ceres::ResidualBlockId> prior_blocks = {problem.AddResidualBlock(
       PosePrior::Create(
           frame->joints, cam_from_hand, options.joint_prior_sigma, options.rotation_prior_sigma),
@@ -654,6 +775,7 @@ Result<PoseFit> FitPose(const HandRig& rig,
   fit.landmark_cost = CostOf(&problem, landmark_blocks, options.num_threads);
   fit.prior_cost = CostOf(&problem, prior_blocks, options.num_threads);
   fit.silhouette_cost = CostOf(&problem, silhouette_blocks, options.num_threads);
+  fit.depth_cost = CostOf(&problem, depth_blocks, options.num_threads);
   FillPose(rig, joints, RotationOf(cam_from_hand), scale, shift, &fit);
   return fit;
 }

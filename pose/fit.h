@@ -53,6 +53,21 @@ struct PoseFitOptions {
   double inside_weight = 10;
   double edge_weight = 10;
   double cover_weight = 10;
+  // The depth term, read where the evidence has depths: per pair of keypoints (each bone, or
+  // each keypoint and the wrist: `depth_from_wrist`), the fitted change in depth minus the
+  // evidence's, both in the rig's wrist-to-middle-knuckle lengths, over depth_sigma, with a
+  // Cauchy loss at depth_loss_scale sigmas (the network's depths are often far off; a bounded
+  // pull keeps a wrong one from turning the hand), scaled by the landmark's weight times
+  // depth_weight. Scale-free: the fit's own scale sets the hand's size, the picture's px never
+  // meet the evidence's depths. depth_weight 0 (the default): no depth term. Off because the
+  // landmark network's depths, the only source today, are worse than the fit's own: at weights
+  // 0.3-10 the natural-pose photo renders' fitted error moved by less than 0.01
+  // (docs/decisions/0019). Given true depths, weight 10 turns a finger bent the wrong way
+  // (pose/fit_test.cc).
+  double depth_sigma = 0.25;
+  double depth_loss_scale = 1.0;
+  double depth_weight = 0;
+  bool depth_from_wrist = false;
   // Caps the work of one fit (each iteration is a few dozen microseconds).
   int max_iterations = 50;
   // Ceres' stop on the cost's relative decrease in one step (its function_tolerance).
@@ -73,6 +88,12 @@ struct PoseFitEvidence {
   // right hand to the mirrored picture.
   std::shared_ptr<const SilhouetteFields> silhouette;
   bool silhouette_mirrored = false;
+
+  // Per landmark, its depth away from the camera in wrist-to-middle-knuckle lengths of the hand,
+  // from any origin (only differences count): the landmark network's world joints' z over their
+  // own wrist-to-middle-knuckle distance. Weighted by `weights`; used with has_landmarks.
+  bool has_depths = false;
+  std::array<float, kNumKeypoints> depths{};
 
   PoseFitEvidence() { weights.fill(1.0f); }
 };
@@ -114,6 +135,7 @@ struct PoseFit {
   double landmark_cost = 0;
   double prior_cost = 0;
   double silhouette_cost = 0;  // 0 without the silhouette term
+  double depth_cost = 0;       // 0 without the depth term
   int iterations = 0;
   std::string termination;  // Ceres' termination type: CONVERGENCE, NO_CONVERGENCE, FAILURE, ...
   std::string message;      // Ceres' own words about why it stopped
@@ -145,6 +167,16 @@ double SilhouetteTermCost(const HandRig& rig,
                           double scale,
                           const std::array<double, 2>& shift,
                           std::vector<double>* gradient = nullptr);
+
+// The depth term's cost at a pose (the evidence's depths and weights, the options' depth
+// settings), and with `gradient` its gradient over the 20 joint angles and the rotation (w, x, y,
+// z), the only parameters it reads. What the solver differentiates, open to tests.
+double DepthTermCost(const HandRig& rig,
+                     const PoseFitEvidence& evidence,
+                     const PoseFitOptions& options,
+                     const JointVector& joints,
+                     const std::array<double, 4>& cam_from_hand,
+                     std::vector<double>* gradient = nullptr);
 
 // The view direction and roll of a camera rotation, the inverse of CamFromHand.
 Status ViewOfCamFromHand(const HandRig& rig,

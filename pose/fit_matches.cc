@@ -1,6 +1,7 @@
 #include "pose/fit_matches.h"
 
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <sstream>
 #include <utility>
@@ -18,6 +19,21 @@ NormalisedKeypoints2d LandmarksNormalised(const PictureEvidence& picture, bool m
     const double x = (p.x - q.centre_x) * q.scale;
     const double y = (p.y - q.centre_y) * q.scale;
     out[k] = {static_cast<float>(mirrored ? -x : x), static_cast<float>(y)};
+  }
+  return out;
+}
+
+// The network's world joints' depths in their own wrist-to-middle-knuckle lengths (the fit's
+// depth evidence, pose/fit.h). Mirroring the picture negates x only, so a left-hand match reads
+// the same depths. A degenerate or non-finite world hand gives NaN depths, which the fit refuses.
+std::array<float, kNumKeypoints> WorldDepths(const HandLandmarks& landmarks) {
+  const auto& w = landmarks.world_m;
+  const double length =
+      std::hypot(double{w[9][0]} - w[0][0], double{w[9][1]} - w[0][1], double{w[9][2]} - w[0][2]);
+  std::array<float, kNumKeypoints> out{};
+  for (int k = 0; k < kNumKeypoints; ++k) {
+    out[k] =
+        length > 0 ? static_cast<float>(w[k][2] / length) : std::numeric_limits<float>::quiet_NaN();
   }
   return out;
 }
@@ -164,6 +180,10 @@ Result<PictureFit> FitPictureMatches(const DatabaseRig& rig,
       evidence.has_landmarks = true;
       evidence.landmarks_px = LandmarksNormalised(picture, mirrored);
       evidence.weights.fill(picture.landmarks->presence);
+      if (picture.landmarks->has_world && options.fit.depth_weight > 0) {
+        evidence.has_depths = true;
+        evidence.depths = WorldDepths(*picture.landmarks);
+      }
     }
     evidence.silhouette = fields;
     evidence.silhouette_mirrored = mirrored;

@@ -175,6 +175,35 @@ TEST_F(FitMatchesTest, WithoutUsableLandmarksTheMatchStandsWithAReason) {
   EXPECT_FALSE(fit->fits[0].reason.empty());
 }
 
+// The network's world joints give the depth term its evidence; a NaN among them leaves the match
+// unfitted with the reason when the term is on, and does not matter when it is off.
+TEST_F(FitMatchesTest, NanWorldLandmarksLeaveTheMatchUnfittedWithAReason) {
+  PictureEvidence picture = PictureOf(truth_, false, 0.99f);
+  picture.landmarks->has_world = true;
+  for (int k = 0; k < kNumKeypoints; ++k) {
+    picture.landmarks->world_m[k] = {0.01f * k, 0.0f, 0.002f * k};
+  }
+  MatchFitOptions options;
+  options.fit.depth_weight = 1;
+  auto fit = FitPictureMatches(rig_, *db_, picture, {MatchOf(Hand::kRight)}, options);
+  ASSERT_TRUE(fit.ok());
+  ASSERT_TRUE(fit->fits[0].fitted) << fit->fits[0].reason;
+  EXPECT_GT(fit->fits[0].fit.depth_cost, 0);
+
+  picture.landmarks->world_m[6][2] = std::nanf("");
+  fit = FitPictureMatches(rig_, *db_, picture, {MatchOf(Hand::kRight)}, options);
+  ASSERT_TRUE(fit.ok());
+  EXPECT_EQ(fit->best, -1);
+  EXPECT_FALSE(fit->fits[0].fitted);
+  EXPECT_NE(fit->fits[0].reason.find("landmark 6: depth"), std::string::npos)
+      << fit->fits[0].reason;
+
+  fit = FitPictureMatches(rig_, *db_, picture, {MatchOf(Hand::kRight)}, MatchFitOptions{});
+  ASSERT_TRUE(fit.ok());
+  EXPECT_TRUE(fit->fits[0].fitted) << fit->fits[0].reason;
+  EXPECT_EQ(fit->fits[0].fit.depth_cost, 0);
+}
+
 TEST_F(FitMatchesTest, WithoutLandmarksTheSilhouetteIsFitted) {
   // The picture's hand region: the truth's capsules (the fit's own model) drawn as an outline.
   PictureEvidence picture = PictureOf(truth_, false, 0.99f);

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <vector>
 
 #include "base/repo_root.h"
 #include "generator/hand/rig_testing.h"
@@ -148,6 +149,12 @@ TEST(PoseFitOptions, Check) {
   bad = PoseFitOptions();
   bad.joint_prior_sigma = 0;
   EXPECT_FALSE(bad.Check());
+  bad = PoseFitOptions();
+  bad.depth_sigma = 0;
+  EXPECT_FALSE(bad.Check());
+  bad = PoseFitOptions();
+  bad.depth_weight = -1;
+  EXPECT_FALSE(bad.Check());
 }
 
 TEST(ViewOfCamFromHand, InvertsCamFromHand) {
@@ -287,6 +294,142 @@ TEST(PoseFit, WithoutLandmarksThePriorKeepsTheStart) {
     EXPECT_LT(MaxDistance(fit->keypoints_normalised, start.keypoints_normalised), 1e-3);
     EXPECT_EQ(fit->landmark_cost, 0);
   }
+}
+
+// The truth's depths as the fit's depth evidence: each keypoint's camera z in the rig's
+// wrist-to-middle-knuckle lengths.
+std::array<float, kNumKeypoints> DepthsOf(const HandRig& rig, const Pose& pose) {
+  const HandKeypoints3d p = rig.Keypoints3d(pose.joints);
+  const double length = std::hypot(p[9][0] - p[0][0], p[9][1] - p[0][1], p[9][2] - p[0][2]);
+  std::array<float, kNumKeypoints> out{};
+  for (int k = 0; k < kNumKeypoints; ++k) {
+    double z = 0;
+    for (int c = 0; c < 3; ++c) z += pose.cam_from_hand[2][c] * p[k][c];
+    out[k] = static_cast<float>(z / length);
+  }
+  return out;
+}
+
+// A rotation as a unit quaternion (w, x, y, z), from its largest component (Shepperd).
+std::array<double, 4> QuaternionOfRotation(const Mat3d& m) {
+  const double t[4] = {m[0][0] + m[1][1] + m[2][2],
+                       m[0][0] - m[1][1] - m[2][2],
+                       -m[0][0] + m[1][1] - m[2][2],
+                       -m[0][0] - m[1][1] + m[2][2]};
+  const int i = static_cast<int>(std::max_element(t, t + 4) - t);
+  const double s = 0.5 / std::sqrt(1 + t[i]);
+  switch (i) {
+    case 0:
+      return {0.25 / s, (m[2][1] - m[1][2]) * s, (m[0][2] - m[2][0]) * s, (m[1][0] - m[0][1]) * s};
+    case 1:
+      return {(m[2][1] - m[1][2]) * s, 0.25 / s, (m[0][1] + m[1][0]) * s, (m[0][2] + m[2][0]) * s};
+    case 2:
+      return {(m[0][2] - m[2][0]) * s, (m[0][1] + m[1][0]) * s, 0.25 / s, (m[1][2] + m[2][1]) * s};
+    default:
+      return {(m[1][0] - m[0][1]) * s, (m[0][2] + m[2][0]) * s, (m[1][2] + m[2][1]) * s, 0.25 / s};
+  }
+}
+
+TEST(PoseFit, DepthGradientMatchesNumericDifferences) {
+  const HandRig rig = ShippedRig();
+  const Pose truth = TruePose(rig);
+  const Pose at = PerturbedPose(rig, truth);
+  PoseFitEvidence evidence = EvidenceOf(Project(rig, truth));
+  evidence.has_depths = true;
+  evidence.depths = DepthsOf(rig, truth);
+  for (int k = 0; k < kNumKeypoints; ++k) evidence.weights[k] = 0.5f + 0.02f * k;
+  const std::array<double, 4> q = QuaternionOfRotation(at.cam_from_hand);
+  for (const bool from_wrist : {false, true}) {
+    PoseFitOptions options;
+    options.depth_weight = 2;
+    options.depth_from_wrist = from_wrist;
+    std::vector<double> gradient;
+    const double cost = DepthTermCost(rig, evidence, options, at.joints, q, &gradient);
+    ASSERT_EQ(gradient.size(), static_cast<size_t>(kNumJointAngles + 4));
+    EXPECT_GT(cost, 0);
+    const auto cost_at = [&](int i, double h) {
+      JointVector j = at.joints;
+      std::array<double, 4> qq = q;
+      if (i < kNumJointAngles) {
+        j[i] += h;
+      } else {
+        qq[i - kNumJointAngles] += h;
+      }
+      return DepthTermCost(rig, evidence, options, j, qq);
+    };
+    int checked = 0;
+    for (int i = 0; i < static_cast<int>(gradient.size()); ++i) {
+      const double h = 1e-6;
+      const double numeric = (cost_at(i, h) - cost_at(i, -h)) / (2 * h);
+      EXPECT_NEAR(gradient[i], numeric, 1e-5 * std::abs(numeric) + 1e-6 * (1 + cost))
+          << "parameter " << i << (from_wrist ? ", from the wrist" : ", per bone");
+      checked += std::abs(numeric) > 1e-6 ? 1 : 0;
+    }
+    EXPECT_GT(checked, 15);
+  }
+  // At the truth the evidence is met: no cost. Off (weight 0), no term at all.
+  PoseFitOptions options;
+  options.depth_weight = 2;
+  EXPECT_LT(DepthTermCost(
+                rig, evidence, options, truth.joints, QuaternionOfRotation(truth.cam_from_hand)),
+            1e-12);
+  EXPECT_EQ(DepthTermCost(rig, evidence, PoseFitOptions(), at.joints, q), 0.0);
+}
+
+// Seen along the palm's normal, the index finger bent 0.4 rad towards the camera and bent 0.4 rad
+// back (hyperextended) away from it project alike: the landmarks leave the bend where the start
+// has it, and the depths turn it the right way.
+TEST(PoseFit, DepthEvidenceFlipsAFingersBend) {
+  const HandRig rig = ShippedRig();
+  Pose truth = TruePose(rig);
+  truth.joints[4] = 0.4;  // index MCP flexion: towards the palm, which faces the camera
+  truth.joints[5] = 0;    // its abduction, PIP and DIP: a straight finger in one plane
+  truth.joints[6] = 0;
+  truth.joints[7] = 0;
+  auto cam = CamFromHand(rig, {-1, 0.02, 0.03}, 0.2);  // the camera on the palm's side (-x)
+  ASSERT_TRUE(cam.ok());
+  truth.cam_from_hand = *cam;
+  Pose bent_back = truth;
+  bent_back.joints[4] = -0.4;
+  const PoseFitStart start = StartAt(rig, bent_back);
+  PoseFitEvidence evidence = EvidenceOf(Project(rig, truth));
+  ASSERT_LT(MaxDistance(Project(rig, bent_back), evidence.landmarks_px), 6.0);
+  const double tip_depth = DepthsOf(rig, truth)[8] - DepthsOf(rig, truth)[5];
+  ASSERT_LT(tip_depth, -0.2);  // the truth's tip is nearer the camera than its knuckle
+
+  auto landmarks_only = FitPose(rig, start, evidence, PoseFitOptions());
+  ASSERT_TRUE(landmarks_only.ok()) << landmarks_only.status().message();
+  EXPECT_LT(landmarks_only->joints[4], 0) << "the landmarks alone flipped the bend";
+
+  evidence.has_depths = true;
+  evidence.depths = DepthsOf(rig, truth);
+  // The weight that crosses the landmarks' ridge between the two bends (at 1 or 3 the fit stays
+  // on the start's side).
+  PoseFitOptions options;
+  options.depth_weight = 10;
+  auto with_depths = FitPose(rig, start, evidence, options);
+  ASSERT_TRUE(with_depths.ok()) << with_depths.status().message();
+  EXPECT_NEAR(with_depths->joints[4], 0.4, 0.1);
+  EXPECT_GE(with_depths->depth_cost, 0);
+  EXPECT_LT(Error3d(rig, with_depths->joints, with_depths->cam_from_hand, truth),
+            Error3d(rig, landmarks_only->joints, landmarks_only->cam_from_hand, truth) / 2);
+  EXPECT_NEAR(with_depths->final_cost,
+              with_depths->landmark_cost + with_depths->prior_cost + with_depths->depth_cost,
+              1e-9 * with_depths->initial_cost);
+}
+
+TEST(PoseFit, NonFiniteDepthsAreAnError) {
+  const HandRig rig = ShippedRig();
+  const Pose truth = TruePose(rig);
+  PoseFitEvidence evidence = EvidenceOf(Project(rig, truth));
+  evidence.has_depths = true;
+  evidence.depths = DepthsOf(rig, truth);
+  evidence.depths[12] = std::nanf("");
+  auto fit = FitPose(rig, StartAt(rig, truth), evidence, PoseFitOptions());
+  ASSERT_FALSE(fit.ok());
+  EXPECT_EQ(fit.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(fit.status().message().find("landmark 12: depth"), std::string::npos)
+      << fit.status().message();
 }
 
 }  // namespace
