@@ -33,6 +33,7 @@
 #include "handdb_version.h"
 #include "photo/image_edges.h"
 #include "pose/export_gltf.h"
+#include "pose/fit.h"
 #include "pose/landmark_rank.h"
 #include "pose/match_json.h"
 #include "pose/picture_search.h"
@@ -689,6 +690,9 @@ int RunQuery(int argc, char** argv) {
   const bool overlap = ResolveNumThreads(flags.picture.options.search.num_threads) > 1;
   std::future<bool> landmarker =
       InBackground(overlap, [&flags] { return flags.picture.OpenLandmarker("query"); });
+  // The fit's solver (a plugin over Ceres, pose/fit.h) loads beside them when a fit may run.
+  std::future<Status> fit_solver;
+  if (flags.fit != "off") fit_solver = InBackground(overlap, [] { return LoadPoseFitSolver(); });
   // Open the database first: a broken database is reported before any image work. Its index is
   // attached when the manifest lists one (--search auto), and searched (SearchMode::kAuto).
   SearcherOptions open;
@@ -737,6 +741,10 @@ int RunQuery(int argc, char** argv) {
     }
     // --fit auto on a database without its rig: the stored views alone, as --json's
     // options.fit "unavailable" says.
+  }
+  if (fit_solver.valid()) {
+    const Status solver = fit_solver.get();
+    if (flags.picture.options.rig != nullptr && !solver.ok()) return Fail("query", solver);
   }
   // A label EXR is converted with the edge options the database was made with.
   const Status recorded = flags.picture.UseDatabaseConversion(db, db_dir);
