@@ -342,6 +342,12 @@ bool QueryFlags::Finish() {
     return false;
   }
   search.kdtree = *ParseKdTreeBackend(kdtree);
+  if (const Status backend = LoadKdTreeBackend(search.kdtree); !backend.ok()) {
+    std::fprintf(
+        stderr, "handdb query: --kdtree %s: %s\n", kdtree.c_str(), backend.message().c_str());
+    picture.failure_exit_code = kExitError;
+    return false;
+  }
   search.hand = hand.Get();
   if (!search.Check()) {
     std::fprintf(stderr, "handdb query: invalid search options (see above)\n");
