@@ -1,6 +1,6 @@
 // The parts of pose/fit.h that need no solver: the options' check, a fit's start from a stored
 // view and the view of a rotation. Linked into handdb_pose, so checking options or preparing a
-// start never loads the fit's solver (pose/fit_solver.h), and into the solver's plugin, which
+// start never loads the fit's solver (pose/fit_plugin.h), and into the solver's plugin, which
 // calls them too.
 #include <cmath>
 
