@@ -1,5 +1,5 @@
-// SHA-256 (FIPS 180-4, computed by OpenSSL's EVP), for recording which hand-model and asset files a
-// plan was made from.
+// SHA-256 (FIPS 180-4, computed by OpenSSL's EVP, its library opened on the first digest), for
+// recording which hand-model and asset files a plan was made from.
 #pragma once
 
 #include <cstdint>

@@ -19,10 +19,6 @@
 //
 //   picture_bench --db DIR [--photos DIR] [--set-queries 24] [--threads 2] [--repeats 5]
 //                 [--handdb PATH]
-#include <fcntl.h>
-#include <spawn.h>
-#include <sys/resource.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -40,6 +36,7 @@
 
 #include "bench/bench_args.h"
 #include "bench/query_sets.h"
+#include "bench/run_process.h"
 #include "evaluate/photos.h"
 #include "generator/hand/database_rig.h"
 #include "photo/hand_landmarks.h"
@@ -50,14 +47,14 @@
 #include "pose/picture_search.h"
 #include "query/searcher.h"
 
-extern char** environ;
-
 namespace handdb {
 namespace {
 
 namespace fs = std::filesystem;
 using bench::Median;
 using bench::NowSeconds;
+using bench::RunTimed;
+using bench::Timed;
 
 struct Args {
   std::string db;
@@ -67,45 +64,6 @@ struct Args {
   int repeats = 5;
   std::string handdb = HANDDB_BINARY;
 };
-
-struct Timed {
-  double seconds = 0;      // from spawn to reaped
-  double cpu_seconds = 0;  // user + system time of the process
-  bool ok = false;         // started and exited 0
-};
-
-// Runs argv with stdin from `in` (or /dev/null when empty), stdout into `out` (or discarded when
-// empty) and stderr discarded. Its own posix_spawn and wait4: base/subprocess.h polls its pipes,
-// which would add to a 20 ms start.
-Timed RunTimed(const std::vector<std::string>& argv,
-               const std::string& out,
-               const std::string& in = "") {
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_addopen(
-      &actions, STDIN_FILENO, in.empty() ? "/dev/null" : in.c_str(), O_RDONLY, 0);
-  posix_spawn_file_actions_addopen(&actions,
-                                   STDOUT_FILENO,
-                                   out.empty() ? "/dev/null" : out.c_str(),
-                                   O_WRONLY | O_CREAT | O_TRUNC,
-                                   0644);
-  posix_spawn_file_actions_addopen(&actions, STDERR_FILENO, "/dev/null", O_WRONLY, 0);
-  std::vector<char*> args;
-  for (const std::string& a : argv) args.push_back(const_cast<char*>(a.c_str()));
-  args.push_back(nullptr);
-  const double t0 = NowSeconds();
-  pid_t pid = 0;
-  const int rc = posix_spawn(&pid, args[0], &actions, nullptr, args.data(), environ);
-  posix_spawn_file_actions_destroy(&actions);
-  if (rc != 0) return {};
-  int status = 0;
-  rusage usage{};
-  if (wait4(pid, &status, 0, &usage) != pid) return {};
-  auto seconds = [](const timeval& t) { return static_cast<double>(t.tv_sec) + t.tv_usec * 1e-6; };
-  return {NowSeconds() - t0,
-          seconds(usage.ru_utime) + seconds(usage.ru_stime),
-          WIFEXITED(status) && WEXITSTATUS(status) == 0};
-}
 
 // The matches (view, roll, hand, D_c) of one query result, to compare two runs' answers.
 std::string MatchesKey(const nlohmann::json& result) {

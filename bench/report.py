@@ -419,6 +419,11 @@ def main():
             "network, search, the re-ranking's pool search and re-rank; then photos/s of one "
             "`handdb query` process per photo against one batch `handdb query DB PHOTO...` over the "
             "same photos.")
+    section("Start-up and one photo", "startup",
+            "`bench/startup_bench`: `handdb --help` and `version` against `/bin/true` (the floor of "
+            "any process), the shared objects and relocations at start, one photo through `handdb "
+            "query` (default fit and `--fit off`) against the warm search it runs; with "
+            "`HANDDB_BENCH_BASELINE` another build alternated run by run (docs/decisions/0020).")
     section("Test sets", "testset_paper",
             "`handdb testset configs/testset-paper.json` (200 views: 100 basic shapes, 100 PCA samples; "
             "uniform directions and rolls) with plain photos; the cluttered set renders the same views.")

@@ -27,6 +27,9 @@
 #             and right, share refined, brute force on 3 of each (after testset: it reads ts-paper)
 #   picture   bench/picture_bench on the paper database and the real photos: start-up, each stage
 #             of a photo cold and warm, photos/s of a batch against one process per photo
+#   startup   bench/startup_bench: handdb --help against /bin/true (shared objects, relocations),
+#             one photo through handdb query against its warm search; HANDDB_BENCH_BASELINE=BINARY
+#             alternates another handdb build run by run
 #   evaluate  handdb evaluate: clean labels, plain photos, cluttered photos (Table 1,
 #             success@(d,n) with the chance baseline, keypoint error, queries/s)
 #   photos    handdb evaluate --photos: the real-photo development set (../shared/photos/asl-digits)
@@ -54,7 +57,7 @@ cd "$here"
 work="${HANDDB_BENCH_DIR:-/tmp/handdb-bench}"
 build="${HANDDB_BENCH_BUILD:-$here/build-bench}"
 jobs="${HANDDB_BENCH_JOBS:-$(nproc)}"
-steps="${HANDDB_BENCH_STEPS:-build format landmark render generate convert query picture testset evaluate photos index codec report}"
+steps="${HANDDB_BENCH_STEPS:-build format landmark render generate convert query picture startup testset evaluate photos index codec report}"
 if [ "${HANDDB_BENCH_PCA_LARGE:-0}" = 1 ] && [ -z "${HANDDB_BENCH_STEPS:-}" ]; then
   steps="$steps pca_large_generate pca_large_query pca_large_evaluate"
 fi
@@ -97,7 +100,7 @@ if want build; then
   cmake -S "$here" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=Release -DHANDDB_BUILD_TESTS=OFF \
     >"$out/build.txt" 2>&1
   cmake --build "$build" -j "$jobs" --target handdb format_bench convert_bench query_bench \
-    index_bench synth_db point_codec_bench landmark_bench picture_bench \
+    index_bench synth_db point_codec_bench landmark_bench picture_bench startup_bench \
     >>"$out/build.txt" 2>&1
 fi
 
@@ -143,6 +146,13 @@ if want picture; then
   # 24 photos spread over the folders: the stages of one, then batch against one process each.
   run picture "$build/bench/picture_bench" --db "$work/db-paper" --photos "$photos" \
     --threads "$jobs" --handdb "$handdb"
+fi
+
+if want startup; then
+  # The start and one photo (the first in sorted order), each against its baseline in the run.
+  run startup "$build/bench/startup_bench" --handdb "$handdb" --db "$work/db-paper" \
+    --photo "$(find "$photos" -type f -iname '*.jpg' | sort | head -n 1)" --threads "$jobs" \
+    ${HANDDB_BENCH_BASELINE:+--baseline "$HANDDB_BENCH_BASELINE"}
 fi
 
 evaluate() {  # NAME DB TESTSET INPUT [extra evaluate options]

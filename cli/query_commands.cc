@@ -33,6 +33,7 @@
 #include "handdb_version.h"
 #include "photo/image_edges.h"
 #include "pose/export_gltf.h"
+#include "pose/fit.h"
 #include "pose/landmark_rank.h"
 #include "pose/match_json.h"
 #include "pose/picture_search.h"
@@ -341,6 +342,12 @@ bool QueryFlags::Finish() {
     return false;
   }
   search.kdtree = *ParseKdTreeBackend(kdtree);
+  if (const Status backend = LoadKdTreeBackend(search.kdtree); !backend.ok()) {
+    std::fprintf(
+        stderr, "handdb query: --kdtree %s: %s\n", kdtree.c_str(), backend.message().c_str());
+    picture.failure_exit_code = kExitError;
+    return false;
+  }
   search.hand = hand.Get();
   if (!search.Check()) {
     std::fprintf(stderr, "handdb query: invalid search options (see above)\n");
@@ -689,6 +696,17 @@ int RunQuery(int argc, char** argv) {
   const bool overlap = ResolveNumThreads(flags.picture.options.search.num_threads) > 1;
   std::future<bool> landmarker =
       InBackground(overlap, [&flags] { return flags.picture.OpenLandmarker("query"); });
+  // The pose fit and --export need the rig the database was rendered with, and the fit its
+  // solver (a plugin over Ceres, pose/fit.h): both load beside the open too, on a thread of their
+  // own; their errors are reported after the database's.
+  const bool wants_rig = flags.fit != "off" || !flags.export_glb.empty();
+  std::future<Result<DatabaseRig>> rig_loaded;
+  if (wants_rig) {
+    rig_loaded = InBackground(overlap, [&flags, &db_dir] {
+      if (flags.fit != "off") LoadPoseFitSolver();  // once per process: its answer is read below
+      return LoadDatabaseRig(db_dir);
+    });
+  }
   // Open the database first: a broken database is reported before any image work. Its index is
   // attached when the manifest lists one (--search auto), and searched (SearchMode::kAuto).
   SearcherOptions open;
@@ -723,9 +741,8 @@ int RunQuery(int argc, char** argv) {
     });
   }
 
-  // The pose fit and --export need the rig the database was rendered with.
-  if (flags.fit != "off" || !flags.export_glb.empty()) {
-    auto rig = LoadDatabaseRig(db_dir);
+  if (wants_rig) {
+    auto rig = rig_loaded.get();
     if (rig.ok()) {
       flags.rig = std::make_shared<const DatabaseRig>(std::move(rig).value());
       if (flags.fit != "off") flags.picture.options.rig = flags.rig;
@@ -737,6 +754,9 @@ int RunQuery(int argc, char** argv) {
     }
     // --fit auto on a database without its rig: the stored views alone, as --json's
     // options.fit "unavailable" says.
+  }
+  if (flags.picture.options.rig != nullptr) {
+    if (const Status solver = LoadPoseFitSolver(); !solver.ok()) return Fail("query", solver);
   }
   // A label EXR is converted with the edge options the database was made with.
   const Status recorded = flags.picture.UseDatabaseConversion(db, db_dir);

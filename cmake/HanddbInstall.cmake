@@ -1,5 +1,6 @@
 # The installable package: `cmake --install build --prefix P` puts
 #   P/bin/handdb                                the tool
+#   P/bin/libhanddb_*.so                        its plugins, opened on first use (base/plugin.h)
 #   P/lib/libhanddb_<module>.a                  one archive per module
 #   P/include/handdb/<module>/...h              each module's door headers only (below)
 #   P/include/handdb/handdb_version.h
@@ -7,7 +8,7 @@
 #   P/lib/cmake/handdb/handdbConfig.cmake       find_package(handdb): handdb::base, handdb::format,
 #                      handdbConfigVersion.cmake  handdb::cluster, handdb::edges, handdb::generator,
 #                      handdbTargets.cmake        handdb::query, handdb::evaluate
-#   P/${HANDDB_PYTHON_INSTALL_DIR}/handdb/      the Python module (python/CMakeLists.txt)
+#   P/${HANDDB_PYTHON_INSTALL_DIR}/handdb/      the Python module and the plugins (python/CMakeLists.txt)
 # A consumer writes `#include "query/searcher.h"` as inside this repository (include/handdb/ is
 # the targets' include directory). tests/install/ builds a consumer against an installed tree.
 include_guard(GLOBAL)

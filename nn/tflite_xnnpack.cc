@@ -16,10 +16,56 @@ namespace {
 using XnnGraph = TfliteModel::Graph;
 
 // XNNPACK's aligned blocks (packed weights, the runtimes' activations: 16 MB for the full
-// landmark model) in huge pages, as the model's own weights (base/huge_pages.h).
-void* Allocate(void*, size_t bytes) { return std::malloc(bytes); }
-void* Reallocate(void*, void* p, size_t bytes) { return std::realloc(p, bytes); }
-void Deallocate(void*, void* p) { std::free(p); }
+// landmark model) in huge pages, as the model's own weights (base/huge_pages.h). Its unaligned
+// blocks are mostly small (operator and value records), but the convolutions' indirection
+// buffers, made when a runtime is set up, were ~400 page faults of a load in small pages: blocks
+// from kHugeFrom bytes come from huge pages too. Each unaligned block starts with a header of its
+// size and kind, which Reallocate and Deallocate read; 16 bytes keep malloc's alignment.
+constexpr size_t kHeaderBytes = 16;
+constexpr size_t kHugeFrom = size_t{64} << 10;
+
+struct BlockHeader {
+  size_t bytes;
+  size_t huge;
+};
+static_assert(sizeof(BlockHeader) == kHeaderBytes);
+
+BlockHeader* HeaderOf(void* p) {
+  return reinterpret_cast<BlockHeader*>(static_cast<char*>(p) - kHeaderBytes);
+}
+
+void* Allocate(void*, size_t bytes) {
+  const bool huge = bytes >= kHugeFrom;
+  void* base =
+      huge ? AllocateHuge(bytes + kHeaderBytes, kHeaderBytes) : std::malloc(bytes + kHeaderBytes);
+  if (base == nullptr) return nullptr;
+  *static_cast<BlockHeader*>(base) = {bytes, huge ? size_t{1} : size_t{0}};
+  return static_cast<char*>(base) + kHeaderBytes;
+}
+void Deallocate(void*, void* p) {
+  if (p == nullptr) return;
+  BlockHeader* h = HeaderOf(p);
+  if (h->huge != 0) {
+    FreeHuge(h);
+  } else {
+    std::free(h);
+  }
+}
+void* Reallocate(void* context, void* p, size_t bytes) {
+  if (p == nullptr) return Allocate(context, bytes);
+  BlockHeader* h = HeaderOf(p);
+  if (h->huge == 0 && bytes < kHugeFrom) {
+    void* moved = std::realloc(h, bytes + kHeaderBytes);
+    if (moved == nullptr) return nullptr;
+    static_cast<BlockHeader*>(moved)->bytes = bytes;
+    return static_cast<char*>(moved) + kHeaderBytes;
+  }
+  void* q = Allocate(context, bytes);
+  if (q == nullptr) return nullptr;
+  std::memcpy(q, p, std::min(h->bytes, bytes));
+  Deallocate(context, p);
+  return q;
+}
 void* AllocateAligned(void*, size_t alignment, size_t bytes) {
   return AllocateHuge(bytes, alignment);
 }

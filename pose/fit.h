@@ -13,6 +13,7 @@
 #pragma once
 
 #include <array>
+#include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
@@ -183,5 +184,19 @@ Status ViewOfCamFromHand(const HandRig& rig,
                          const Mat3d& cam_from_hand,
                          Vec3d* view_direction,
                          double* roll);
+
+// FitPose's and SilhouetteTermCost's solver, Ceres, is in a shared object of its own
+// (libhanddb_fit.so, pose/fit_plugin.h), so a process that fits nothing never loads it: it is
+// opened on the first of those calls. LoadPoseFitSolver opens it now, so a command can load it
+// beside other work and report a missing plugin before it starts; once per process, later calls
+// return the first answer. kNotFound names the places looked in; a plugin that is not this
+// build's is refused (kUnsupportedVersion). Without it FitPose returns that status and
+// SilhouetteTermCost throws it.
+Status LoadPoseFitSolver();
+
+// Where the plugin is looked for: $HANDDB_FIT_PLUGIN alone when set; else, in order, beside the
+// running executable, in its ../lib/handdb, beside the shared object holding this code (the
+// Python module), then the build tree's.
+std::vector<std::filesystem::path> PoseFitSolverCandidates();
 
 }  // namespace handdb

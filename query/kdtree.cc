@@ -1,14 +1,17 @@
 #include "query/kdtree.h"
 
-#include <pcl/kdtree/kdtree_flann.h>
-#include <pcl/point_cloud.h>
-#include <pcl/point_types.h>
+#include <dlfcn.h>
 
 #include <cmath>
 #include <limits>
+#include <mutex>
 #include <nanoflann.hpp>
+#include <stdexcept>
 #include <string>
 #include <vector>
+
+#include "base/plugin.h"
+#include "query/kdtree_pcl_plugin.h"
 
 namespace handdb {
 
@@ -73,38 +76,80 @@ class NanoflannImpl final : public KdTree::Impl {
   NanoflannTree tree_;
 };
 
+// PCL's KdTreeFLANN, in the plugin of query/kdtree_pcl_plugin.h, loaded once per process.
+struct PclPlugin {
+  decltype(&handdb_pcl_kdtree_new) make = nullptr;
+  decltype(&handdb_pcl_kdtree_nearest) nearest = nullptr;
+  decltype(&handdb_pcl_kdtree_delete) destroy = nullptr;
+};
+
+constexpr const char* kPclPluginName = "libhanddb_pcl_kdtree.so";
+
+Result<const PclPlugin*> LoadPclPlugin() {
+  static std::once_flag once;
+  static PclPlugin plugin;
+  static Status status;
+  std::call_once(once, [] {
+    auto lib = OpenPlugin(kPclPluginName, "HANDDB_PCL_KDTREE_PLUGIN", "the kd-tree backend pcl");
+    if (!lib.ok()) {
+      status = lib.status();
+      return;
+    }
+    const auto abi =
+        reinterpret_cast<decltype(&handdb_pcl_kdtree_abi)>(::dlsym(*lib, "handdb_pcl_kdtree_abi"));
+    PclPlugin p;
+    p.make = reinterpret_cast<decltype(p.make)>(::dlsym(*lib, "handdb_pcl_kdtree_new"));
+    p.nearest = reinterpret_cast<decltype(p.nearest)>(::dlsym(*lib, "handdb_pcl_kdtree_nearest"));
+    p.destroy = reinterpret_cast<decltype(p.destroy)>(::dlsym(*lib, "handdb_pcl_kdtree_delete"));
+    if (abi == nullptr || p.make == nullptr || p.nearest == nullptr || p.destroy == nullptr ||
+        abi() != HANDDB_PCL_KDTREE_ABI) {
+      status =
+          Status(StatusCode::kUnsupportedVersion,
+                 std::string(kPclPluginName) + " is not the kd-tree plugin of this handdb (ABI " +
+                     std::to_string(HANDDB_PCL_KDTREE_ABI) + ")");
+      return;
+    }
+    plugin = p;
+  });
+  if (plugin.make == nullptr) return status;
+  return &plugin;
+}
+
 // PCL's FLANN works in float. Coordinates are the integer PointQ values (exact in float); squared
 // distances below 2^24 units^2 (256 px) are exact too, so the neighbour is the exact nearest one
 // for any practical query (both point sets live within ~170 px of the origin).
 class PclImpl final : public KdTree::Impl {
  public:
-  explicit PclImpl(std::span<const PointQ> points) : cloud_(new pcl::PointCloud<pcl::PointXY>) {
-    cloud_->resize(points.size());
+  explicit PclImpl(std::span<const PointQ> points) {
+    auto plugin = LoadPclPlugin();
+    if (!plugin.ok()) throw std::runtime_error(plugin.status().message());
+    plugin_ = *plugin;
+    std::vector<float> xy(2 * points.size());
     for (size_t i = 0; i < points.size(); ++i) {
-      (*cloud_)[i].x = points[i].x;
-      (*cloud_)[i].y = points[i].y;
+      xy[2 * i] = points[i].x;
+      xy[2 * i + 1] = points[i].y;
     }
-    tree_.setSortedResults(false);
-    tree_.setInputCloud(cloud_);
+    tree_ = plugin_->make(xy.data(), points.size());
+    THROW_CHECK_MSG(tree_ != nullptr, "PCL's kd-tree could not be built");
   }
+  ~PclImpl() override { plugin_->destroy(tree_); }
+  PclImpl(const PclImpl&) = delete;
+  PclImpl& operator=(const PclImpl&) = delete;
 
-  uint32_t NearestIndex(PointQ q) const override {
-    pcl::PointXY p;
-    p.x = q.x;
-    p.y = q.y;
-    // KdTreeFLANN::nearestKSearch is const and thread-safe; the output vectors are ours.
-    std::vector<int> indices(1);
-    std::vector<float> sq(1);
-    tree_.nearestKSearch(p, 1, indices, sq);
-    return static_cast<uint32_t>(indices[0]);
-  }
+  uint32_t NearestIndex(PointQ q) const override { return plugin_->nearest(tree_, q.x, q.y); }
 
  private:
-  pcl::PointCloud<pcl::PointXY>::Ptr cloud_;
-  pcl::KdTreeFLANN<pcl::PointXY> tree_;
+  const PclPlugin* plugin_ = nullptr;
+  handdb_pcl_kdtree* tree_ = nullptr;
 };
 
 }  // namespace
+
+Status LoadKdTreeBackend(KdTreeBackend backend) {
+  if (backend != KdTreeBackend::kPcl) return Status::Ok();
+  auto plugin = LoadPclPlugin();
+  return plugin.ok() ? Status::Ok() : plugin.status();
+}
 
 KdTree::KdTree(std::span<const PointQ> points, KdTreeBackend backend)
     : points_(points), backend_(backend) {

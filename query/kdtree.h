@@ -1,7 +1,7 @@
 // Exact 2-D nearest-neighbour search over fixed-point points (PointQ, units of 1/16 px), behind
 // one small interface with two interchangeable backends: nanoflann (default, an adaptor over the
-// caller's storage, no copy) and PCL's KdTreeFLANN (copies into a pcl::PointCloud). Neither
-// library appears in this header.
+// caller's storage, no copy) and PCL's KdTreeFLANN (copies into a pcl::PointCloud, in a plugin
+// opened on first use). Neither library appears in this header.
 //
 // Distances: NearestSquared() returns the EXACT squared distance in PointQ units^2 (1/256 px^2),
 // recomputed in 64-bit integers from the neighbour the backend found, so both backends return
@@ -26,6 +26,10 @@ enum class KdTreeBackend { kNanoflann, kPcl };
 // "nanoflann" / "pcl".
 std::string_view KdTreeBackendName(KdTreeBackend backend);
 Result<KdTreeBackend> ParseKdTreeBackend(std::string_view name);
+// PCL's backend lives in a plugin (query/kdtree_pcl_plugin.h) opened on the first tree that uses
+// it; this opens it now, so a command can say once that it is missing (kNotFound naming where it
+// looked) instead of failing at the first tree, which throws. Nothing to load for nanoflann.
+Status LoadKdTreeBackend(KdTreeBackend backend);
 
 class KdTree {
  public:

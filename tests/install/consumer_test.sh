@@ -22,6 +22,14 @@ for f in bin/handdb lib/libhanddb_format.a lib/libhanddb_query.a lib/cmake/handd
          include/handdb/handdb_version.h share/handdb/schemas/manifest.schema.json; do
   [ -f "$prefix/$f" ] || fail "$prefix/$f: not installed"
 done
+# handdb's plugins (base/plugin.h), opened on first use, beside the binary and the Python module.
+plugins="libhanddb_fit.so libhanddb_pcl_kdtree.so"
+for p in $plugins; do
+  [ -f "$prefix/bin/$p" ] || fail "$prefix/bin/$p: the plugin was not installed beside the binary"
+  if [ "$with_python" = "ON" ]; then
+    [ -f "$prefix/$site/handdb/$p" ] || fail "$prefix/$site/handdb/$p: the plugin was not installed beside the Python module"
+  fi
+done
 # Internals stay out of the installed tree.
 for f in format/shard_layout.h format/shard_testing.h query/chamfer.h query/simd.h \
          query/search_testing.h base/testing.h edges/synthetic_hand.h; do
@@ -32,6 +40,11 @@ echo "installed: $(find "$prefix/include" -name '*.h' | wc -l) headers, $(ls "$p
 "$writer" "$tmp/db" > /dev/null
 "$prefix/bin/handdb" validate -q "$tmp/db"
 "$prefix/bin/handdb" show "$tmp/db" --view 5 --roll 3 -o "$tmp/query.png"
+# The installed binary opens the installed plugin (the first place it looks: beside itself).
+LD_DEBUG=files "$prefix/bin/handdb" query "$tmp/db" "$tmp/query.png" --kdtree pcl -q \
+  > /dev/null 2> "$tmp/ld.log" || { tail -5 "$tmp/ld.log"; fail "handdb query --kdtree pcl failed"; }
+grep -q "file=$prefix/bin/libhanddb_pcl_kdtree.so " "$tmp/ld.log" \
+  || fail "the installed handdb did not open $prefix/bin/libhanddb_pcl_kdtree.so"
 
 readme="${HANDDB_SOURCE_DIR:-$here/../..}/README.md"
 awk '/^## From C\+\+/ { section = 1 } section && /^```cpp/ { code = 1; next } code && /^```/ { exit } code' \
