@@ -14,6 +14,16 @@
 namespace handdb {
 namespace {
 
+// A bounding box (its first column and row, its width and height minus one, each below
+// kMaxLatticeSide) whose corners are all int32. The first corner is checked before the sums,
+// which a damaged code could otherwise carry past int64.
+bool BoxInInt32(int64_t min_col, int64_t min_row, uint64_t w1, uint64_t h1) {
+  constexpr int64_t kMin = std::numeric_limits<int32_t>::min();
+  constexpr int64_t kMax = std::numeric_limits<int32_t>::max();
+  return min_col >= kMin && min_row >= kMin && min_col <= kMax && min_row <= kMax &&
+         min_col + static_cast<int64_t>(w1) <= kMax && min_row + static_cast<int64_t>(h1) <= kMax;
+}
+
 // Moves: 0 E, 1 SE, 2 S, 3 SW, 4 W, 5 NW, 6 N, 7 NE (image coordinates, y down).
 constexpr int kDx[8] = {1, 1, 0, -1, -1, -1, 0, 1};
 constexpr int kDy[8] = {0, 1, 1, 1, 0, -1, -1, -1};
@@ -187,11 +197,7 @@ Status DecodeLatticePixels(std::span<const uint8_t> code, std::vector<LatticePix
   }
   const int64_t min_col = bits::UnZigZag(zc), min_row = bits::UnZigZag(zr);
   if (w1 >= static_cast<uint64_t>(kMaxLatticeSide) ||
-      h1 >= static_cast<uint64_t>(kMaxLatticeSide) ||
-      min_col < std::numeric_limits<int32_t>::min() ||
-      min_row < std::numeric_limits<int32_t>::min() ||
-      min_col + static_cast<int64_t>(w1) > std::numeric_limits<int32_t>::max() ||
-      min_row + static_cast<int64_t>(h1) > std::numeric_limits<int32_t>::max()) {
+      h1 >= static_cast<uint64_t>(kMaxLatticeSide) || !BoxInInt32(min_col, min_row, w1, h1)) {
     return Status(StatusCode::kOutOfRange,
                   "point code: bounding box " + std::to_string(w1 + 1) + " x " +
                       std::to_string(h1 + 1) + " at (" + std::to_string(min_col) + ", " +
@@ -551,10 +557,7 @@ Status PeekViewPoints(std::span<const uint8_t> code,
     return OutOfRange("bounding box out of range");
   }
   const int64_t min_col = bits::UnZigZag(zc), min_row = bits::UnZigZag(zr);
-  if (min_col < std::numeric_limits<int32_t>::min() ||
-      min_row < std::numeric_limits<int32_t>::min() ||
-      min_col + static_cast<int64_t>(w1) > std::numeric_limits<int32_t>::max() ||
-      min_row + static_cast<int64_t>(h1) > std::numeric_limits<int32_t>::max()) {
+  if (!BoxInInt32(min_col, min_row, w1, h1)) {
     return OutOfRange("bounding box out of range");
   }
   // PointOf is monotonic in the column and the row: the box's corners bound every pixel's point.
