@@ -44,8 +44,32 @@ std::array<double, 2> ProjectXY(const Mat3d& cam_from_hand, const Vec3d& look_at
   return out;
 }
 
+constexpr int kDigitDofs = FitKinematics::kDigitDofs;
+constexpr int kNumDigits = FitKinematics::kNumDigits;
+
+// The fit's parameter blocks: the joint angles one block per digit (a keypoint's residual then
+// differentiates with respect to its own digit's 4 angles, not all 20), the rotation, the
+// projection's scale and shift. The digits' blocks are consecutive slices of one JointVector.
+struct PoseBlocks {
+  double* joints;  // kNumJointAngles, DOF order
+  double* cam_from_hand;
+  double* scale;
+  double* shift;
+
+  double* digit(int d) const { return joints + d * kDigitDofs; }
+
+  // Every block, in the order of the Jacobian's columns: the joints, the rotation, scale, shift.
+  void AddTo(ceres::Problem* problem) const {
+    for (int d = 0; d < kNumDigits; ++d) problem->AddParameterBlock(digit(d), kDigitDofs);
+    problem->AddParameterBlock(cam_from_hand, 4);
+    problem->AddParameterBlock(scale, 1);
+    problem->AddParameterBlock(shift, 2);
+  }
+};
+
 // One landmark: the rig's keypoint k, posed, turned into the camera and placed in the normalised
-// frame, minus the picture's landmark, over sigma. Only keypoint k's chain of bones is posed.
+// frame, minus the picture's landmark, over sigma. Only keypoint k's chain of bones is posed,
+// from its digit's angles (the wrist's from none).
 class LandmarkResidual {
  public:
   LandmarkResidual(const FitKinematics* kinematics,
@@ -59,11 +83,54 @@ class LandmarkResidual {
         landmark_{landmark.x, landmark.y},
         inverse_sigma_(inverse_sigma) {}
 
+  // A digit's keypoint.
   template <typename T>
   bool operator()(
-      const T* joints, const T* cam_from_hand, const T* scale, const T* shift, T* residuals) const {
+      const T* digit, const T* cam_from_hand, const T* scale, const T* shift, T* residuals) const {
     T point[3];
-    kinematics_->Keypoint(joints, keypoint_, point);
+    kinematics_->KeypointOfDigit(digit, keypoint_, point);
+    return Project(point, cam_from_hand, scale, shift, residuals);
+  }
+
+  // The wrist, which no angle moves.
+  template <typename T>
+  bool operator()(const T* cam_from_hand, const T* scale, const T* shift, T* residuals) const {
+    T point[3];
+    kinematics_->KeypointOfDigit(static_cast<const T*>(nullptr), keypoint_, point);
+    return Project(point, cam_from_hand, scale, shift, residuals);
+  }
+
+  // The residual block of landmark k over its blocks.
+  static ceres::ResidualBlockId Add(ceres::Problem* problem,
+                                    ceres::LossFunction* loss,
+                                    const PoseBlocks& blocks,
+                                    const FitKinematics* kinematics,
+                                    int keypoint,
+                                    const Vec3d& look_at,
+                                    const Point2f& landmark,
+                                    double inverse_sigma) {
+    auto* functor = new LandmarkResidual(kinematics, keypoint, look_at, landmark, inverse_sigma);
+    if (keypoint == 0) {
+      return problem->AddResidualBlock(
+          new ceres::AutoDiffCostFunction<LandmarkResidual, 2, 4, 1, 2>(functor),
+          loss,
+          blocks.cam_from_hand,
+          blocks.scale,
+          blocks.shift);
+    }
+    return problem->AddResidualBlock(
+        new ceres::AutoDiffCostFunction<LandmarkResidual, 2, kDigitDofs, 4, 1, 2>(functor),
+        loss,
+        blocks.digit(FitKinematics::DigitOf(keypoint)),
+        blocks.cam_from_hand,
+        blocks.scale,
+        blocks.shift);
+  }
+
+ private:
+  template <typename T>
+  bool Project(
+      T* point, const T* cam_from_hand, const T* scale, const T* shift, T* residuals) const {
     for (int r = 0; r < 3; ++r) point[r] -= T(look_at_[r]);
     T in_cam[3];
     ceres::UnitQuaternionRotatePoint(cam_from_hand, point, in_cam);
@@ -73,16 +140,6 @@ class LandmarkResidual {
     return true;
   }
 
-  static ceres::CostFunction* Create(const FitKinematics* kinematics,
-                                     int keypoint,
-                                     const Vec3d& look_at,
-                                     const Point2f& landmark,
-                                     double inverse_sigma) {
-    return new ceres::AutoDiffCostFunction<LandmarkResidual, 2, kNumJointAngles, 4, 1, 2>(
-        new LandmarkResidual(kinematics, keypoint, look_at, landmark, inverse_sigma));
-  }
-
- private:
   const FitKinematics* kinematics_;
   int keypoint_;
   Vec3d look_at_;
@@ -90,50 +147,57 @@ class LandmarkResidual {
   double inverse_sigma_;
 };
 
-// The joints and the rotation near the candidate's: per joint (angle - start) / sigma, and the
-// rotation from the candidate's camera to the fitted one as 2 sin(angle / 2) * axis / sigma
-// (the angle-axis vector to first order, and smooth at zero).
-class PosePrior {
+// A digit's joints near the candidate's: per joint (angle - start) / sigma.
+class DigitPrior {
  public:
-  PosePrior(const JointVector& joints,
-            const Quaternion& cam_from_hand,
-            double joint_sigma,
-            double rotation_sigma)
-      : joints_(joints),
-        hand_from_cam_{cam_from_hand[0], -cam_from_hand[1], -cam_from_hand[2], -cam_from_hand[3]},
-        inverse_joint_sigma_(1.0 / joint_sigma),
-        inverse_rotation_sigma_(1.0 / rotation_sigma) {}
+  DigitPrior(const double* start, double joint_sigma) : inverse_sigma_(1.0 / joint_sigma) {
+    std::copy(start, start + kDigitDofs, start_.begin());
+  }
 
   template <typename T>
-  bool operator()(const T* joints, const T* cam_from_hand, T* residuals) const {
-    for (int i = 0; i < kNumJointAngles; ++i) {
-      residuals[i] = (joints[i] - T(joints_[i])) * inverse_joint_sigma_;
-    }
+  bool operator()(const T* digit, T* residuals) const {
+    for (int i = 0; i < kDigitDofs; ++i) residuals[i] = (digit[i] - T(start_[i])) * inverse_sigma_;
+    return true;
+  }
+
+  static ceres::CostFunction* Create(const double* start, double joint_sigma) {
+    return new ceres::AutoDiffCostFunction<DigitPrior, kDigitDofs, kDigitDofs>(
+        new DigitPrior(start, joint_sigma));
+  }
+
+ private:
+  std::array<double, kDigitDofs> start_{};
+  double inverse_sigma_;
+};
+
+// The rotation near the candidate's: the rotation from the candidate's camera to the fitted one
+// as 2 sin(angle / 2) * axis / sigma (the angle-axis vector to first order, and smooth at zero).
+class RotationPrior {
+ public:
+  RotationPrior(const Quaternion& cam_from_hand, double rotation_sigma)
+      : hand_from_cam_{cam_from_hand[0], -cam_from_hand[1], -cam_from_hand[2], -cam_from_hand[3]},
+        inverse_sigma_(1.0 / rotation_sigma) {}
+
+  template <typename T>
+  bool operator()(const T* cam_from_hand, T* residuals) const {
     const T start_inverse[4] = {
         T(hand_from_cam_[0]), T(hand_from_cam_[1]), T(hand_from_cam_[2]), T(hand_from_cam_[3])};
     T delta[4];
     ceres::QuaternionProduct(start_inverse, cam_from_hand, delta);
     // q and -q are the same rotation: measure from the one nearer the identity.
     const double sign = delta[0] < T(0.0) ? -2.0 : 2.0;
-    for (int i = 0; i < 3; ++i) {
-      residuals[kNumJointAngles + i] = delta[i + 1] * (sign * inverse_rotation_sigma_);
-    }
+    for (int i = 0; i < 3; ++i) residuals[i] = delta[i + 1] * (sign * inverse_sigma_);
     return true;
   }
 
-  static ceres::CostFunction* Create(const JointVector& joints,
-                                     const Quaternion& cam_from_hand,
-                                     double joint_sigma,
-                                     double rotation_sigma) {
-    return new ceres::AutoDiffCostFunction<PosePrior, kNumJointAngles + 3, kNumJointAngles, 4>(
-        new PosePrior(joints, cam_from_hand, joint_sigma, rotation_sigma));
+  static ceres::CostFunction* Create(const Quaternion& cam_from_hand, double rotation_sigma) {
+    return new ceres::AutoDiffCostFunction<RotationPrior, 3, 4>(
+        new RotationPrior(cam_from_hand, rotation_sigma));
   }
 
  private:
-  JointVector joints_;
   Quaternion hand_from_cam_;
-  double inverse_joint_sigma_;
-  double inverse_rotation_sigma_;
+  double inverse_sigma_;
 };
 
 // One pair of keypoints' change in depth (the camera's z), in the rig's wrist-to-middle-knuckle
@@ -154,11 +218,14 @@ class DepthResidual {
         inverse_length_(inverse_length),
         inverse_sigma_(inverse_sigma) {}
 
+  // `digit`: keypoint k's digit's joints, which the reference (the wrist or a keypoint of the same
+  // digit) depends on too.
   template <typename T>
-  bool operator()(const T* joints, const T* cam_from_hand, T* residual) const {
+  bool operator()(const T* digit, const T* cam_from_hand, T* residual) const {
     T point[3], reference[3];
-    kinematics_->Keypoint(joints, keypoint_, point);
-    kinematics_->Keypoint(joints, reference_, reference);
+    kinematics_->KeypointOfDigit(digit, keypoint_, point);
+    kinematics_->KeypointOfDigit(
+        reference_ == 0 ? static_cast<const T*>(nullptr) : digit, reference_, reference);
     for (int r = 0; r < 3; ++r) point[r] -= reference[r];
     T in_cam[3];
     ceres::UnitQuaternionRotatePoint(cam_from_hand, point, in_cam);
@@ -172,7 +239,7 @@ class DepthResidual {
                                      double target,
                                      double inverse_length,
                                      double inverse_sigma) {
-    return new ceres::AutoDiffCostFunction<DepthResidual, 1, kNumJointAngles, 4>(
+    return new ceres::AutoDiffCostFunction<DepthResidual, 1, kDigitDofs, 4>(
         new DepthResidual(kinematics, keypoint, reference, target, inverse_length, inverse_sigma));
   }
 
@@ -220,7 +287,7 @@ std::vector<ceres::ResidualBlockId> AddDepthBlocks(ceres::Problem* problem,
                               1.0 / length,
                               1.0 / options.depth_sigma),
         loss,
-        joints,
+        joints + FitKinematics::DigitOf(k) * kDigitDofs,
         cam_from_hand));
   }
   return blocks;
@@ -278,14 +345,23 @@ class SilhouetteResidual {
 
   int num_residuals() const { return num_inside_ + num_edges_ + num_cover_; }
 
+  // The five digits' joints, then the rotation, scale and shift (PoseBlocks).
   template <typename T>
-  bool operator()(
-      const T* joints, const T* cam_from_hand, const T* scale, const T* shift, T* residuals) const {
+  bool operator()(const T* thumb,
+                  const T* index,
+                  const T* middle,
+                  const T* ring,
+                  const T* little,
+                  const T* cam_from_hand,
+                  const T* scale,
+                  const T* shift,
+                  T* residuals) const {
     using std::sqrt;
+    const T* digits[kNumDigits] = {thumb, index, middle, ring, little};
     T xy[kNumKeypoints][2];
     for (int k = 0; k < kNumKeypoints; ++k) {
       T point[3];
-      kinematics_->Keypoint(joints, k, point);
+      kinematics_->KeypointOfDigit(digits[FitKinematics::DigitOf(k)], k, point);
       for (int r = 0; r < 3; ++r) point[r] -= T(look_at_[r]);
       T in_cam[3];
       ceres::UnitQuaternionRotatePoint(cam_from_hand, point, in_cam);
@@ -347,9 +423,16 @@ class SilhouetteResidual {
 
   static ceres::CostFunction* Create(SilhouetteResidual* functor) {
     const int n = functor->num_residuals();
-    return new ceres::
-        AutoDiffCostFunction<SilhouetteResidual, ceres::DYNAMIC, kNumJointAngles, 4, 1, 2>(functor,
-                                                                                           n);
+    return new ceres::AutoDiffCostFunction<SilhouetteResidual,
+                                           ceres::DYNAMIC,
+                                           kDigitDofs,
+                                           kDigitDofs,
+                                           kDigitDofs,
+                                           kDigitDofs,
+                                           kDigitDofs,
+                                           4,
+                                           1,
+                                           2>(functor, n);
   }
 
  private:
@@ -555,8 +638,15 @@ double SilhouetteTermCost(const HandRig& rig,
                              options)));
   const int n = cost->num_residuals();
   std::vector<double> residuals(n);
-  const double* parameters[] = {joints.data(), cam_from_hand.data(), &scale, shift.data()};
-  constexpr int kSizes[] = {kNumJointAngles, 4, 1, 2};
+  const double* parameters[] = {joints.data(),
+                                joints.data() + kDigitDofs,
+                                joints.data() + 2 * kDigitDofs,
+                                joints.data() + 3 * kDigitDofs,
+                                joints.data() + 4 * kDigitDofs,
+                                cam_from_hand.data(),
+                                &scale,
+                                shift.data()};
+  constexpr int kSizes[] = {kDigitDofs, kDigitDofs, kDigitDofs, kDigitDofs, kDigitDofs, 4, 1, 2};
   std::vector<std::vector<double>> jacobians;
   std::vector<double*> jacobian_ptrs;
   if (gradient != nullptr) {
@@ -571,7 +661,7 @@ double SilhouetteTermCost(const HandRig& rig,
   for (const double r : residuals) sum += r * r;
   if (gradient != nullptr) {
     gradient->clear();
-    for (int b = 0; b < 4; ++b) {
+    for (int b = 0; b < 8; ++b) {
       for (int j = 0; j < kSizes[b]; ++j) {
         double g = 0;
         for (int i = 0; i < n; ++i)
@@ -593,13 +683,18 @@ double DepthTermCost(const HandRig& rig,
   JointVector j = joints;
   Quaternion q = cam_from_hand;
   ceres::Problem problem;
+  double scale = 1;
+  std::array<double, 2> shift{};
+  const PoseBlocks pose{j.data(), q.data(), &scale, shift.data()};
+  pose.AddTo(&problem);
   const std::vector<ceres::ResidualBlockId> blocks =
       AddDepthBlocks(&problem, kinematics, rig, evidence, options, j.data(), q.data());
   if (gradient != nullptr) gradient->assign(kNumJointAngles + 4, 0.0);
   if (blocks.empty()) return 0;
   ceres::Problem::EvaluateOptions evaluate;
   evaluate.residual_blocks = blocks;
-  evaluate.parameter_blocks = {j.data(), q.data()};
+  for (int d = 0; d < kNumDigits; ++d) evaluate.parameter_blocks.push_back(pose.digit(d));
+  evaluate.parameter_blocks.push_back(q.data());
   double cost = 0;
   THROW_CHECK(problem.Evaluate(evaluate, &cost, nullptr, gradient, nullptr));
   return cost;
@@ -621,8 +716,15 @@ Result<PoseFit> FitPose(const HandRig& rig,
   double scale = frame->scale;
   std::array<double, 2> shift = frame->shift;
   const FitKinematics kinematics(rig);
+  if (!kinematics.digit_blocks()) {
+    return InvalidArgument(
+        "the rig's DOFs do not turn each digit by its own 4 angles in docs/conventions.md's "
+        "order");
+  }
 
   ceres::Problem problem;  // owns the cost, loss and manifold objects given to it
+  const PoseBlocks blocks{joints.data(), cam_from_hand.data(), &scale, shift.data()};
+  blocks.AddTo(&problem);
   std::vector<ceres::ResidualBlockId> landmark_blocks;
   if (*used > 0) {
     for (int k = 0; k < kNumKeypoints; ++k) {
@@ -632,17 +734,14 @@ Result<PoseFit> FitPose(const HandRig& rig,
       // same error whatever its confidence.
       ceres::LossFunction* loss = new ceres::ScaledLoss(
           new ceres::HuberLoss(options.landmark_loss_scale), w, ceres::TAKE_OWNERSHIP);
-      landmark_blocks.push_back(
-          problem.AddResidualBlock(LandmarkResidual::Create(&kinematics,
-                                                            k,
-                                                            rig.look_at(),
-                                                            evidence.landmarks_px[k],
-                                                            1.0 / options.landmark_sigma_px),
-                                   loss,
-                                   joints.data(),
-                                   cam_from_hand.data(),
-                                   &scale,
-                                   shift.data()));
+      landmark_blocks.push_back(LandmarkResidual::Add(&problem,
+                                                      loss,
+                                                      blocks,
+                                                      &kinematics,
+                                                      k,
+                                                      rig.look_at(),
+                                                      evidence.landmarks_px[k],
+                                                      1.0 / options.landmark_sigma_px));
     }
   }
   std::vector<ceres::ResidualBlockId> silhouette_blocks;
@@ -657,23 +756,34 @@ Result<PoseFit> FitPose(const HandRig& rig,
                                                           evidence.silhouette_mirrored,
                                                           options)),
         nullptr,
-        joints.data(),
-        cam_from_hand.data(),
-        &scale,
-        shift.data()));
+        blocks.digit(0),
+        blocks.digit(1),
+        blocks.digit(2),
+        blocks.digit(3),
+        blocks.digit(4),
+        blocks.cam_from_hand,
+        blocks.scale,
+        blocks.shift));
   }
   const std::vector<ceres::ResidualBlockId> depth_blocks = AddDepthBlocks(
       &problem, kinematics, rig, evidence, options, joints.data(), cam_from_hand.data());
-  const std::vector<ceres::ResidualBlockId> prior_blocks = {problem.AddResidualBlock(
-      PosePrior::Create(
-          frame->joints, cam_from_hand, options.joint_prior_sigma, options.rotation_prior_sigma),
-      nullptr,
-      joints.data(),
-      cam_from_hand.data())};
+  // The joints and the rotation near the candidate's.
+  std::vector<ceres::ResidualBlockId> prior_blocks;
+  for (int d = 0; d < kNumDigits; ++d) {
+    prior_blocks.push_back(problem.AddResidualBlock(
+        DigitPrior::Create(frame->joints.data() + d * kDigitDofs, options.joint_prior_sigma),
+        nullptr,
+        blocks.digit(d)));
+  }
+  prior_blocks.push_back(
+      problem.AddResidualBlock(RotationPrior::Create(cam_from_hand, options.rotation_prior_sigma),
+                               nullptr,
+                               blocks.cam_from_hand));
   problem.SetManifold(cam_from_hand.data(), new ceres::QuaternionManifold);
   for (int i = 0; i < kNumJointAngles; ++i) {
-    problem.SetParameterLowerBound(joints.data(), i, rig.limits().min[i]);
-    problem.SetParameterUpperBound(joints.data(), i, rig.limits().max[i]);
+    double* digit = blocks.digit(i / kDigitDofs);
+    problem.SetParameterLowerBound(digit, i % kDigitDofs, rig.limits().min[i]);
+    problem.SetParameterUpperBound(digit, i % kDigitDofs, rig.limits().max[i]);
   }
   if (*used > 0 || silhouette) {
     // The scale cannot flip the hand or collapse it; a factor 4 either way is far beyond any

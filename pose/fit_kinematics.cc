@@ -59,6 +59,14 @@ FitKinematics::FitKinematics(const HandRig& rig) {
     chain.at_tail = kp.at_tail;
     chain.length = kp.length;
   }
+  for (int k = 0; k < kNumKeypoints; ++k) {
+    const int first = DigitOf(k) * kDigitDofs;
+    for (const int b : chains_[k].bones) {
+      for (const Dof& dof : bones_[b].dofs) {
+        if (k == 0 || dof.index < first || dof.index >= first + kDigitDofs) digit_blocks_ = false;
+      }
+    }
+  }
 }
 
 HandKeypoints3d FitKinematics::Keypoints3d(const JointVector& joints) const {

@@ -2,7 +2,8 @@
 // keypoints with respect to the joint angles automatically (a Ceres Jet is a scalar here). It is
 // the computation of HandRig::Keypoints3d (generator/hand/kinematics.cc) rewritten per keypoint:
 // a keypoint only depends on the bones from its root down to its own bone, so a residual per
-// keypoint poses that chain and nothing else. pose/fit_kinematics_test.cc holds the two to 1e-9.
+// keypoint poses that chain and nothing else, and only its digit's angles move it.
+// pose/fit_kinematics_test.cc holds the two to 1e-9.
 #pragma once
 
 #include <array>
@@ -21,7 +22,28 @@ class FitKinematics {
 
   // Keypoint k (docs/conventions.md order) in the hand frame, for `joints` (20, DOF order).
   template <typename T>
-  void Keypoint(const T* joints, int k, T* point_in_hand) const;
+  void Keypoint(const T* joints, int k, T* point_in_hand) const {
+    Pose(joints, 0, k, point_in_hand);
+  }
+
+  // The same from the joints of keypoint k's digit alone (kDigitDofs of them, from DOF
+  // DigitOf(k) * kDigitDofs): a digit's keypoints depend on its own angles only, so a solver
+  // differentiates with respect to 4 angles instead of 20. The wrist (k = 0) reads none.
+  // Valid when digit_blocks() holds.
+  template <typename T>
+  void KeypointOfDigit(const T* digit_joints, int k, T* point_in_hand) const {
+    Pose(digit_joints, DigitOf(k) * kDigitDofs, k, point_in_hand);
+  }
+
+  static constexpr int kDigitDofs = 4;
+  static constexpr int kNumDigits = kNumJointAngles / kDigitDofs;
+  // Keypoint k's digit (docs/conventions.md: thumb 1-4, index 5-8, ..., little 17-20); 0 for the
+  // wrist, which has no angle.
+  static constexpr int DigitOf(int k) { return k == 0 ? 0 : (k - 1) / kDigitDofs; }
+
+  // Whether every keypoint's chain turns only by its own digit's DOFs, as docs/conventions.md
+  // orders them (digit d: DOFs 4d..4d+3). A rig that breaks this cannot be fitted per digit.
+  bool digit_blocks() const { return digit_blocks_; }
 
   // All 21 keypoints in double, for tests and for the answer of a fit.
   HandKeypoints3d Keypoints3d(const JointVector& joints) const;
@@ -43,8 +65,13 @@ class FitKinematics {
     double length = 0;
   };
 
+  // Keypoint k posed from `joints`, whose first entry is DOF `first_dof`.
+  template <typename T>
+  void Pose(const T* joints, int first_dof, int k, T* point_in_hand) const;
+
   std::vector<Bone> bones_;
   std::array<Chain, kNumKeypoints> chains_;
+  bool digit_blocks_ = true;
 };
 
 namespace fit_internal {
@@ -82,7 +109,7 @@ void AxisAngleRotation(const double (&axis)[3], const T& angle, T (&r)[3][3]) {
 }  // namespace fit_internal
 
 template <typename T>
-void FitKinematics::Keypoint(const T* joints, int k, T* point_in_hand) const {
+void FitKinematics::Pose(const T* joints, int first_dof, int k, T* point_in_hand) const {
   const Chain& chain = chains_[k];
   // The posed transform of the chain so far (bone frame -> hand frame).
   T rotation[3][3];
@@ -111,7 +138,7 @@ void FitKinematics::Keypoint(const T* joints, int k, T* point_in_hand) const {
     for (const Dof& dof : bone.dofs) {
       T turn[3][3];
       T turned[3][3];
-      fit_internal::AxisAngleRotation(dof.axis, joints[dof.index], turn);
+      fit_internal::AxisAngleRotation(dof.axis, joints[dof.index - first_dof], turn);
       fit_internal::MatMul3(with_local, turn, turned);
       for (int r = 0; r < 3; ++r) {
         for (int c = 0; c < 3; ++c) with_local[r][c] = turned[r][c];

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "base/repo_root.h"
+#include "generator/hand/hand_model.h"
 #include "generator/hand/rig_testing.h"
 #include "pose/fit_kinematics.h"
 
@@ -273,6 +274,23 @@ TEST(PoseFit, NonFiniteEvidenceIsAnError) {
   bad_options.max_iterations = 0;
   EXPECT_EQ(FitPose(rig, start, EvidenceOf(Project(rig, truth)), bad_options).status().code(),
             StatusCode::kInvalidArgument);
+}
+
+// The fit differentiates each digit's keypoints with respect to its own angles only: a rig whose
+// DOFs are not grouped by digit as docs/conventions.md orders them is refused with the reason.
+TEST(PoseFit, RigWithoutDigitBlocksIsAnError) {
+  auto model = LoadHandModel(RepoRoot() / "configs/hands/webxr_generic_right.json");
+  ASSERT_TRUE(model.ok());
+  model->dofs[4].bone = model->dofs[0].bone;  // the index MCP flexion on the thumb
+  auto moved = HandRig::Create(*model);
+  ASSERT_TRUE(moved.ok()) << moved.status().message();
+  const HandRig rig = ShippedRig();
+  const Pose truth = TruePose(rig);
+  auto fit =
+      FitPose(*moved, StartAt(rig, truth), EvidenceOf(Project(rig, truth)), PoseFitOptions());
+  ASSERT_FALSE(fit.ok());
+  EXPECT_EQ(fit.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(fit.status().message().find("DOFs"), std::string::npos) << fit.status().message();
 }
 
 TEST(PoseFit, WithoutLandmarksThePriorKeepsTheStart) {
