@@ -551,6 +551,8 @@ Result<PictureQuery> QueryOnePicture(const Searcher& searcher,
                                      int search_threads) {
   PictureSearchOptions options = flags.picture.options;
   options.search.num_threads = search_threads;
+  // A picture's matches are fitted on its threads too (the same fits on any number).
+  options.fit.num_threads = ResolveNumThreads(search_threads);
   PictureQuery q;
   auto found = SearchPicture(searcher, image, options, &q.stats);
   if (!found.ok()) return found.status();

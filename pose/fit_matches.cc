@@ -6,6 +6,8 @@
 #include <sstream>
 #include <utility>
 
+#include "base/thread_pool.h"
+
 namespace handdb {
 namespace {
 
@@ -112,6 +114,7 @@ bool MatchFitOptions::Check() const {
   if (!silhouette.Check()) return false;
   if (!silhouette_fit.Check()) return false;
   CHECK_OPTION_GE(max_silhouette_matches, 0);
+  CHECK_OPTION(num_threads >= 1 && num_threads <= 256);
   return true;
 }
 
@@ -155,17 +158,18 @@ Result<PictureFit> FitPictureMatches(const DatabaseRig& rig,
     no_evidence = no_landmarks + " and no silhouette (" + no_silhouette + ")";
   }
 
-  for (size_t i = 0; i < n; ++i) {
+  // Each match's fit is independent of the others': on several threads they are the same fits.
+  auto fit_one = [&](size_t i, int) {
     const Match& match = matches[i];
     MatchFit& mf = out.fits[i];
     if (!no_evidence.empty()) {
       mf.reason = no_evidence;
-      continue;
+      return true;
     }
     if (!out.landmarks_used && i >= static_cast<size_t>(options.max_silhouette_matches)) {
       mf.reason = "a silhouette fit is made of the first " +
                   std::to_string(options.max_silhouette_matches) + " matches only";
-      continue;
+      return true;
     }
     const bool mirrored = match.hand == Hand::kLeft;
     // The stored view's own label (right hand, roll 0): the start of its virtual view (v, r).
@@ -173,7 +177,7 @@ Result<PictureFit> FitPictureMatches(const DatabaseRig& rig,
         PoseFitStartFromLabel(rig.rig, database.label(match.view_id), rig.render, match.roll_angle);
     if (!start.ok()) {
       mf.reason = start.status().message();
-      continue;
+      return true;
     }
     PoseFitEvidence evidence;
     if (out.landmarks_used) {
@@ -191,11 +195,11 @@ Result<PictureFit> FitPictureMatches(const DatabaseRig& rig,
         rig.rig, *start, evidence, out.landmarks_used ? options.fit : options.silhouette_fit);
     if (!fit.ok()) {
       mf.reason = fit.status().message();
-      continue;
+      return true;
     }
     if (fit->termination == "FAILURE") {  // the answer is the start: the match stands
       mf.reason = "the solver failed: " + fit->message;
-      continue;
+      return true;
     }
     if (out.landmarks_used) {
       mf.landmark_error_start_px = MeanDistance(start->keypoints_normalised, evidence.landmarks_px);
@@ -210,8 +214,13 @@ Result<PictureFit> FitPictureMatches(const DatabaseRig& rig,
       mf.keypoints_image_px[k] = picture.edges.ImageFromNormalised(p);
     }
     mf.fitted = true;
+    return true;
+  };
+  ParallelFor(n, options.num_threads, fit_one);
+  for (size_t i = 0; i < n; ++i) {
+    if (!out.fits[i].fitted) continue;
     if (out.best < 0 || (options.choice == FitChoice::kLeastCost &&
-                         mf.fit.final_cost < out.fits[out.best].fit.final_cost)) {
+                         out.fits[i].fit.final_cost < out.fits[out.best].fit.final_cost)) {
       out.best = static_cast<int>(i);
     }
   }

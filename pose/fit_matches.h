@@ -79,6 +79,10 @@ struct MatchFitOptions {
   // better on the label renders).
   int max_silhouette_matches = 1;
   FitChoice choice = FitChoice::kLeastCost;
+  // The matches are fitted on up to this many threads (the same fits on any number): a single
+  // picture's query fits its 3 matches beside each other; a batch, whose pictures already share
+  // the threads, one after another.
+  int num_threads = 1;
   bool Check() const;
 };
 

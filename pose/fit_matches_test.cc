@@ -128,6 +128,31 @@ TEST_F(FitMatchesTest, MovesTheMatchOntoTheLandmarks) {
   EXPECT_LT(dz / kNumKeypoints, 2.0);
 }
 
+// Matches fitted on several threads are the fits of one thread, and the same one is the answer.
+TEST_F(FitMatchesTest, ThreadsGiveTheSameFits) {
+  const PictureEvidence picture = PictureOf(truth_, /*left=*/false, 0.99f);
+  const std::vector<Match> matches = {
+      MatchOf(Hand::kRight), MatchOf(Hand::kLeft), MatchOf(Hand::kRight), MatchOf(Hand::kLeft)};
+  MatchFitOptions options;
+  options.max_matches = 4;
+  auto one = FitPictureMatches(rig_, *db_, picture, matches, options);
+  options.num_threads = 3;
+  auto three = FitPictureMatches(rig_, *db_, picture, matches, options);
+  ASSERT_TRUE(one.ok()) << one.status().ToString();
+  ASSERT_TRUE(three.ok()) << three.status().ToString();
+  ASSERT_EQ(one->fits.size(), 4u);
+  ASSERT_EQ(three->fits.size(), 4u);
+  EXPECT_EQ(one->best, three->best);
+  for (size_t i = 0; i < 4; ++i) {
+    ASSERT_TRUE(one->fits[i].fitted) << one->fits[i].reason;
+    ASSERT_TRUE(three->fits[i].fitted) << three->fits[i].reason;
+    EXPECT_EQ(one->fits[i].fit.final_cost, three->fits[i].fit.final_cost) << "match " << i;
+    EXPECT_EQ(one->fits[i].fit.joints, three->fits[i].fit.joints) << "match " << i;
+  }
+  options.num_threads = 0;
+  EXPECT_FALSE(FitPictureMatches(rig_, *db_, picture, matches, options).ok());
+}
+
 TEST_F(FitMatchesTest, ALeftHandIsFittedInTheMirroredPictureAndMirroredBack) {
   const PictureEvidence picture = PictureOf(truth_, /*left=*/true, 0.99f);
   auto fit = FitPictureMatches(rig_, *db_, picture, {MatchOf(Hand::kLeft)}, MatchFitOptions{});

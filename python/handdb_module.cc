@@ -705,6 +705,7 @@ py::object Search(const PyDatabase& self,
     picture_search.search = options;
     picture_search.landmark_rank = landmark_rank;
     FitFromArgs(self, fit, fit_matches, &picture_search);
+    picture_search.fit.num_threads = ResolveNumThreads(options.num_threads);
   } else {
     if (edge_kwargs.size()) throw py::type_error("image options given with a points query");
     points = QueryPoints(py::array::ensure(query));
@@ -835,6 +836,7 @@ py::list SearchMany(const PyDatabase& self,
     const int total = ResolveNumThreads(threads);
     const int workers = static_cast<int>(std::min<size_t>(static_cast<size_t>(total), n));
     options.search.num_threads = std::max(1, total / std::max(workers, 1));
+    options.fit.num_threads = options.search.num_threads;
     ParallelFor(n, workers, [&](size_t i, int) {
       found[i].emplace(SearchPicture(searcher, paths[i], options, &stats[i]));
       return true;
