@@ -1,6 +1,7 @@
 #include "track/frames.h"
 
 #include <dlfcn.h>
+#include <link.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -11,6 +12,7 @@
 #include <system_error>
 
 #include "base/atomic_file.h"
+#include "base/plugin.h"
 #include "track/videoio_plugin.h"
 
 namespace handdb {
@@ -81,44 +83,41 @@ struct VideoPlugin {
 };
 
 constexpr const char* kPluginName = "libhanddb_videoio.so";
+constexpr const char* kPluginEnv = "HANDDB_VIDEOIO_PLUGIN";
 
 Result<const VideoPlugin*> LoadVideoPlugin() {
   static std::once_flag once;
   static VideoPlugin plugin;
-  static std::string error;
+  static Status error;
   std::call_once(once, [] {
-    std::string tried;
-    for (const fs::path& candidate : VideoPluginCandidates()) {
-      std::error_code ec;
-      if (!fs::exists(candidate, ec)) {
-        tried += (tried.empty() ? "" : ", ") + candidate.string();
-        continue;
-      }
-      void* lib = ::dlopen(candidate.c_str(), RTLD_NOW | RTLD_LOCAL);
-      if (lib == nullptr) {
-        error = candidate.string() + " cannot be loaded: " + ::dlerror();
-        return;
-      }
-      VideoPlugin p;
-      p.abi = reinterpret_cast<decltype(p.abi)>(::dlsym(lib, "handdb_videoio_abi"));
-      p.open = reinterpret_cast<decltype(p.open)>(::dlsym(lib, "handdb_video_open"));
-      p.info = reinterpret_cast<decltype(p.info)>(::dlsym(lib, "handdb_video_info"));
-      p.read = reinterpret_cast<decltype(p.read)>(::dlsym(lib, "handdb_video_read"));
-      p.close = reinterpret_cast<decltype(p.close)>(::dlsym(lib, "handdb_video_close"));
-      if (p.abi == nullptr || p.open == nullptr || p.info == nullptr || p.read == nullptr ||
-          p.close == nullptr || p.abi() != HANDDB_VIDEOIO_ABI) {
-        error = candidate.string() + " is not a video plugin of this handdb (ABI " +
-                std::to_string(HANDDB_VIDEOIO_ABI) + ")";
-        return;
-      }
-      plugin = p;
+    auto lib = OpenPlugin(kPluginName, kPluginEnv, "reading a video");
+    if (!lib.ok()) {
+      error = lib.status().code() == StatusCode::kNotFound
+                  ? Status(StatusCode::kNotFound,
+                           lib.status().message() + " or give a folder of frames")
+                  : lib.status();
       return;
     }
-    error = std::string("videos are read by the video plugin ") + kPluginName +
-            ", which is not installed (looked in " + tried +
-            "; set HANDDB_VIDEOIO_PLUGIN or give a folder of frames)";
+    VideoPlugin p;
+    p.abi = reinterpret_cast<decltype(p.abi)>(::dlsym(*lib, "handdb_videoio_abi"));
+    p.open = reinterpret_cast<decltype(p.open)>(::dlsym(*lib, "handdb_video_open"));
+    p.info = reinterpret_cast<decltype(p.info)>(::dlsym(*lib, "handdb_video_info"));
+    p.read = reinterpret_cast<decltype(p.read)>(::dlsym(*lib, "handdb_video_read"));
+    p.close = reinterpret_cast<decltype(p.close)>(::dlsym(*lib, "handdb_video_close"));
+    if (p.abi == nullptr || p.open == nullptr || p.info == nullptr || p.read == nullptr ||
+        p.close == nullptr || p.abi() != HANDDB_VIDEOIO_ABI) {
+      link_map* map = nullptr;
+      const std::string file = ::dlinfo(*lib, RTLD_DI_LINKMAP, &map) == 0 && map != nullptr
+                                   ? std::string(map->l_name)
+                                   : std::string(kPluginName);
+      error = Status(StatusCode::kNotFound,
+                     file + " is not a video plugin of this handdb (ABI " +
+                         std::to_string(HANDDB_VIDEOIO_ABI) + ")");
+      return;
+    }
+    plugin = p;
   });
-  if (plugin.open == nullptr) return Status(StatusCode::kNotFound, error);
+  if (plugin.open == nullptr) return error;
   return &plugin;
 }
 
@@ -161,17 +160,6 @@ class VideoSource : public FrameSource {
   int64_t next_ = 0;
 };
 
-// The directory of the shared object (or executable) holding this function.
-fs::path ThisObjectDir() {
-  Dl_info info{};
-  if (::dladdr(reinterpret_cast<void*>(&ThisObjectDir), &info) != 0 && info.dli_fname != nullptr) {
-    std::error_code ec;
-    const fs::path p = fs::canonical(info.dli_fname, ec);
-    if (!ec) return p.parent_path();
-  }
-  return {};
-}
-
 }  // namespace
 
 bool FrameSourceOptions::Check() const {
@@ -187,21 +175,7 @@ bool IsFrameFileName(const std::string& name) {
   return false;
 }
 
-std::vector<fs::path> VideoPluginCandidates() {
-  std::vector<fs::path> out;
-  if (const char* env = std::getenv("HANDDB_VIDEOIO_PLUGIN"); env != nullptr && *env != '\0') {
-    return {fs::path(env)};
-  }
-  std::error_code ec;
-  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
-  if (!ec) {
-    out.push_back(exe.parent_path() / kPluginName);
-    out.push_back(exe.parent_path().parent_path() / "lib" / "handdb" / kPluginName);
-  }
-  if (const fs::path here = ThisObjectDir(); !here.empty()) out.push_back(here / kPluginName);
-  out.push_back(fs::path(HANDDB_VIDEOIO_BUILD_DIR) / kPluginName);
-  return out;
-}
+std::vector<fs::path> VideoPluginCandidates() { return PluginCandidates(kPluginName, kPluginEnv); }
 
 Result<std::unique_ptr<FrameSource>> OpenFrameFolder(const fs::path& dir,
                                                      const FrameSourceOptions& options) {

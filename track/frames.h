@@ -61,9 +61,9 @@ Result<std::unique_ptr<FrameSource>> OpenVideo(const std::filesystem::path& vide
 Result<std::unique_ptr<FrameSource>> OpenFrames(const std::filesystem::path& video_or_dir,
                                                 const FrameSourceOptions& options = {});
 
-// Where the video plugin is looked for: $HANDDB_VIDEOIO_PLUGIN alone when set; else, in order,
-// beside the running executable, in its ../lib/handdb, beside the shared object holding this
-// code (the Python module), then the build tree's.
+// Where the video plugin is looked for (base/plugin.h): $HANDDB_VIDEOIO_PLUGIN alone when set;
+// else, in order, beside the running executable, in its ../lib/handdb, beside the shared object
+// holding the loader (the Python module), then the build tree's.
 std::vector<std::filesystem::path> VideoPluginCandidates();
 
 }  // namespace handdb
