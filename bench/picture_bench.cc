@@ -251,7 +251,8 @@ int Run(const Args& args) {
   PrintStage(search, search_ms);
   PrintStage(pool, search_ms, "what SearchEvidence searches for a photo with landmarks");
   PrintStage(rerank, search_ms);
-  if (rig != nullptr) PrintStage(fit, search_ms, "the first match fitted (--fit auto)");
+  if (rig != nullptr)
+    PrintStage(fit, search_ms, "the first 3 matches fitted on one thread (--fit auto)");
   PrintStage(whole, search_ms);
   const double per_picture = Median(whole.warm_ms);
   const double fixed = Median(start_ms) + Median(open.warm_ms) + Median(model.warm_ms);
