@@ -143,19 +143,12 @@ int Run(const Args& args) {
     std::fprintf(stderr, "index_bench: %s\n", input.status().ToString().c_str());
     return 1;
   }
-  std::optional<TestSet> ts;
-  if (!args.testset.empty()) {
-    auto t = ReadTestSet(args.testset);
-    if (!t.ok()) {
-      std::fprintf(stderr, "index_bench: %s\n", t.status().ToString().c_str());
-      return 1;
-    }
-    ts = std::move(t).value();
+  auto images = bench::ImageQuerySets(args.photos, args.testset, args.set_queries, *input);
+  if (!images.ok()) {
+    std::fprintf(stderr, "index_bench: %s\n", images.status().ToString().c_str());
+    return 1;
   }
-  std::vector<QuerySet> sets;
-  sets.push_back(bench::PhotoQuerySet(args.photos, args.set_queries, *input));
-  sets.push_back(bench::TestSetQuerySet(ts ? &*ts : nullptr, true, args.set_queries, *input));
-  sets.push_back(bench::TestSetQuerySet(ts ? &*ts : nullptr, false, args.set_queries, *input));
+  std::vector<QuerySet> sets = std::move(images).value();
   sets.push_back(bench::PerturbedQuerySet(db, args.perturbed, 12345));
 
   auto cache = ReadCache(args.cache);

@@ -474,20 +474,12 @@ int RunQuerySets(const Args& args,
   }
   image_options.label_edges = recorded->edges;
   image_options.label_joint_pairs = recorded->joint_pairs;
-  std::optional<TestSet> testset;
-  if (!args.testset.empty()) {
-    auto read = ReadTestSet(args.testset);
-    if (!read.ok()) {
-      std::fprintf(stderr, "query_bench: %s\n", read.status().ToString().c_str());
-      return 1;
-    }
-    testset = std::move(read).value();
+  auto images = bench::ImageQuerySets(args.photos, args.testset, args.set_queries, image_options);
+  if (!images.ok()) {
+    std::fprintf(stderr, "query_bench: %s\n", images.status().ToString().c_str());
+    return 1;
   }
-  const TestSet* ts = testset ? &*testset : nullptr;
-  std::vector<QuerySet> sets;
-  sets.push_back(bench::PhotoQuerySet(args.photos, args.set_queries, image_options));
-  sets.push_back(bench::TestSetQuerySet(ts, /*photo=*/true, args.set_queries, image_options));
-  sets.push_back(bench::TestSetQuerySet(ts, /*photo=*/false, args.set_queries, image_options));
+  std::vector<QuerySet> sets = std::move(images).value();
   sets.push_back(std::move(perturbed));
 
   // Round-robin over the sets, query i of every set before query i + 1 of any, so a change of the

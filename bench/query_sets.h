@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <optional>
 #include <random>
 #include <span>
 #include <string>
@@ -140,6 +141,27 @@ inline QuerySet TestSetQuerySet(const TestSet* testset,
                     (testset->clutter ? "cluttered" : "plain") + " background) of test set " +
                     testset->dir.string();
   return set;
+}
+
+// The image sets every benchmark measures, in this order: `photos` (the development photos),
+// then the photo-like and the clean renders of the test set in `testset_dir` (skipped with the
+// reason when it is empty), at most `cap` queries each. An unreadable test set is an error.
+inline Result<std::vector<QuerySet>> ImageQuerySets(const std::string& photos,
+                                                    const std::string& testset_dir,
+                                                    int cap,
+                                                    const ImageEdgeOptions& options) {
+  std::optional<TestSet> testset;
+  if (!testset_dir.empty()) {
+    auto read = ReadTestSet(testset_dir);
+    if (!read.ok()) return read.status();
+    testset = std::move(read).value();
+  }
+  const TestSet* ts = testset ? &*testset : nullptr;
+  std::vector<QuerySet> sets;
+  sets.push_back(PhotoQuerySet(photos, cap, options));
+  sets.push_back(TestSetQuerySet(ts, /*photo=*/true, cap, options));
+  sets.push_back(TestSetQuerySet(ts, /*photo=*/false, cap, options));
+  return sets;
 }
 
 // A query near virtual view (v, r): rotated by up to 0.4 roll steps, shifted by up to 2 px, 20%
