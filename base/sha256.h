@@ -1,5 +1,7 @@
-// SHA-256 (FIPS 180-4, computed by OpenSSL's EVP, its library opened on the first digest), for
-// recording which hand-model and asset files a plan was made from.
+// SHA-256 (FIPS 180-4, computed by Nettle: the digests of GnuTLS, a library of ~700 relocations
+// where OpenSSL's libcrypto has ~21,000, so linking it costs a command's start nothing measurable;
+// docs/decisions/0022), for recording which hand-model and asset files a plan, a database and its
+// rig were made from.
 #pragma once
 
 #include <cstdint>
@@ -10,8 +12,8 @@
 
 #include "base/status.h"
 
-// OpenSSL's EVP_MD_CTX (openssl/types.h), declared so the header needs no OpenSSL include.
-struct evp_md_ctx_st;
+// Nettle's context (nettle/sha2.h), declared so the header needs no Nettle include.
+struct sha256_ctx;
 
 namespace handdb {
 
@@ -27,10 +29,7 @@ class Sha256 {
   std::string HexDigest();  // finalises; lower-case hex, 64 characters
 
  private:
-  struct FreeContext {
-    void operator()(evp_md_ctx_st* ctx) const;
-  };
-  std::unique_ptr<evp_md_ctx_st, FreeContext> ctx_;  // OpenSSL's EVP_MD_CTX
+  std::unique_ptr<sha256_ctx> ctx_;
 };
 
 std::string Sha256Hex(std::string_view data);

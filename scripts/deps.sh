@@ -12,7 +12,7 @@ PACKAGES=(
   blender python3-numpy python3-pytest python3-pytest-xdist python3-opencv python3-jsonschema
   openimageio-tools libopenexr-dev libopencv-dev libeigen3-dev
   libpcl-dev libnanoflann-dev libcli11-dev nlohmann-json3-dev libzstd-dev libxxhash-dev
-  libssl-dev libboost-dev libfaiss-dev libpng-dev libjpeg62-turbo-dev libceres-dev
+  nettle-dev libboost-dev libfaiss-dev libpng-dev libjpeg62-turbo-dev libceres-dev
   # xnnpack.h includes pthreadpool.h, which libxnnpack-dev does not pull in.
   libxnnpack-dev libpthreadpool-dev libtinygltf-dev
   python3-dev pybind11-dev python3-pybind11
