@@ -1,6 +1,7 @@
 #include "base/plugin.h"
 
 #include <dlfcn.h>
+#include <link.h>
 
 #include <cstdlib>
 
@@ -59,6 +60,15 @@ Result<void*> OpenPlugin(const std::string& file_name,
   return Status(StatusCode::kNotFound,
                 what + " needs the plugin " + file_name + ", which is not installed (looked in " +
                     tried + "; set " + env_var + ")");
+}
+
+std::string PluginFile(void* handle, const std::string& file_name) {
+  link_map* map = nullptr;
+  if (::dlinfo(handle, RTLD_DI_LINKMAP, &map) == 0 && map != nullptr && map->l_name != nullptr &&
+      *map->l_name != '\0') {
+    return map->l_name;
+  }
+  return file_name;
 }
 
 }  // namespace handdb

@@ -26,4 +26,8 @@ Result<void*> OpenPlugin(const std::string& file_name,
                          const char* env_var,
                          const std::string& what);
 
+// The file a handle of OpenPlugin was loaded from, for a message about it (`file_name` when the
+// loader cannot say).
+std::string PluginFile(void* handle, const std::string& file_name);
+
 }  // namespace handdb

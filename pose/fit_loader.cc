@@ -35,7 +35,7 @@ Status OpenFitPlugin(const FitPluginApi** api) {
       table->layout != FitPluginLayoutOfThisBuild() || table->fit_pose == nullptr ||
       table->silhouette_term_cost == nullptr) {
     return Status(StatusCode::kUnsupportedVersion,
-                  std::string("the pose fit: ") + kFitPluginName +
+                  "the pose fit: " + PluginFile(*lib, kFitPluginName) +
                       " is not the fit plugin of this handdb build (ABI " +
                       std::to_string(kFitPluginAbi) + "); reinstall handdb");
   }

@@ -103,10 +103,10 @@ Result<const PclPlugin*> LoadPclPlugin() {
     p.destroy = reinterpret_cast<decltype(p.destroy)>(::dlsym(*lib, "handdb_pcl_kdtree_delete"));
     if (abi == nullptr || p.make == nullptr || p.nearest == nullptr || p.destroy == nullptr ||
         abi() != HANDDB_PCL_KDTREE_ABI) {
-      status =
-          Status(StatusCode::kUnsupportedVersion,
-                 std::string(kPclPluginName) + " is not the kd-tree plugin of this handdb (ABI " +
-                     std::to_string(HANDDB_PCL_KDTREE_ABI) + ")");
+      status = Status(StatusCode::kUnsupportedVersion,
+                      PluginFile(*lib, kPclPluginName) +
+                          " is not the kd-tree plugin of this handdb (ABI " +
+                          std::to_string(HANDDB_PCL_KDTREE_ABI) + ")");
       return;
     }
     plugin = p;

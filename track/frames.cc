@@ -1,7 +1,6 @@
 #include "track/frames.h"
 
 #include <dlfcn.h>
-#include <link.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -106,12 +105,8 @@ Result<const VideoPlugin*> LoadVideoPlugin() {
     p.close = reinterpret_cast<decltype(p.close)>(::dlsym(*lib, "handdb_video_close"));
     if (p.abi == nullptr || p.open == nullptr || p.info == nullptr || p.read == nullptr ||
         p.close == nullptr || p.abi() != HANDDB_VIDEOIO_ABI) {
-      link_map* map = nullptr;
-      const std::string file = ::dlinfo(*lib, RTLD_DI_LINKMAP, &map) == 0 && map != nullptr
-                                   ? std::string(map->l_name)
-                                   : std::string(kPluginName);
       error = Status(StatusCode::kNotFound,
-                     file + " is not a video plugin of this handdb (ABI " +
+                     PluginFile(*lib, kPluginName) + " is not a video plugin of this handdb (ABI " +
                          std::to_string(HANDDB_VIDEOIO_ABI) + ")");
       return;
     }
