@@ -2,6 +2,7 @@
 #
 #   handdb_add_library(NAME handdb_format SRCS a.cc b.cc DEPS PUBLIC x PRIVATE y)
 #   handdb_add_test(NAME format/shard_reader_test SRCS format/shard_reader_test.cc DEPS handdb_format)
+#   handdb_add_plugin(NAME handdb_fit SRCS fit.cc LOADED_BY handdb_pose)
 #   (optional: LABELS a;b, TIMEOUT seconds, COST seconds of its longest run, under the sanitizers)
 #
 # Test names are "<module>/<file stem>" so `ctest -R format/` selects a module.
@@ -18,6 +19,24 @@ function(handdb_add_library)
   set_target_properties(${ARG_NAME} PROPERTIES POSITION_INDEPENDENT_CODE ON)
   target_link_libraries(${ARG_NAME} PUBLIC ${ARG_PUBLIC_DEPS} PRIVATE ${ARG_PRIVATE_DEPS})
   target_compile_options(${ARG_NAME} PRIVATE ${HANDDB_WARNINGS})
+endfunction()
+
+# A shared object handdb opens on first use (base/plugin.h, docs/decisions/0020): built beside
+# the handdb binary, installed there, exporting only what it marks, and built before the library
+# whose code opens it (LOADED_BY), so whatever links that library finds it. The caller links it.
+function(handdb_add_plugin)
+  cmake_parse_arguments(ARG "" "NAME;LOADED_BY" "SRCS" ${ARGN})
+  add_library(${ARG_NAME} MODULE ${ARG_SRCS})
+  target_include_directories(${ARG_NAME} PRIVATE ${PROJECT_SOURCE_DIR})
+  target_compile_options(${ARG_NAME} PRIVATE ${HANDDB_WARNINGS})
+  target_link_options(${ARG_NAME} PRIVATE -Wl,--as-needed)
+  set_target_properties(${ARG_NAME} PROPERTIES
+    CXX_VISIBILITY_PRESET hidden
+    VISIBILITY_INLINES_HIDDEN ON
+    LIBRARY_OUTPUT_DIRECTORY ${PROJECT_BINARY_DIR}/cli)
+  include(GNUInstallDirs)
+  install(TARGETS ${ARG_NAME} LIBRARY DESTINATION ${CMAKE_INSTALL_BINDIR})
+  add_dependencies(${ARG_LOADED_BY} ${ARG_NAME})
 endfunction()
 
 function(handdb_add_test)
