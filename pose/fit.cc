@@ -307,20 +307,23 @@ T Bounded(const T& r, double scale) {
   return r / sqrt(T(1.0) + (r * r) * (1.0 / (scale * scale)));
 }
 
-// The silhouette term (PoseFitOptions): one block over all 21 keypoints, since every sample
-// depends on two of them and the outline's points on whichever capsule is nearest.
-class SilhouetteResidual {
+// The silhouette term's data (PoseFitOptions), shared by its blocks: the capsules, the two fields
+// and their interpolators, the outline and each part's weight. Each capsule's samples are a block
+// of their own over its digits' angles (a finger link's Jets carry 11 derivatives, not 27); the
+// outline's points are one block over every parameter, since each reads whichever capsule is
+// nearest.
+class SilhouetteTerm {
  public:
   // Samples along each capsule: a third of the way in from each end and the middle, on the axis
   // and on both sides.
   static constexpr double kAlong[3] = {1.0 / 6, 0.5, 5.0 / 6};
 
-  SilhouetteResidual(const FitKinematics* kinematics,
-                     std::vector<HandCapsule> capsules,
-                     const Vec3d& look_at,
-                     std::shared_ptr<const SilhouetteFields> fields,
-                     bool mirrored,
-                     const PoseFitOptions& options)
+  SilhouetteTerm(const FitKinematics* kinematics,
+                 std::vector<HandCapsule> capsules,
+                 const Vec3d& look_at,
+                 std::shared_ptr<const SilhouetteFields> fields,
+                 bool mirrored,
+                 const PoseFitOptions& options)
       : kinematics_(kinematics),
         capsules_(std::move(capsules)),
         look_at_(look_at),
@@ -334,81 +337,107 @@ class SilhouetteResidual {
         loss_scale_(options.silhouette_loss_scale) {
     int outline_capsules = 0;
     for (const HandCapsule& c : capsules_) outline_capsules += c.outline ? 1 : 0;
-    num_inside_ = static_cast<int>(capsules_.size()) * 3 * 3;
-    num_edges_ = outline_capsules * 3 * 2;
-    num_cover_ = static_cast<int>(fields_->outline.size());
-    inside_weight_ = std::sqrt(options.inside_weight / num_inside_);
-    edge_weight_ = num_edges_ > 0 ? std::sqrt(options.edge_weight / num_edges_) : 0;
-    cover_weight_ = num_cover_ > 0 ? std::sqrt(options.cover_weight / num_cover_) : 0;
+    const int num_inside = static_cast<int>(capsules_.size()) * 3 * 3;
+    const int num_edges = outline_capsules * 3 * 2;
+    const int num_cover = static_cast<int>(fields_->outline.size());
+    inside_weight_ = std::sqrt(options.inside_weight / num_inside);
+    edge_weight_ = num_edges > 0 ? std::sqrt(options.edge_weight / num_edges) : 0;
+    cover_weight_ = num_cover > 0 ? std::sqrt(options.cover_weight / num_cover) : 0;
     for (const Point2f& p : fields_->outline) outline_.push_back({mirror_ * p.x, double(p.y)});
   }
 
-  int num_residuals() const { return num_inside_ + num_edges_ + num_cover_; }
+  const std::vector<HandCapsule>& capsules() const { return capsules_; }
+  int num_outline() const { return static_cast<int>(outline_.size()); }
+  static int NumCapsuleResiduals(const HandCapsule& c) { return c.outline ? 3 * 3 + 3 * 2 : 3 * 3; }
 
-  // The five digits' joints, then the rotation, scale and shift (PoseBlocks).
+  // Keypoint k in the normalised frame, from its digit's angles (the wrist's from none).
   template <typename T>
-  bool operator()(const T* thumb,
-                  const T* index,
-                  const T* middle,
-                  const T* ring,
-                  const T* little,
-                  const T* cam_from_hand,
-                  const T* scale,
-                  const T* shift,
-                  T* residuals) const {
+  void Project(
+      const T* digit, int k, const T* cam_from_hand, const T* scale, const T* shift, T* xy) const {
+    T point[3];
+    kinematics_->KeypointOfDigit(digit, k, point);
+    for (int r = 0; r < 3; ++r) point[r] -= T(look_at_[r]);
+    T in_cam[3];
+    ceres::UnitQuaternionRotatePoint(cam_from_hand, point, in_cam);
+    for (int r = 0; r < 2; ++r) xy[r] = scale[0] * in_cam[r] + shift[r];
+  }
+
+  // Capsule c's samples from its end points a and b: points on its axis and sides outside the
+  // hand's region, and (an outline capsule) its sides away from the nearest edge.
+  template <typename T>
+  void CapsuleSamples(int c, const T* a, const T* b, const T* scale, T* residuals) const {
     using std::sqrt;
-    const T* digits[kNumDigits] = {thumb, index, middle, ring, little};
-    T xy[kNumKeypoints][2];
-    for (int k = 0; k < kNumKeypoints; ++k) {
-      T point[3];
-      kinematics_->KeypointOfDigit(digits[FitKinematics::DigitOf(k)], k, point);
-      for (int r = 0; r < 3; ++r) point[r] -= T(look_at_[r]);
-      T in_cam[3];
-      ceres::UnitQuaternionRotatePoint(cam_from_hand, point, in_cam);
-      for (int r = 0; r < 2; ++r) xy[k][r] = scale[0] * in_cam[r] + shift[r];
-    }
+    const HandCapsule& capsule = capsules_[c];
+    const T radius = scale[0] * capsule.radius;
+    const T dx = b[0] - a[0], dy = b[1] - a[1];
+    // A link seen end-on has no direction in the picture: a tiny length keeps its normal
+    // finite (its sides are then any two opposite points of its disc).
+    const T length = sqrt(dx * dx + dy * dy + T(1e-6));
+    const T nx = -dy / length * radius, ny = dx / length * radius;
     T* inside = residuals;
-    T* edges = residuals + num_inside_;
-    T* cover = edges + num_edges_;
-    for (const HandCapsule& c : capsules_) {
-      const T* a = xy[c.from];
-      const T* b = xy[c.to];
-      const T radius = scale[0] * c.radius;
-      const T dx = b[0] - a[0], dy = b[1] - a[1];
-      // A link seen end-on has no direction in the picture: a tiny length keeps its normal
-      // finite (its sides are then any two opposite points of its disc).
-      const T length = sqrt(dx * dx + dy * dy + T(1e-6));
-      const T nx = -dy / length * radius, ny = dx / length * radius;
-      for (const double t : kAlong) {
-        const T cx = a[0] + t * dx, cy = a[1] + t * dy;
-        *inside++ = Read(hand_field_, cx, cy) * inside_weight_;
-        *inside++ = Read(hand_field_, cx + nx, cy + ny) * inside_weight_;
-        *inside++ = Read(hand_field_, cx - nx, cy - ny) * inside_weight_;
-        if (c.outline) {
-          *edges++ = Read(edge_field_, cx + nx, cy + ny) * edge_weight_;
-          *edges++ = Read(edge_field_, cx - nx, cy - ny) * edge_weight_;
-        }
+    T* edges = residuals + 3 * 3;
+    for (const double t : kAlong) {
+      const T cx = a[0] + t * dx, cy = a[1] + t * dy;
+      *inside++ = Read(hand_field_, cx, cy) * inside_weight_;
+      *inside++ = Read(hand_field_, cx + nx, cy + ny) * inside_weight_;
+      *inside++ = Read(hand_field_, cx - nx, cy - ny) * inside_weight_;
+      if (capsule.outline) {
+        *edges++ = Read(edge_field_, cx + nx, cy + ny) * edge_weight_;
+        *edges++ = Read(edge_field_, cx - nx, cy - ny) * edge_weight_;
       }
     }
+  }
+
+  // The outline's points outside every capsule, each its distance from the nearest one.
+  template <typename T>
+  void Cover(const T* const* digits,
+             const T* cam_from_hand,
+             const T* scale,
+             const T* shift,
+             T* residuals) const {
+    using std::sqrt;
+    // Which capsule is nearest is decided on values; the residual and its derivatives are that
+    // capsule's (the minimum's derivative where it is differentiable), so only the keypoints of
+    // the nearest capsules are posed with derivatives.
+    double values[kNumKeypoints][2];
+    {
+      double digit_values[kNumDigits][kDigitDofs];
+      for (int d = 0; d < kNumDigits; ++d) {
+        for (int i = 0; i < kDigitDofs; ++i) digit_values[d][i] = ValueOf(digits[d][i]);
+      }
+      double q[4], s = ValueOf(scale[0]), t[2] = {ValueOf(shift[0]), ValueOf(shift[1])};
+      for (int i = 0; i < 4; ++i) q[i] = ValueOf(cam_from_hand[i]);
+      for (int k = 0; k < kNumKeypoints; ++k) {
+        Project(digit_values[FitKinematics::DigitOf(k)], k, q, &s, t, values[k]);
+      }
+    }
+    T xy[kNumKeypoints][2];
+    bool posed[kNumKeypoints] = {};
+    auto keypoint = [&](int k) -> const T* {
+      if (!posed[k]) {
+        Project(digits[FitKinematics::DigitOf(k)], k, cam_from_hand, scale, shift, xy[k]);
+        posed[k] = true;
+      }
+      return xy[k];
+    };
+    const double scale_value = ValueOf(scale[0]);
     for (const std::array<double, 2>& q : outline_) {
-      // The nearest capsule by value; the residual and its derivatives are that capsule's (the
-      // minimum's derivative where it is differentiable).
       int nearest = 0;
       double best = std::numeric_limits<double>::infinity();
       for (size_t i = 0; i < capsules_.size(); ++i) {
-        const double d = OutsideCapsule(capsules_[i], xy, ValueOf(scale[0]), q);
+        const double d = OutsideCapsule(capsules_[i], values, scale_value, q);
         if (d < best) {
           best = d;
           nearest = static_cast<int>(i);
         }
       }
       if (best <= 0) {
-        *cover++ = T(0.0);
+        *residuals++ = T(0.0);
         continue;
       }
       const HandCapsule& c = capsules_[nearest];
-      const T* a = xy[c.from];
-      const T* b = xy[c.to];
+      const T* a = keypoint(c.from);
+      const T* b = keypoint(c.to);
       const T dx = b[0] - a[0], dy = b[1] - a[1];
       const T ex = T(q[0]) - a[0], ey = T(q[1]) - a[1];
       T t = (ex * dx + ey * dy) / (dx * dx + dy * dy + T(1e-9));
@@ -416,23 +445,8 @@ class SilhouetteResidual {
       if (t > T(1.0)) t = T(1.0);
       const T fx = ex - t * dx, fy = ey - t * dy;
       const T distance = sqrt(fx * fx + fy * fy + T(1e-9)) - scale[0] * c.radius;
-      *cover++ = Bounded(distance * inverse_sigma_, loss_scale_) * cover_weight_;
+      *residuals++ = Bounded(distance * inverse_sigma_, loss_scale_) * cover_weight_;
     }
-    return true;
-  }
-
-  static ceres::CostFunction* Create(SilhouetteResidual* functor) {
-    const int n = functor->num_residuals();
-    return new ceres::AutoDiffCostFunction<SilhouetteResidual,
-                                           ceres::DYNAMIC,
-                                           kDigitDofs,
-                                           kDigitDofs,
-                                           kDigitDofs,
-                                           kDigitDofs,
-                                           kDigitDofs,
-                                           4,
-                                           1,
-                                           2>(functor, n);
   }
 
  private:
@@ -449,13 +463,12 @@ class SilhouetteResidual {
     return Bounded(value * inverse_sigma_, loss_scale_);
   }
 
-  template <typename T>
   static double OutsideCapsule(const HandCapsule& c,
-                               const T (&xy)[kNumKeypoints][2],
+                               const double (&xy)[kNumKeypoints][2],
                                double scale,
                                const std::array<double, 2>& q) {
-    const double ax = ValueOf(xy[c.from][0]), ay = ValueOf(xy[c.from][1]);
-    const double dx = ValueOf(xy[c.to][0]) - ax, dy = ValueOf(xy[c.to][1]) - ay;
+    const double ax = xy[c.from][0], ay = xy[c.from][1];
+    const double dx = xy[c.to][0] - ax, dy = xy[c.to][1] - ay;
     const double ex = q[0] - ax, ey = q[1] - ay;
     const double t = std::clamp((ex * dx + ey * dy) / (dx * dx + dy * dy + 1e-9), 0.0, 1.0);
     return std::hypot(ex - t * dx, ey - t * dy) - scale * c.radius;
@@ -473,13 +486,195 @@ class SilhouetteResidual {
   double inverse_sigma_;
   double loss_scale_;
   std::vector<std::array<double, 2>> outline_;  // in the fitted (possibly mirrored) frame
-  int num_inside_ = 0;
-  int num_edges_ = 0;
-  int num_cover_ = 0;
   double inside_weight_ = 0;
   double edge_weight_ = 0;
   double cover_weight_ = 0;
 };
+
+// The samples (SilhouetteTerm::CapsuleSamples) of the capsules whose end points are the wrist
+// and one digit's keypoints, over that digit's angles; or of a capsule across two digits (the
+// strut over the knuckles), over both digits' angles. Each keypoint is posed once per block.
+class CapsuleResidual {
+ public:
+  CapsuleResidual(std::shared_ptr<const SilhouetteTerm> term,
+                  std::vector<int> capsules,
+                  std::vector<int> keypoints)
+      : term_(std::move(term)), capsules_(std::move(capsules)), keypoints_(std::move(keypoints)) {}
+
+  int num_residuals() const {
+    int n = 0;
+    for (const int c : capsules_) n += SilhouetteTerm::NumCapsuleResiduals(term_->capsules()[c]);
+    return n;
+  }
+
+  template <typename T>
+  bool operator()(
+      const T* digit, const T* cam_from_hand, const T* scale, const T* shift, T* residuals) const {
+    const T* digits[2] = {digit, digit};
+    return Samples(digits, cam_from_hand, scale, shift, residuals);
+  }
+
+  template <typename T>
+  bool operator()(const T* first_digit,
+                  const T* second_digit,
+                  const T* cam_from_hand,
+                  const T* scale,
+                  const T* shift,
+                  T* residuals) const {
+    const T* digits[2] = {first_digit, second_digit};
+    return Samples(digits, cam_from_hand, scale, shift, residuals);
+  }
+
+  // Adds the silhouette's capsule blocks: one per digit (its links and the strut from the wrist
+  // to its base), and one per capsule whose end points lie in two digits.
+  static std::vector<ceres::ResidualBlockId> Add(ceres::Problem* problem,
+                                                 const std::shared_ptr<const SilhouetteTerm>& term,
+                                                 const PoseBlocks& blocks) {
+    std::vector<ceres::ResidualBlockId> ids;
+    const std::vector<HandCapsule>& capsules = term->capsules();
+    std::vector<bool> added(capsules.size(), false);
+    for (int d = 0; d < kNumDigits; ++d) {
+      auto in_digit = [d](int k) { return k == 0 || FitKinematics::DigitOf(k) == d; };
+      std::vector<int> own;
+      std::vector<int> keypoints;
+      for (int c = 0; c < static_cast<int>(capsules.size()); ++c) {
+        if (!in_digit(capsules[c].from) || !in_digit(capsules[c].to)) continue;
+        own.push_back(c);
+        added[c] = true;
+        for (const int k : {capsules[c].from, capsules[c].to}) {
+          if (std::find(keypoints.begin(), keypoints.end(), k) == keypoints.end()) {
+            keypoints.push_back(k);
+          }
+        }
+      }
+      if (own.empty()) continue;
+      auto* functor = new CapsuleResidual(term, std::move(own), std::move(keypoints));
+      const int n = functor->num_residuals();
+      ids.push_back(problem->AddResidualBlock(
+          new ceres::AutoDiffCostFunction<CapsuleResidual, ceres::DYNAMIC, kDigitDofs, 4, 1, 2>(
+              functor, n),
+          nullptr,
+          blocks.digit(d),
+          blocks.cam_from_hand,
+          blocks.scale,
+          blocks.shift));
+    }
+    for (int c = 0; c < static_cast<int>(capsules.size()); ++c) {
+      if (added[c]) continue;
+      // Two digits (neither end is the wrist, or the digit blocks above would hold it): the
+      // first digit's keypoint reads the first block, the second's the second.
+      const int first = FitKinematics::DigitOf(capsules[c].from);
+      const int second = FitKinematics::DigitOf(capsules[c].to);
+      auto* functor = new CapsuleResidual(term, {c}, {capsules[c].from, capsules[c].to});
+      const int n = functor->num_residuals();
+      ids.push_back(problem->AddResidualBlock(new ceres::AutoDiffCostFunction<CapsuleResidual,
+                                                                              ceres::DYNAMIC,
+                                                                              kDigitDofs,
+                                                                              kDigitDofs,
+                                                                              4,
+                                                                              1,
+                                                                              2>(functor, n),
+                                              nullptr,
+                                              blocks.digit(first),
+                                              blocks.digit(second),
+                                              blocks.cam_from_hand,
+                                              blocks.scale,
+                                              blocks.shift));
+    }
+    return ids;
+  }
+
+ private:
+  // digits[0] poses the block's first keypoint's digit, digits[1] every other keypoint's (the
+  // same block in a one-digit block).
+  template <typename T>
+  bool Samples(const T* const (&digits)[2],
+               const T* cam_from_hand,
+               const T* scale,
+               const T* shift,
+               T* residuals) const {
+    T xy[kNumKeypoints][2];
+    for (size_t i = 0; i < keypoints_.size(); ++i) {
+      term_->Project(
+          digits[i == 0 ? 0 : 1], keypoints_[i], cam_from_hand, scale, shift, xy[keypoints_[i]]);
+    }
+    for (const int c : capsules_) {
+      const HandCapsule& capsule = term_->capsules()[c];
+      term_->CapsuleSamples(c, xy[capsule.from], xy[capsule.to], scale, residuals);
+      residuals += SilhouetteTerm::NumCapsuleResiduals(capsule);
+    }
+    return true;
+  }
+
+  std::shared_ptr<const SilhouetteTerm> term_;
+  std::vector<int> capsules_;   // indices into term_->capsules()
+  std::vector<int> keypoints_;  // their end points, each once
+};
+
+// The outline's points (SilhouetteTerm::Cover), over every parameter.
+class CoverResidual {
+ public:
+  explicit CoverResidual(std::shared_ptr<const SilhouetteTerm> term) : term_(std::move(term)) {}
+
+  template <typename T>
+  bool operator()(const T* thumb,
+                  const T* index,
+                  const T* middle,
+                  const T* ring,
+                  const T* little,
+                  const T* cam_from_hand,
+                  const T* scale,
+                  const T* shift,
+                  T* residuals) const {
+    const T* digits[kNumDigits] = {thumb, index, middle, ring, little};
+    term_->Cover(digits, cam_from_hand, scale, shift, residuals);
+    return true;
+  }
+
+  static ceres::ResidualBlockId Add(ceres::Problem* problem,
+                                    const std::shared_ptr<const SilhouetteTerm>& term,
+                                    const PoseBlocks& blocks) {
+    return problem->AddResidualBlock(
+        new ceres::AutoDiffCostFunction<CoverResidual,
+                                        ceres::DYNAMIC,
+                                        kDigitDofs,
+                                        kDigitDofs,
+                                        kDigitDofs,
+                                        kDigitDofs,
+                                        kDigitDofs,
+                                        4,
+                                        1,
+                                        2>(new CoverResidual(term), term->num_outline()),
+        nullptr,
+        blocks.digit(0),
+        blocks.digit(1),
+        blocks.digit(2),
+        blocks.digit(3),
+        blocks.digit(4),
+        blocks.cam_from_hand,
+        blocks.scale,
+        blocks.shift);
+  }
+
+ private:
+  std::shared_ptr<const SilhouetteTerm> term_;
+};
+
+// The silhouette term's blocks: one per capsule, and the outline's (when it has points).
+std::vector<ceres::ResidualBlockId> AddSilhouetteBlocks(
+    ceres::Problem* problem,
+    const FitKinematics& kinematics,
+    const HandRig& rig,
+    std::shared_ptr<const SilhouetteFields> fields,
+    bool mirrored,
+    const PoseFitOptions& options,
+    const PoseBlocks& blocks) {
+  const auto term = std::make_shared<const SilhouetteTerm>(
+      &kinematics, HandCapsules(rig), rig.look_at(), std::move(fields), mirrored, options);
+  std::vector<ceres::ResidualBlockId> ids = CapsuleResidual::Add(problem, term, blocks);
+  if (term->num_outline() > 0) ids.push_back(CoverResidual::Add(problem, term, blocks));
+  return ids;
+}
 
 Status InvalidArgument(const std::string& message) {
   return Status(StatusCode::kInvalidArgument, "pose fit: " + message);
@@ -629,48 +824,30 @@ double SilhouetteTermCost(const HandRig& rig,
                           const std::array<double, 2>& shift,
                           std::vector<double>* gradient) {
   const FitKinematics kinematics(rig);
-  const std::unique_ptr<ceres::CostFunction> cost(SilhouetteResidual::Create(
-      new SilhouetteResidual(&kinematics,
-                             HandCapsules(rig),
-                             rig.look_at(),
-                             std::make_shared<const SilhouetteFields>(fields),
-                             mirrored,
-                             options)));
-  const int n = cost->num_residuals();
-  std::vector<double> residuals(n);
-  const double* parameters[] = {joints.data(),
-                                joints.data() + kDigitDofs,
-                                joints.data() + 2 * kDigitDofs,
-                                joints.data() + 3 * kDigitDofs,
-                                joints.data() + 4 * kDigitDofs,
-                                cam_from_hand.data(),
-                                &scale,
-                                shift.data()};
-  constexpr int kSizes[] = {kDigitDofs, kDigitDofs, kDigitDofs, kDigitDofs, kDigitDofs, 4, 1, 2};
-  std::vector<std::vector<double>> jacobians;
-  std::vector<double*> jacobian_ptrs;
-  if (gradient != nullptr) {
-    for (const int size : kSizes) {
-      jacobians.emplace_back(static_cast<size_t>(n) * size);
-      jacobian_ptrs.push_back(jacobians.back().data());
-    }
-  }
-  THROW_CHECK(cost->Evaluate(
-      parameters, residuals.data(), gradient != nullptr ? jacobian_ptrs.data() : nullptr));
-  double sum = 0;
-  for (const double r : residuals) sum += r * r;
-  if (gradient != nullptr) {
-    gradient->clear();
-    for (int b = 0; b < 8; ++b) {
-      for (int j = 0; j < kSizes[b]; ++j) {
-        double g = 0;
-        for (int i = 0; i < n; ++i)
-          g += residuals[i] * jacobians[b][static_cast<size_t>(i) * kSizes[b] + j];
-        gradient->push_back(g);
-      }
-    }
-  }
-  return sum / 2;
+  JointVector j = joints;
+  Quaternion q = cam_from_hand;
+  double s = scale;
+  std::array<double, 2> t = shift;
+  ceres::Problem problem;
+  const PoseBlocks pose{j.data(), q.data(), &s, t.data()};
+  pose.AddTo(&problem);
+  const std::vector<ceres::ResidualBlockId> blocks =
+      AddSilhouetteBlocks(&problem,
+                          kinematics,
+                          rig,
+                          std::make_shared<const SilhouetteFields>(fields),
+                          mirrored,
+                          options,
+                          pose);
+  ceres::Problem::EvaluateOptions evaluate;
+  evaluate.residual_blocks = blocks;
+  for (int d = 0; d < kNumDigits; ++d) evaluate.parameter_blocks.push_back(pose.digit(d));
+  evaluate.parameter_blocks.push_back(q.data());
+  evaluate.parameter_blocks.push_back(&s);
+  evaluate.parameter_blocks.push_back(t.data());
+  double cost = 0;
+  THROW_CHECK(problem.Evaluate(evaluate, &cost, nullptr, gradient, nullptr));
+  return cost;
 }
 
 double DepthTermCost(const HandRig& rig,
@@ -748,22 +925,13 @@ Result<PoseFit> FitPose(const HandRig& rig,
   const bool silhouette = evidence.silhouette != nullptr &&
                           options.inside_weight + options.edge_weight + options.cover_weight > 0;
   if (silhouette) {
-    silhouette_blocks.push_back(problem.AddResidualBlock(
-        SilhouetteResidual::Create(new SilhouetteResidual(&kinematics,
-                                                          HandCapsules(rig),
-                                                          rig.look_at(),
-                                                          evidence.silhouette,
-                                                          evidence.silhouette_mirrored,
-                                                          options)),
-        nullptr,
-        blocks.digit(0),
-        blocks.digit(1),
-        blocks.digit(2),
-        blocks.digit(3),
-        blocks.digit(4),
-        blocks.cam_from_hand,
-        blocks.scale,
-        blocks.shift));
+    silhouette_blocks = AddSilhouetteBlocks(&problem,
+                                            kinematics,
+                                            rig,
+                                            evidence.silhouette,
+                                            evidence.silhouette_mirrored,
+                                            options,
+                                            blocks);
   }
   const std::vector<ceres::ResidualBlockId> depth_blocks = AddDepthBlocks(
       &problem, kinematics, rig, evidence, options, joints.data(), cam_from_hand.data());
