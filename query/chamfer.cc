@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 
 #include "base/status.h"
@@ -12,28 +13,46 @@ namespace handdb {
 namespace {
 
 #ifdef HANDDB_HAVE_AVX2_PATH
-// Eight points per step: unpack int16 x/y to int32, squared distance, running minimum. Returns
-// the minimum over the first n - n % 8 points (INT32_MAX if none); *done receives that count.
-__attribute__((target("avx2"))) int32_t NearestSquaredAvx2(PointQ q,
-                                                           const PointQ* pts,
-                                                           size_t n,
-                                                           size_t* done) {
+// Eight points per step, each point's (x, y) an int16 pair: their differences from q fit int16
+// (|coordinates| <= kSmallCoordLimit), so one multiply-add of the pairs gives dx^2 + dy^2 in
+// int32 (below 2^31), then a running minimum; the last n % 8 points are read with a masked load.
+// Returns the minimum over all n points (n >= 1).
+__attribute__((target("avx2"))) int32_t NearestSquaredAvx2(PointQ q, const PointQ* pts, size_t n) {
   static_assert(sizeof(PointQ) == 4);
-  const __m256i qx = _mm256_set1_epi32(q.x);
-  const __m256i qy = _mm256_set1_epi32(q.y);
-  __m256i best = _mm256_set1_epi32(std::numeric_limits<int32_t>::max());
+  int32_t q_pair = 0;
+  std::memcpy(&q_pair, &q, sizeof(q_pair));
+  const __m256i qv = _mm256_set1_epi32(q_pair);
+  const __m256i none = _mm256_set1_epi32(std::numeric_limits<int32_t>::max());
+  __m256i best0 = none;
+  __m256i best1 = none;
   size_t i = 0;
-  for (; i + 8 <= n; i += 8) {
-    const __m256i v = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(pts + i));
-    const __m256i dx = _mm256_sub_epi32(_mm256_srai_epi32(_mm256_slli_epi32(v, 16), 16), qx);
-    const __m256i dy = _mm256_sub_epi32(_mm256_srai_epi32(v, 16), qy);
-    const __m256i d2 = _mm256_add_epi32(_mm256_mullo_epi32(dx, dx), _mm256_mullo_epi32(dy, dy));
-    best = _mm256_min_epi32(best, d2);
+  for (; i + 16 <= n; i += 16) {
+    const __m256i d0 =
+        _mm256_sub_epi16(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(pts + i)), qv);
+    const __m256i d1 =
+        _mm256_sub_epi16(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(pts + i + 8)), qv);
+    best0 = _mm256_min_epi32(best0, _mm256_madd_epi16(d0, d0));
+    best1 = _mm256_min_epi32(best1, _mm256_madd_epi16(d1, d1));
   }
-  alignas(32) int32_t lanes[8];
-  _mm256_store_si256(reinterpret_cast<__m256i*>(lanes), best);
-  *done = i;
-  return *std::min_element(lanes, lanes + 8);
+  if (i + 8 <= n) {
+    const __m256i d =
+        _mm256_sub_epi16(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(pts + i)), qv);
+    best0 = _mm256_min_epi32(best0, _mm256_madd_epi16(d, d));
+    i += 8;
+  }
+  if (i < n) {
+    // Lanes past the end are neither read nor counted.
+    const __m256i lanes = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    const __m256i mask = _mm256_cmpgt_epi32(_mm256_set1_epi32(static_cast<int>(n - i)), lanes);
+    const __m256i v = _mm256_maskload_epi32(reinterpret_cast<const int*>(pts + i), mask);
+    const __m256i d = _mm256_sub_epi16(v, qv);
+    best1 = _mm256_min_epi32(best1, _mm256_blendv_epi8(none, _mm256_madd_epi16(d, d), mask));
+  }
+  const __m256i best = _mm256_min_epi32(best0, best1);
+  __m128i m = _mm_min_epi32(_mm256_castsi256_si128(best), _mm256_extracti128_si256(best, 1));
+  m = _mm_min_epi32(m, _mm_shuffle_epi32(m, _MM_SHUFFLE(1, 0, 3, 2)));
+  m = _mm_min_epi32(m, _mm_shuffle_epi32(m, _MM_SHUFFLE(2, 3, 0, 1)));
+  return _mm_cvtsi128_si32(m);
 }
 
 #endif
@@ -94,12 +113,11 @@ ChamferTerms Chamfer(std::span<const PointQ> query,
 
 int32_t NearestSquaredSmall(PointQ q, std::span<const PointQ> points) {
   THROW_CHECK(!points.empty());
-  int32_t best = std::numeric_limits<int32_t>::max();
-  size_t i = 0;
 #ifdef HANDDB_HAVE_AVX2_PATH
-  if (HaveAvx2()) best = NearestSquaredAvx2(q, points.data(), points.size(), &i);
+  if (HaveAvx2()) return NearestSquaredAvx2(q, points.data(), points.size());
 #endif
-  for (; i < points.size(); ++i) {
+  int32_t best = std::numeric_limits<int32_t>::max();
+  for (size_t i = 0; i < points.size(); ++i) {
     const int32_t dx = static_cast<int32_t>(points[i].x) - q.x;
     const int32_t dy = static_cast<int32_t>(points[i].y) - q.y;
     best = std::min(best, dx * dx + dy * dy);

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -82,7 +83,7 @@ TEST(RotateAndQuantise, RoundsAndClamps) {
 
 TEST(NearestSquaredSmall, MatchesTheKdTreeForEverySizeAndTheCoordinateLimit) {
   std::mt19937 rng(11);
-  for (size_t n : {1, 7, 8, 9, 16, 17, 555, 1000}) {
+  for (size_t n : {1, 7, 8, 9, 15, 16, 17, 23, 24, 25, 31, 555, 1000}) {
     std::uniform_int_distribution<int> u(-kSmallCoordLimit, kSmallCoordLimit);
     std::vector<PointQ> pts(n);
     for (auto& p : pts) p = {static_cast<int16_t>(u(rng)), static_cast<int16_t>(u(rng))};
@@ -95,6 +96,24 @@ TEST(NearestSquaredSmall, MatchesTheKdTreeForEverySizeAndTheCoordinateLimit) {
         q = {static_cast<int16_t>(-kSmallCoordLimit), static_cast<int16_t>(-kSmallCoordLimit)};
       ASSERT_EQ(NearestSquaredSmall(q, pts), tree.NearestSquared(q)) << "n " << n << " i " << i;
     }
+  }
+}
+
+TEST(NearestSquaredSmall, ReadsNoPointPastTheSpan) {
+  // The point just past each span is the query itself: counting it would give 0.
+  std::vector<PointQ> pts(64);
+  for (size_t i = 0; i < pts.size(); ++i) {
+    pts[i] = {static_cast<int16_t>(100 * i + 50), static_cast<int16_t>(-30 * i)};
+  }
+  for (size_t n = 1; n < pts.size(); ++n) {
+    const PointQ q = pts[n];
+    int32_t expected = std::numeric_limits<int32_t>::max();
+    for (size_t i = 0; i < n; ++i) {
+      const int32_t dx = pts[i].x - q.x, dy = pts[i].y - q.y;
+      expected = std::min(expected, dx * dx + dy * dy);
+    }
+    ASSERT_GT(expected, 0);
+    EXPECT_EQ(NearestSquaredSmall(q, std::span<const PointQ>(pts.data(), n)), expected) << n;
   }
 }
 
