@@ -1,6 +1,7 @@
 #include "query/search_context.h"
 
 #include <algorithm>
+#include <bit>
 #include <utility>
 
 #ifdef __SSE2__
@@ -71,15 +72,22 @@ void SearchContext::PrepareSlotCells(size_t s) {
   point_cells_[s].resize(pts.size());
   // What the scans' per-point bounds read: the distinct cells and each point's gaps to the
   // neighbouring cells and its own (FieldGaps).
-  std::vector<uint16_t>& distinct = distinct_cells_[s];
-  distinct.clear();
+  // The distinct cells in increasing order, from a bitmap of the grid's cells (no sort).
+  constexpr size_t kWords = (CoarseGrid::kCells + 63) / 64;
+  uint64_t seen[kWords] = {};
   for (size_t i = 0; i < pts.size(); ++i) {
     const int c = CoarseGrid::CellOf(pts[i]);
     point_cells_[s][i] = static_cast<int16_t>(c);
-    if (c >= 0) distinct.push_back(static_cast<uint16_t>(c));
+    if (c >= 0) seen[c >> 6] |= uint64_t{1} << (c & 63);
   }
-  std::sort(distinct.begin(), distinct.end());
-  distinct.erase(std::unique(distinct.begin(), distinct.end()), distinct.end());
+  std::vector<uint16_t>& distinct = distinct_cells_[s];
+  distinct.clear();
+  for (size_t w = 0; w < kWords; ++w) {
+    for (uint64_t bits = seen[w]; bits != 0; bits &= bits - 1) {
+      distinct.push_back(
+          static_cast<uint16_t>(64 * w + static_cast<size_t>(std::countr_zero(bits))));
+    }
+  }
   point_gaps_[s].resize(8 * pts.size());
   point_own_gaps_[s].resize(pts.size());
   for (size_t i = 0; i < pts.size(); ++i) {
