@@ -203,10 +203,12 @@ bool FlipsY(GridFlip flip) { return flip == GridFlip::kY || flip == GridFlip::kX
 
 }  // namespace
 
-float DistanceGrid::LowerBound(PointQ p, GridFlip flip) const {
+float DistanceGrid::LowerBound(PointQ p, GridFlip flip, bool turned) const {
   // 32-bit coordinates: -(-32768) is representable.
-  const int x = FlipsX(flip) ? -static_cast<int>(p.x) : p.x;
-  const int y = FlipsY(flip) ? -static_cast<int>(p.y) : p.y;
+  const int fx = FlipsX(flip) ? -static_cast<int>(p.x) : p.x;
+  const int fy = FlipsY(flip) ? -static_cast<int>(p.y) : p.y;
+  const int x = turned ? -fy : fx;
+  const int y = turned ? fx : fy;
   const int ax = std::abs(x);
   const int ay = std::abs(y);
   if (ax > fast_limit_ || ay > fast_limit_) {
@@ -224,16 +226,18 @@ float DistanceGrid::LowerBound(PointQ p, GridFlip flip) const {
   return std::max(0.0f, d - off);
 }
 
-double DistanceGrid::SumLowerBounds(std::span<const PointQ> points, GridFlip flip) const {
+double DistanceGrid::SumLowerBounds(std::span<const PointQ> points,
+                                    GridFlip flip,
+                                    bool turned) const {
   double sum = 0;
-  for (const PointQ& p : points) sum += LowerBound(p, flip);
+  for (const PointQ& p : points) sum += LowerBound(p, flip, turned);
   return sum;
 }
 
 namespace {
 
 #ifdef HANDDB_HAVE_AVX2_PATH
-template <bool kNegX, bool kNegY>
+template <bool kNegX, bool kNegY, bool kTurn>
 __attribute__((target("avx2"), always_inline)) inline __m256 Step(const PointQ* p,
                                                                   __m256i vbias,
                                                                   __m256i vhalf,
@@ -249,6 +253,12 @@ __attribute__((target("avx2"), always_inline)) inline __m256 Step(const PointQ* 
   // The point reflected in an axis (32-bit lanes, exact).
   if constexpr (kNegX) x = _mm256_sub_epi32(_mm256_setzero_si256(), x);
   if constexpr (kNegY) y = _mm256_sub_epi32(_mm256_setzero_si256(), y);
+  // Then turned back: T^-1(x, y) = (-y, x).
+  if constexpr (kTurn) {
+    const __m256i turned_x = _mm256_sub_epi32(_mm256_setzero_si256(), y);
+    y = x;
+    x = turned_x;
+  }
   const __m256i ix = _mm256_sra_epi32(_mm256_add_epi32(x, vbias), vshift);
   const __m256i iy = _mm256_sra_epi32(_mm256_add_epi32(y, vbias), vshift);
   const __m256i idx = _mm256_add_epi32(_mm256_mullo_epi32(iy, vsize), ix);
@@ -266,7 +276,7 @@ __attribute__((target("avx2"), always_inline)) inline __m256 Step(const PointQ* 
 
 // Eight points per step: unpack int16 x/y, compute node and offset-table indices, two gathers.
 // Returns the sum over the first n - n % 8 points; *done receives that count.
-template <bool kNegX, bool kNegY>
+template <bool kNegX, bool kNegY, bool kTurn>
 __attribute__((target("avx2"))) double SumLowerBoundsAvx2(const PointQ* pts,
                                                           size_t n,
                                                           const uint16_t* dt,
@@ -289,13 +299,16 @@ __attribute__((target("avx2"))) double SumLowerBoundsAvx2(const PointQ* pts,
   size_t i = 0;
   for (; i + 16 <= n; i += 16) {
     acc0 = _mm256_add_ps(
-        acc0, Step<kNegX, kNegY>(pts + i, vbias, vhalf, vmask, vsize, vshift, zero, dt, table));
-    acc1 = _mm256_add_ps(
-        acc1, Step<kNegX, kNegY>(pts + i + 8, vbias, vhalf, vmask, vsize, vshift, zero, dt, table));
+        acc0,
+        Step<kNegX, kNegY, kTurn>(pts + i, vbias, vhalf, vmask, vsize, vshift, zero, dt, table));
+    acc1 = _mm256_add_ps(acc1,
+                         Step<kNegX, kNegY, kTurn>(
+                             pts + i + 8, vbias, vhalf, vmask, vsize, vshift, zero, dt, table));
   }
   for (; i + 8 <= n; i += 8)
     acc0 = _mm256_add_ps(
-        acc0, Step<kNegX, kNegY>(pts + i, vbias, vhalf, vmask, vsize, vshift, zero, dt, table));
+        acc0,
+        Step<kNegX, kNegY, kTurn>(pts + i, vbias, vhalf, vmask, vsize, vshift, zero, dt, table));
   alignas(32) float lanes[16];
   _mm256_store_ps(lanes, acc0);
   _mm256_store_ps(lanes + 8, acc1);
@@ -309,7 +322,7 @@ __attribute__((target("avx2"))) double SumLowerBoundsAvx2(const PointQ* pts,
 
 }  // namespace
 
-template <bool kNegX, bool kNegY>
+template <bool kNegX, bool kNegY, bool kTurn>
 double DistanceGrid::SumLowerBoundsFastImpl(std::span<const PointQ> points) const {
   const uint16_t* dt = dt_.data();
   const float* table = offset_table_.data();
@@ -325,13 +338,15 @@ double DistanceGrid::SumLowerBoundsFastImpl(std::span<const PointQ> points) cons
   double vector_sum = 0;
 #ifdef HANDDB_HAVE_AVX2_PATH
   if (HaveAvx2()) {
-    vector_sum =
-        SumLowerBoundsAvx2<kNegX, kNegY>(pts, n, dt, table, mask, half, bias, shift, size, &i);
+    vector_sum = SumLowerBoundsAvx2<kNegX, kNegY, kTurn>(
+        pts, n, dt, table, mask, half, bias, shift, size, &i);
   }
 #endif
   auto one = [&](const PointQ& p) {
-    const int x = kNegX ? -static_cast<int>(p.x) : p.x;
-    const int y = kNegY ? -static_cast<int>(p.y) : p.y;
+    const int fx = kNegX ? -static_cast<int>(p.x) : p.x;
+    const int fy = kNegY ? -static_cast<int>(p.y) : p.y;
+    const int x = kTurn ? -fy : fx;
+    const int y = kTurn ? fx : fy;
     const float off = table[(((y + half) & mask) << shift) | ((x + half) & mask)];
     const float d = static_cast<float>(dt[((y + bias) >> shift) * size + ((x + bias) >> shift)]) *
                     (1.0f / kUnitsPerPx);
@@ -348,16 +363,22 @@ double DistanceGrid::SumLowerBoundsFastImpl(std::span<const PointQ> points) cons
          (static_cast<double>(acc[2]) + acc[3]);
 }
 
-double DistanceGrid::SumLowerBoundsFast(std::span<const PointQ> points, GridFlip flip) const {
+double DistanceGrid::SumLowerBoundsFast(std::span<const PointQ> points,
+                                        GridFlip flip,
+                                        bool turned) const {
   switch (flip) {
     case GridFlip::kNone:
-      return SumLowerBoundsFastImpl<false, false>(points);
+      return turned ? SumLowerBoundsFastImpl<false, false, true>(points)
+                    : SumLowerBoundsFastImpl<false, false, false>(points);
     case GridFlip::kX:
-      return SumLowerBoundsFastImpl<true, false>(points);
+      return turned ? SumLowerBoundsFastImpl<true, false, true>(points)
+                    : SumLowerBoundsFastImpl<true, false, false>(points);
     case GridFlip::kY:
-      return SumLowerBoundsFastImpl<false, true>(points);
+      return turned ? SumLowerBoundsFastImpl<false, true, true>(points)
+                    : SumLowerBoundsFastImpl<false, true, false>(points);
     case GridFlip::kXY:
-      return SumLowerBoundsFastImpl<true, true>(points);
+      return turned ? SumLowerBoundsFastImpl<true, true, true>(points)
+                    : SumLowerBoundsFastImpl<true, true, false>(points);
   }
   return 0;
 }

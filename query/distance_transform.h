@@ -31,7 +31,9 @@ namespace handdb {
 // How a grid of the set Q is read: at p (kNone), or at p reflected in an axis or both. The grid
 // of Q read at F(p) bounds d(p, F(Q)) (F is an isometry and its own inverse): rolls r and
 // r + R/2 are Q and -Q (kXY), and the mirrored query's rolls are Q reflected in x or y (kX, kY),
-// so one grid serves up to four (hand, roll) pairs (docs/query.md).
+// so one grid serves up to four (hand, roll) pairs (docs/query.md). Read turned as well (at
+// T^-1(F(p)), T(x, y) = (y, -x) the quarter turn), it bounds d(p, F(T(Q))): roll r + R/4 is T of
+// roll r, so with R a multiple of 4 one grid serves eight.
 enum class GridFlip { kNone, kX, kY, kXY };
 
 struct DistanceGridOptions {
@@ -62,15 +64,19 @@ class DistanceGrid {
   // Node nearest to p (may be outside [0, size) for points off the grid).
   int NodeIndex(int coord) const { return (coord + half_extent_u_ + cell_u_ / 2) >> shift_; }
   // The lower bound of d(p, Q) in px described above; with a flip F, of d(F(p), Q), which is
-  // d(p, F(Q)).
-  float LowerBound(PointQ p, GridFlip flip = GridFlip::kNone) const;
+  // d(p, F(Q)); `turned`, of d(T^-1(F(p)), Q) = d(p, F(T(Q))) with T^-1(x, y) = (-y, x).
+  float LowerBound(PointQ p, GridFlip flip = GridFlip::kNone, bool turned = false) const;
   // Sum of LowerBound over points (float accumulation; see MeanLowerBoundMargin()).
-  double SumLowerBounds(std::span<const PointQ> points, GridFlip flip = GridFlip::kNone) const;
+  double SumLowerBounds(std::span<const PointQ> points,
+                        GridFlip flip = GridFlip::kNone,
+                        bool turned = false) const;
   // True if every point with |x|, |y| <= max_abs (PointQ units) is on the grid's fast path
-  // (for p and for any flip of p alike).
+  // (for p and for any flip or turn of p alike).
   bool Covers(int max_abs) const { return max_abs <= fast_limit_; }
   // SumLowerBounds for points known to satisfy Covers(); no bounds checks.
-  double SumLowerBoundsFast(std::span<const PointQ> points, GridFlip flip = GridFlip::kNone) const;
+  double SumLowerBoundsFast(std::span<const PointQ> points,
+                            GridFlip flip = GridFlip::kNone,
+                            bool turned = false) const;
 
   int size() const { return size_; }
   // The grid step of the last Build (px): options' cell_px, doubled while a far point would make
@@ -83,7 +89,7 @@ class DistanceGrid {
   static double MeanLowerBoundMargin(size_t n, double mean);
 
  private:
-  template <bool kNegX, bool kNegY>
+  template <bool kNegX, bool kNegY, bool kTurn>
   double SumLowerBoundsFastImpl(std::span<const PointQ> points) const;
 
   DistanceGridOptions options_;

@@ -97,8 +97,9 @@ TEST_P(LowerBound, FastSumEqualsPerPointSum) {
 }
 
 // Read at F(p), the grid of Q bounds d(p, F(Q)) for every flip F: rolls r and r + R/2 share one
-// grid (-Q, kXY), and so do the mirrored query's rolls (Q reflected in x or y).
-TEST_P(LowerBound, FlippedReadsBoundTheReflectedSet) {
+// grid (-Q, kXY), and so do the mirrored query's rolls (Q reflected in x or y). Read turned, at
+// T^-1(F(p)), it bounds d(p, F(T(Q))) with T(x, y) = (y, -x): roll r + R/4 shares it too.
+TEST_P(LowerBound, FlippedAndTurnedReadsBoundTheMappedSet) {
   const auto set = RandomPoints(600, 150 * 16, 6);
   DistanceGrid grid(DistanceGridOptions{GetParam(), 170});
   grid.Build(set);
@@ -107,35 +108,42 @@ TEST_P(LowerBound, FlippedReadsBoundTheReflectedSet) {
   ASSERT_TRUE(grid.Covers(160 * 16));
   double plain = 0;
   for (const auto& p : near) plain += grid.LowerBound(p);
-  for (const GridFlip flip : {GridFlip::kX, GridFlip::kY, GridFlip::kXY}) {
-    const int sx = flip == GridFlip::kY ? 1 : -1;
-    const int sy = flip == GridFlip::kX ? 1 : -1;
-    std::vector<PointQ> reflected;
-    for (const PointQ& q : set) {
-      reflected.push_back({static_cast<int16_t>(sx * q.x), static_cast<int16_t>(sy * q.y)});
-    }
-    double sum_gap = 0;
-    for (const auto* ps : {&probes, &near}) {
-      for (const PointQ& p : *ps) {
-        const double exact = ExactDistancePx(reflected, p);
-        const double lb = grid.LowerBound(p, flip);
-        ASSERT_LE(lb, exact + 1e-5) << p.x << "," << p.y;
-        if (ps == &near) sum_gap += exact - lb;
+  for (const bool turned : {false, true}) {
+    for (const GridFlip flip : {GridFlip::kNone, GridFlip::kX, GridFlip::kY, GridFlip::kXY}) {
+      if (flip == GridFlip::kNone && !turned) continue;
+      SCOPED_TRACE(::testing::Message()
+                   << "flip " << static_cast<int>(flip) << " turned " << turned);
+      const int sx = flip == GridFlip::kX || flip == GridFlip::kXY ? -1 : 1;
+      const int sy = flip == GridFlip::kY || flip == GridFlip::kXY ? -1 : 1;
+      std::vector<PointQ> mapped;
+      for (const PointQ& q : set) {
+        const int tx = turned ? q.y : q.x;
+        const int ty = turned ? -q.x : q.y;
+        mapped.push_back({static_cast<int16_t>(sx * tx), static_cast<int16_t>(sy * ty)});
       }
+      double sum_gap = 0;
+      for (const auto* ps : {&probes, &near}) {
+        for (const PointQ& p : *ps) {
+          const double exact = ExactDistancePx(mapped, p);
+          const double lb = grid.LowerBound(p, flip, turned);
+          ASSERT_LE(lb, exact + 1e-5) << p.x << "," << p.y;
+          if (ps == &near) sum_gap += exact - lb;
+        }
+      }
+      EXPECT_LT(sum_gap / near.size(), 1.4143 * GetParam());
+      // The fast and per-point sums agree for these reads too, and differ from plain reads.
+      double per_point = 0;
+      for (const auto& p : near) per_point += grid.LowerBound(p, flip, turned);
+      const double fast = grid.SumLowerBoundsFast(near, flip, turned);
+      const double mean = fast / near.size();
+      EXPECT_NEAR(
+          mean, per_point / near.size(), DistanceGrid::MeanLowerBoundMargin(near.size(), mean));
+      EXPECT_EQ(grid.SumLowerBounds(near, flip, turned), per_point);
+      EXPECT_NE(per_point, plain);
+      // The most negative coordinate maps without overflow (off the grid: the box fallback).
+      const PointQ corner{-32768, -32768};
+      EXPECT_EQ(grid.LowerBound(corner, flip, turned), grid.LowerBound(corner));
     }
-    EXPECT_LT(sum_gap / near.size(), 1.4143 * GetParam());
-    // The fast and per-point sums agree for flipped reads too, and differ from plain reads.
-    double per_point = 0;
-    for (const auto& p : near) per_point += grid.LowerBound(p, flip);
-    const double fast = grid.SumLowerBoundsFast(near, flip);
-    const double mean = fast / near.size();
-    EXPECT_NEAR(
-        mean, per_point / near.size(), DistanceGrid::MeanLowerBoundMargin(near.size(), mean));
-    EXPECT_EQ(grid.SumLowerBounds(near, flip), per_point);
-    EXPECT_NE(per_point, plain);
-    // The most negative coordinate flips without overflow (off the grid: the box fallback).
-    const PointQ corner{-32768, -32768};
-    EXPECT_EQ(grid.LowerBound(corner, flip), grid.LowerBound(corner));
   }
 }
 

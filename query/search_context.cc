@@ -128,6 +128,15 @@ double SearchContext::QuarterTurnGap(size_t base, size_t member) const {
   });
 }
 
+double SearchContext::MemberGap(size_t base, const GridMember& m) const {
+  if (!m.turned) return FlipGap(base, m.slot, m.flip);
+  const int64_t sx = m.flip == GridFlip::kX || m.flip == GridFlip::kXY ? -1 : 1;
+  const int64_t sy = m.flip == GridFlip::kY || m.flip == GridFlip::kXY ? -1 : 1;
+  return MappedGap(base, m.slot, [sx, sy](PointQ p) {
+    return std::pair<int64_t, int64_t>{sx * p.y, -sy * static_cast<int64_t>(p.x)};
+  });
+}
+
 template <typename Map>
 double SearchContext::MappedGap(size_t base, size_t member, Map map) const {
   const std::vector<PointQ>& a = rolled_[base];

@@ -112,9 +112,12 @@ struct Slot {
 // A slot that reads another slot's distance grid: the grid of the base slot's rolled query Q_b,
 // read at flip(y), bounds d(y, flip(Q_b)), and the member's own rolled query is flip(Q_b) up to
 // `gap_px` per point (rounding ties; 0 in practice), so d(y, Q_m) >= d(flip(y), Q_b) - gap.
+// A turned member is flip(T(Q_b)) up to its gap, T(x, y) = (y, -x), and reads the grid at
+// T^-1(flip(y)) (DistanceGrid::LowerBound).
 struct GridMember {
   uint32_t slot = 0;
   GridFlip flip = GridFlip::kNone;
+  bool turned = false;
   double gap_px = 0;  // set once the slots are prepared
 };
 
@@ -168,6 +171,10 @@ class SearchContext {
   // The same for the quarter turn T(x, y) = (y, -x): roll r + R/4 is roll r turned by T up to
   // the two quantisations.
   double QuarterTurnGap(size_t base, size_t member) const;
+
+  // The same for a grid member: how far its rolled query is from flip(base's), or from
+  // flip(T(base's)) when turned.
+  double MemberGap(size_t base, const GridMember& m) const;
 
   // max_i |rolled(member)[i] - map(rolled(base)[i])| in px, rounded up.
   template <typename Map>

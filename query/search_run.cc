@@ -22,7 +22,8 @@ std::vector<Slot> MakeSlots(Hand hand, uint32_t rolls) {
 // roll r turned by 180 degrees (kXY). The left hand's roll r' is the right hand's roll R - r'
 // mirrored in x: rot(-a) M X = M rot(a) X with M = diag(-1, 1), and a = -angle(R - r') (kX), and
 // its roll R/2 - r is then the right roll r + R/2 mirrored, i.e. roll r reflected in y (kY). So a
-// both-hand search builds R/2 grids for its 2R slots (docs/query.md).
+// both-hand search needs R/2 grids for its 2R slots (docs/query.md); MakeFineGridGroups halves
+// that.
 std::vector<std::vector<GridMember>> MakeGridGroups(size_t num_slots, uint32_t rolls) {
   const bool halves = rolls >= 2 && rolls % 2 == 0;
   const bool both = num_slots == 2 * static_cast<size_t>(rolls);
@@ -36,6 +37,20 @@ std::vector<std::vector<GridMember>> MakeGridGroups(size_t num_slots, uint32_t r
     }
     groups.push_back(std::move(g));
   }
+  return groups;
+}
+
+std::vector<std::vector<GridMember>> MakeFineGridGroups(size_t num_slots, uint32_t rolls) {
+  std::vector<std::vector<GridMember>> groups = MakeGridGroups(num_slots, rolls);
+  if (rolls % 4 != 0) return groups;
+  const size_t quarter = rolls / 4;
+  for (size_t g = 0; g < quarter; ++g) {
+    for (GridMember m : groups[g + quarter]) {
+      m.turned = true;
+      groups[g].push_back(m);
+    }
+  }
+  groups.resize(quarter);
   return groups;
 }
 
@@ -133,7 +148,7 @@ void SearchRun::BoundCandidates(std::vector<uint32_t> pairs) {
   // Every slot of a group holding a candidate: FineBounds builds the grid from the group's base
   // and measures each member's gap to it.
   std::vector<size_t> prepare;
-  for (const std::vector<GridMember>& group : MakeGridGroups(num_slots(), num_rolls_)) {
+  for (const std::vector<GridMember>& group : MakeFineGridGroups(num_slots(), num_rolls_)) {
     if (GroupEntries(group) == 0) continue;
     for (const GridMember& m : group) prepare.push_back(m.slot);
   }
@@ -352,7 +367,7 @@ std::vector<std::pair<Bound, size_t>> SearchRun::GridOrder(
     if (GroupEntries(groups[g]) == 0) continue;
     Bound best = kNoBound;
     for (GridMember& m : groups[g]) {
-      m.gap_px = ctx_.FlipGap(groups[g][0].slot, m.slot, m.flip);
+      m.gap_px = ctx_.MemberGap(groups[g][0].slot, m);
       if (SlotEntries(m.slot) == 0) continue;
       for (size_t e = slot_begin_[m.slot]; e < slot_begin_[m.slot + 1]; ++e) {
         if (la_[e] == kNoBound) continue;
@@ -367,7 +382,7 @@ std::vector<std::pair<Bound, size_t>> SearchRun::GridOrder(
 }
 
 void SearchRun::FineBounds() {
-  auto groups = MakeGridGroups(num_slots(), num_rolls_);
+  auto groups = MakeFineGridGroups(num_slots(), num_rolls_);
   const std::vector<std::pair<Bound, size_t>> order = GridOrder(groups);
   const DistanceGridOptions grid_options{options_.dt_cell_px, grid_half_extent_px_};
   std::vector<DistanceGrid> grids(threads_, DistanceGrid(grid_options));
@@ -410,7 +425,8 @@ void SearchRun::BoundSlot(const DistanceGrid& grid, const GridMember& m) {
     double sum = 0;
     for (size_t i = 0; i < pts.size() && sum <= limit; i += kChunk) {
       const auto chunk = pts.subspan(i, std::min(kChunk, pts.size() - i));
-      sum += fast ? grid.SumLowerBoundsFast(chunk, m.flip) : grid.SumLowerBounds(chunk, m.flip);
+      sum += fast ? grid.SumLowerBoundsFast(chunk, m.flip, m.turned)
+                  : grid.SumLowerBounds(chunk, m.flip, m.turned);
     }
     const double mean = sum / n;
     lb_[e] = std::max(

@@ -34,8 +34,14 @@ std::vector<Slot> MakeSlots(Hand hand, uint32_t rolls);
 // roll r turned by 180 degrees (kXY). The left hand's roll r' is the right hand's roll R - r'
 // mirrored in x: rot(-a) M X = M rot(a) X with M = diag(-1, 1), and a = -angle(R - r') (kX), and
 // its roll R/2 - r is then the right roll r + R/2 mirrored, i.e. roll r reflected in y (kY). So a
-// both-hand search builds R/2 grids for its 2R slots (docs/query.md).
+// both-hand search needs R/2 grids for its 2R slots (docs/query.md); the coarse fields are
+// copied along these groups.
 std::vector<std::vector<GridMember>> MakeGridGroups(size_t num_slots, uint32_t rolls);
+
+// The groups that share one distance grid in the fine bounds: with R a multiple of 4, group r
+// and group r + R/4 (read turned) for r < R/4, so a both-hand search builds R/4 grids for its 2R
+// slots; otherwise MakeGridGroups'.
+std::vector<std::vector<GridMember>> MakeFineGridGroups(size_t num_slots, uint32_t rolls);
 
 // What a run reads of its Searcher: the database, its per-view summaries, the fields and
 // histograms the bounds read (null: none), each view's dense shape index (empty: no per-shape

@@ -15,6 +15,7 @@
 #include "format/shard_layout.h"
 #include "format/shard_testing.h"
 #include "format/shard_writer.h"
+#include "query/search_run.h"
 #include "query/search_testing.h"
 
 namespace handdb {
@@ -334,8 +335,32 @@ TEST(Searcher, PerShapeLimitEqualsTheFullRankingFiltered) {
 // mirrored query's rolls read the right hand's grids (at (-x, y) and (x, -y)); odd R and R = 1, 2
 // take the other paths. Pruned equals brute force for each hand setting, and every bound is below
 // its D_c.
+// The fine bounds' grids: every slot read from exactly one grid, R/4 grids when R is a multiple
+// of 4 (roll r + R/4 turned), R/2 when R is even, R otherwise; a base is never turned or flipped.
+TEST(Searcher, FineGridGroupsCoverEverySlotOnce) {
+  for (const uint32_t rolls : {1u, 2u, 3u, 4u, 6u, 12u, 48u}) {
+    for (const size_t slots : {size_t{rolls}, 2 * size_t{rolls}}) {
+      const auto groups = search_internal::MakeFineGridGroups(slots, rolls);
+      const size_t expected = rolls % 4 == 0 ? rolls / 4 : (rolls % 2 == 0 ? rolls / 2 : rolls);
+      EXPECT_EQ(groups.size(), expected) << rolls << " rolls, " << slots << " slots";
+      std::vector<int> seen(slots, 0);
+      for (const auto& group : groups) {
+        ASSERT_FALSE(group.empty());
+        EXPECT_EQ(group[0].flip, GridFlip::kNone);
+        EXPECT_FALSE(group[0].turned);
+        for (const auto& m : group) {
+          ASSERT_LT(m.slot, slots);
+          ++seen[m.slot];
+        }
+      }
+      EXPECT_EQ(std::count(seen.begin(), seen.end(), 1), static_cast<ptrdiff_t>(slots))
+          << rolls << " rolls, " << slots << " slots";
+    }
+  }
+}
+
 TEST(Searcher, PrunedEqualsBruteForceForOddAndTinyRollCounts) {
-  for (const uint32_t rolls : {1u, 2u, 3u, 15u, 48u}) {
+  for (const uint32_t rolls : {1u, 2u, 3u, 4u, 12u, 15u, 48u}) {
     const auto db = std::make_shared<const Database>(
         SyntheticDatabase(kViews, kPoints, rolls, /*views_per_shape=*/6));
     const Searcher searcher(db);
