@@ -7,6 +7,10 @@
 // is left to the reader of the lines (docs/decisions/0019-depth-from-the-landmark-network.md).
 //
 //   fit_study --db DB --testset TS --out lines.jsonl [--matches 10] [--variant name:key=v,...]
+//
+// Keys: joint_sigma, rotation_sigma, landmark_sigma, tolerance, depth_weight, depth_sigma,
+// depth_loss_scale, depth_from_wrist, min_presence, and for the silhouette term beside the
+// landmarks silhouette (1: on), silhouette_sigma, inside_weight, edge_weight, cover_weight.
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -81,6 +85,16 @@ Result<std::pair<std::string, MatchFitOptions>> ParseVariant(const std::string& 
       f.depth_loss_scale = v;
     } else if (key == "depth_from_wrist") {
       f.depth_from_wrist = v != 0;
+    } else if (key == "silhouette") {
+      options.silhouette_with_landmarks = v != 0;
+    } else if (key == "silhouette_sigma") {
+      f.silhouette_sigma_px = v;
+    } else if (key == "inside_weight") {
+      f.inside_weight = v;
+    } else if (key == "edge_weight") {
+      f.edge_weight = v;
+    } else if (key == "cover_weight") {
+      f.cover_weight = v;
     } else if (key == "min_presence") {
       options.min_presence = static_cast<float>(v);
     } else {
@@ -215,7 +229,9 @@ int main(int argc, char** argv) {
   app.add_option("--matches", args.matches, "matches fitted per view")->capture_default_str();
   app.add_option("--threads", args.threads, "search threads")->capture_default_str();
   app.add_option("--limit", args.limit, "the first N views only (0: all)");
-  app.add_option("--variant", args.variants, "name:key=value,... fit options refitted");
+  app.add_option("--variant",
+                 args.variants,
+                 "name:key=value,... fit options refitted (keys: the file's first comment)");
   const int parsed = handdb::bench::ParseBenchArgs(app, argc, argv);
   if (parsed >= 0) return parsed;
   return handdb::Run(args);
