@@ -114,26 +114,13 @@ const PointBuckets& SearchContext::ViewBuckets(view_id_t v, int worker) {
       v, [&](PointBuckets& buckets) { buckets.Build(db_.SearchPoints(v)); });
 }
 
-double SearchContext::FlipGap(size_t base, size_t member, GridFlip flip) const {
-  const int64_t sx = flip == GridFlip::kX || flip == GridFlip::kXY ? -1 : 1;
-  const int64_t sy = flip == GridFlip::kY || flip == GridFlip::kXY ? -1 : 1;
-  return MappedGap(base, member, [sx, sy](PointQ p) {
-    return std::pair<int64_t, int64_t>{sx * p.x, sy * p.y};
-  });
-}
-
-double SearchContext::QuarterTurnGap(size_t base, size_t member) const {
-  return MappedGap(base, member, [](PointQ p) {
-    return std::pair<int64_t, int64_t>{p.y, -static_cast<int64_t>(p.x)};
-  });
-}
-
 double SearchContext::MemberGap(size_t base, const GridMember& m) const {
-  if (!m.turned) return FlipGap(base, m.slot, m.flip);
   const int64_t sx = m.flip == GridFlip::kX || m.flip == GridFlip::kXY ? -1 : 1;
   const int64_t sy = m.flip == GridFlip::kY || m.flip == GridFlip::kXY ? -1 : 1;
-  return MappedGap(base, m.slot, [sx, sy](PointQ p) {
-    return std::pair<int64_t, int64_t>{sx * p.y, -sy * static_cast<int64_t>(p.x)};
+  return MappedGap(base, m.slot, [sx, sy, turned = m.turned](PointQ p) {
+    const int64_t x = turned ? p.y : p.x;
+    const int64_t y = turned ? -static_cast<int64_t>(p.x) : p.y;
+    return std::pair<int64_t, int64_t>{sx * x, sy * y};
   });
 }
 

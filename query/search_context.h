@@ -163,17 +163,11 @@ class SearchContext {
   // the few rolls of one view that are refined close together.
   const PointBuckets& ViewBuckets(view_id_t v, int worker);
 
-  // max_i |rolled(member)[i] - flip(rolled(base)[i])| (px), rounded up: how far the member's
-  // rolled query is from the base's, flipped, point by point (both are the query's points in the
-  // same order). 0 unless a coordinate sits on a rounding tie.
-  double FlipGap(size_t base, size_t member, GridFlip flip) const;
-
-  // The same for the quarter turn T(x, y) = (y, -x): roll r + R/4 is roll r turned by T up to
-  // the two quantisations.
-  double QuarterTurnGap(size_t base, size_t member) const;
-
-  // The same for a grid member: how far its rolled query is from flip(base's), or from
-  // flip(T(base's)) when turned.
+  // max_i |rolled(m.slot)[i] - flip(rolled(base)[i])| (px), rounded up, with flip(T(...)) for a
+  // turned member (T(x, y) = (y, -x): roll r + R/4 is roll r turned by T up to the two
+  // quantisations): how far the member's rolled query is from the base's, mapped, point by
+  // point (both are the query's points in the same order). 0 unless a coordinate sits on a
+  // rounding tie.
   double MemberGap(size_t base, const GridMember& m) const;
 
   // max_i |rolled(member)[i] - map(rolled(base)[i])| in px, rounded up.

@@ -287,8 +287,9 @@ void SearchRun::PrepareSlotFields() {
         slot_fields_.Compute(base, ctx_.rolled(base));
         CopyMembers(groups[g]);
         if (quarter > 0) {
-          const size_t turned = groups[g + quarter][0].slot;
-          slot_fields_.CopyQuarterTurned(base, turned, ctx_.QuarterTurnGap(base, turned));
+          GridMember turned = groups[g + quarter][0];  // base r + R/4: T of base r
+          turned.turned = true;
+          slot_fields_.CopyQuarterTurned(base, turned.slot, ctx_.MemberGap(base, turned));
           CopyMembers(groups[g + quarter]);
         }
         return true;
@@ -300,7 +301,7 @@ void SearchRun::CopyMembers(const std::vector<GridMember>& group) {
   const size_t base = group[0].slot;
   for (size_t i = 1; i < group.size(); ++i) {
     const GridMember& m = group[i];
-    slot_fields_.CopyFlipped(base, m.slot, m.flip, ctx_.FlipGap(base, m.slot, m.flip));
+    slot_fields_.CopyFlipped(base, m.slot, m.flip, ctx_.MemberGap(base, m));
   }
 }
 
