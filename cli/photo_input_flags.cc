@@ -77,6 +77,13 @@ void PhotoInputFlags::Add(CLI::App& app, Which which) {
                  "finds (docs/query.md): auto (the model scripts/deps.sh installs; D_c alone "
                  "with a warning if it is missing), off, or a .tflite model file")
       ->capture_default_str();
+  app.add_option("--landmark-passes",
+                 options.picture.landmark_passes,
+                 "photo: runs of the landmark network: 1 (on the crop the segmentation gives) or "
+                 "2 (then on the crop its joints give, MediaPipe's tracking crop; nearer fits, "
+                 "one more run a photo)")
+      ->check(CLI::Range(1, 2))
+      ->capture_default_str();
   app.add_option("--landmark-weight",
                  options.landmark_rank.weight,
                  "photo: weight of the landmark fit against D_c / best D_c in the ranking")
@@ -196,6 +203,8 @@ std::vector<std::string> PhotoInputFlags::Args() const {
               {"--landmarks",
                options.picture.landmarker ? options.picture.landmarker->path().string()
                                           : std::string("off"),
+               "--landmark-passes",
+               std::to_string(options.picture.landmark_passes),
                "--landmark-weight",
                std::to_string(options.landmark_rank.weight)});
   return args;
@@ -216,6 +225,7 @@ nlohmann::json PhotoInputFlags::ToJson() const {
       {"landmarks",
        options.picture.landmarker ? nlohmann::json(options.picture.landmarker->path().string())
                                   : nlohmann::json(nullptr)},
+      {"landmark_passes", options.picture.landmark_passes},
       {"landmark_weight", options.landmark_rank.weight}};
 }
 

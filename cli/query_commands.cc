@@ -448,6 +448,7 @@ json ResultJson(const QueryFlags& flags,
       for (const Point2f& p : l.image_px) px.push_back({p.x, p.y});
       query_json["landmarks"] = {
           {"model", flags.picture.options.picture.landmarker->path().string()},
+          {"passes", flags.picture.options.picture.landmark_passes},
           {"presence", l.presence},
           {"used", UsesLandmarks(picture, flags.picture.options.landmark_rank)},
           {"weight", flags.picture.options.landmark_rank.weight},

@@ -105,4 +105,30 @@ HandLandmarks HandLandmarker::Detect(const uint8_t* rgb,
   return lm;
 }
 
+LandmarkCrop CropAroundLandmarks(const HandLandmarks& landmarks) {
+  const auto& p = landmarks.image_px;
+  // The hand's up: from the wrist to the mean of the middle knuckle (9) and the mean of the index
+  // (5) and ring (13) knuckles.
+  const double ux = 0.5 * (p[9].x + 0.5 * (p[5].x + p[13].x)) - p[0].x;
+  const double uy = 0.5 * (p[9].y + 0.5 * (p[5].y + p[13].y)) - p[0].y;
+  const double angle = std::atan2(ux, -uy);  // clockwise from the picture's up
+  // The crop's axes in the picture: right (c, s) and down (-s, c).
+  const double c = std::cos(angle), s = std::sin(angle);
+  double lo_x = 1e30, hi_x = -1e30, lo_y = 1e30, hi_y = -1e30;
+  for (const int k : {0, 1, 2, 3, 5, 6, 9, 10, 13, 14, 17, 18}) {
+    const double x = c * p[k].x + s * p[k].y, y = -s * p[k].x + c * p[k].y;
+    lo_x = std::min(lo_x, x);
+    hi_x = std::max(hi_x, x);
+    lo_y = std::min(lo_y, y);
+    hi_y = std::max(hi_y, y);
+  }
+  // The box's centre, shifted up the crop by a tenth of its height, back in the picture's axes.
+  const double bx = 0.5 * (lo_x + hi_x), by = 0.5 * (lo_y + hi_y) - 0.1 * (hi_y - lo_y);
+  LandmarkCrop crop;
+  crop.centre = {static_cast<float>(c * bx - s * by), static_cast<float>(s * bx + c * by)};
+  crop.side = static_cast<float>(2.0 * std::max(hi_x - lo_x, hi_y - lo_y));
+  crop.angle_deg = static_cast<float>(angle * 180.0 / M_PI);
+  return crop;
+}
+
 }  // namespace handdb

@@ -3,8 +3,10 @@
 // Hands' `hand_landmark_full.tflite` (Apache-2.0, installed by scripts/deps.sh), run by
 // nn/tflite.h. The photo path crops the hand it segmented (its silhouette's centre,
 // 1.5 diameters wide, turned so the hand points up: away from the forearm, or from the palm
-// centre towards the silhouette's centre) and maps the joints back to the picture's pixels.
-// The search uses them to re-rank its nearest views (pose/landmark_rank.h, docs/query.md).
+// centre towards the silhouette's centre), runs the network again on the crop those joints give
+// (CropAroundLandmarks) and maps the joints back to the picture's pixels. The search uses them
+// to re-rank its nearest views (pose/landmark_rank.h, docs/query.md), the pose fit fits the rig
+// to them (pose/fit.h).
 #pragma once
 
 #include <array>
@@ -41,6 +43,22 @@ struct HandLandmarks {
   float crop_side_px = 0;
   float crop_angle_deg = 0;
 };
+
+// A square crop of a picture, turned: centre and side in the picture's px, and the turn
+// (degrees, clockwise in the picture) that brings the hand's up to the crop's up.
+struct LandmarkCrop {
+  Point2f centre{};
+  float side = 0;
+  float angle_deg = 0;
+};
+
+// The crop MediaPipe Hands takes around a hand it has found (its landmarks-to-ROI rule, with
+// which it tracks a hand from frame to frame and for which the network was trained): turned so
+// the wrist points down to the mean of the middle knuckle and the mean of the index and ring
+// knuckles, centred on the box of the palm's and the digits' first joints (wrist, the thumb's
+// first three, each finger's first two) in that turn, shifted a tenth of the box towards the
+// fingers, and twice the box's longer side wide.
+LandmarkCrop CropAroundLandmarks(const HandLandmarks& landmarks);
 
 class TfliteModel;
 

@@ -151,7 +151,24 @@ TEST(HandLandmarkerTest, FindsTheJointsOfRealPhotos) {
     EXPECT_EQ(edges->centre_y, q->centre_y);
     EXPECT_EQ(edges->scale, q->scale);
     EXPECT_GT(l.presence, 0.9f);
-    EXPECT_NEAR(l.crop_side_px, 1.5 * q->diameter_px, 1e-3);
+    // Two passes: the first on the segmentation's crop, the answer on the crop its joints give.
+    PictureOptions once = options;
+    once.landmark_passes = 1;
+    auto first = ReadPicture(Photo(shape, file), once);
+    ASSERT_TRUE(first.ok() && first->landmarks.has_value());
+    EXPECT_NEAR(first->landmarks->crop_side_px, 1.5 * q->diameter_px, 1e-3);
+    EXPECT_GT(first->landmarks->presence, 0.9f);
+    const LandmarkCrop crop = CropAroundLandmarks(*first->landmarks);
+    EXPECT_NEAR(l.crop_centre.x, crop.centre.x, 1e-3);
+    EXPECT_NEAR(l.crop_centre.y, crop.centre.y, 1e-3);
+    EXPECT_NEAR(l.crop_side_px, crop.side, 1e-3);
+    EXPECT_NEAR(l.crop_angle_deg, crop.angle_deg, 1e-3);
+    // The two runs find the same hand: no joint moves by more than a tenth of its diameter.
+    for (int k = 0; k < kNumLandmarks; ++k) {
+      const Point2f& a = first->landmarks->image_px[k];
+      EXPECT_LT(std::hypot(a.x - l.image_px[k].x, a.y - l.image_px[k].y), 0.1 * q->diameter_px)
+          << k;
+    }
     // Every joint in the picture (the wrist may lie a little past the border the arm leaves
     // by), near the hand (within its diameter of its centre).
     const double margin = 0.1 * q->diameter_px;
@@ -183,6 +200,41 @@ TEST(HandLandmarkerTest, FindsTheJointsOfRealPhotos) {
       }
     }
   }
+}
+
+// MediaPipe's crop around a hand's joints: turned so the hand points up, centred on the box of
+// the palm's and digits' first joints, a tenth of the box towards the fingers, twice it wide.
+// Turning and moving the joints turns and moves the crop with them.
+TEST(CropAroundLandmarksTest, FollowsTheHandsTurnAndPlace) {
+  HandLandmarks up;  // a hand pointing up the picture, wrist at (100, 200)
+  up.image_px[0] = {100, 200};
+  for (int f = 0; f < 5; ++f) {
+    const float x = 70 + 15.0f * f;  // thumb at the left, little finger at the right
+    for (int j = 0; j < 4; ++j) up.image_px[1 + 4 * f + j] = {x, 140 - 20.0f * j};
+  }
+  const LandmarkCrop c = CropAroundLandmarks(up);
+  EXPECT_NEAR(c.angle_deg, 0, 1e-4);
+  // The box of joints 0, 1-3, 5-6, 9-10, 13-14, 17-18: x 70..130, y 100..200 (the thumb's
+  // third joint at 100); its longer side 100, its centre (100, 150) moved up by 10.
+  EXPECT_NEAR(c.side, 200, 1e-3);
+  EXPECT_NEAR(c.centre.x, 100, 1e-3);
+  EXPECT_NEAR(c.centre.y, 140, 1e-3);
+
+  const double turn = 30 * M_PI / 180;  // clockwise in the picture (y down)
+  const double cs = std::cos(turn), sn = std::sin(turn);
+  auto move = [&](Point2f p) {
+    const double x = p.x - 100, y = p.y - 200;
+    return Point2f{static_cast<float>(cs * x - sn * y + 400),
+                   static_cast<float>(sn * x + cs * y + 50)};
+  };
+  HandLandmarks turned = up;
+  for (Point2f& p : turned.image_px) p = move(p);
+  const LandmarkCrop t = CropAroundLandmarks(turned);
+  EXPECT_NEAR(t.angle_deg, 30, 1e-3);
+  EXPECT_NEAR(t.side, 200, 1e-2);
+  const Point2f centre = move(c.centre);
+  EXPECT_NEAR(t.centre.x, centre.x, 1e-2);
+  EXPECT_NEAR(t.centre.y, centre.y, 1e-2);
 }
 
 // No landmarker: no landmarks (edge images and label EXRs never get any).

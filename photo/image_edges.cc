@@ -434,15 +434,16 @@ WristCut CutForearm(cv::Mat* region, double radii, double reach_radii) {
   return out;
 }
 
-// The landmark network on the hand the photo path found (hand_landmarks.h): a square crop
-// centred on the silhouette, 1.5 of its diameters wide (the whole hand with a margin, as the
-// network's training crops), turned so the hand points up: away from the forearm where one
-// leaves the picture, else from the palm centre towards the silhouette's centre (the fingers
-// reach further from the palm than the wrist does). On the photo-like test views, whose hands
-// point every way, the network's presence is below 0.9 for 63% with the turn and 73% without
-// (docs/query.md, "Hand landmarks"); in 195 of the 199 development photos the turn comes from
-// the arm.
+// The landmark network on the hand the photo path found (hand_landmarks.h). The first crop is
+// square, centred on the silhouette, 1.5 of its diameters wide (the whole hand with a margin),
+// turned so the hand points up: away from the forearm where one leaves the picture, else from
+// the palm centre towards the silhouette's centre (the fingers reach further from the palm than
+// the wrist does); in 195 of the 199 development photos the turn comes from the arm. With
+// `passes` 2 the network runs again on the crop its first joints give (CropAroundLandmarks, the
+// crop MediaPipe Hands tracks a hand in) and the second run's joints are the answer: the hand
+// then sits in the crop as in the network's training (docs/decisions/0027).
 HandLandmarks FindLandmarks(const HandLandmarker& landmarker,
+                            int passes,
                             const cv::Mat& bgr,
                             const QueryEdges& q) {
   double up_x = 0, up_y = -1;
@@ -456,16 +457,19 @@ HandLandmarks FindLandmarks(const HandLandmarker& landmarker,
       up_y = dy;
     }
   }
-  const double angle = std::atan2(up_x, -up_y) * 180.0 / M_PI;
+  LandmarkCrop crop;
+  crop.centre = {static_cast<float>(q.centre_x), static_cast<float>(q.centre_y)};
+  crop.side = static_cast<float>(1.5 * q.diameter_px);
+  crop.angle_deg = static_cast<float>(std::atan2(up_x, -up_y) * 180.0 / M_PI);
   cv::Mat rgb;
   cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
-  return landmarker.Detect(rgb.data,
-                           rgb.cols,
-                           rgb.rows,
-                           rgb.step,
-                           {static_cast<float>(q.centre_x), static_cast<float>(q.centre_y)},
-                           static_cast<float>(1.5 * q.diameter_px),
-                           static_cast<float>(angle));
+  HandLandmarks found;
+  for (int pass = 0; pass < passes; ++pass) {
+    if (pass > 0) crop = CropAroundLandmarks(found);
+    found = landmarker.Detect(
+        rgb.data, rgb.cols, rgb.rows, rgb.step, crop.centre, crop.side, crop.angle_deg);
+  }
+  return found;
 }
 
 // The photo path's 8-bit BGR picture, whatever the file's depth and channels.
@@ -935,14 +939,16 @@ Result<PictureEvidence> FromDecoded(const std::filesystem::path& image,
                                     cv::Size source,
                                     QueryInputKind kind,
                                     const ImageEdgeOptions& options,
-                                    const HandLandmarker* landmarker);
+                                    const HandLandmarker* landmarker,
+                                    int landmark_passes);
 
 // The picture decoded once: its edges, then (a photo, with a landmarker) the landmark network
 // on the same pixels and the hand the segmentation found, both in the decoded picture's pixels
 // until the last step maps them to the file's.
 Result<PictureEvidence> Read(const std::filesystem::path& image,
                              const ImageEdgeOptions& options,
-                             const HandLandmarker* landmarker) {
+                             const HandLandmarker* landmarker,
+                             int landmark_passes) {
   if (!options.Check()) {
     return Status(StatusCode::kInvalidArgument, "invalid image edge options (see the line above)");
   }
@@ -981,7 +987,7 @@ Result<PictureEvidence> Read(const std::filesystem::path& image,
       flags == cv::IMREAD_UNCHANGED || !size
           ? any.size()
           : cv::Size(static_cast<int>(size->width), static_cast<int>(size->height));
-  return FromDecoded(image, any, source, kind, options, landmarker);
+  return FromDecoded(image, any, source, kind, options, landmarker, landmark_passes);
 }
 
 // A decoded picture (`source`: its size in its file) -> its evidence: the edges of an edge image
@@ -991,7 +997,8 @@ Result<PictureEvidence> FromDecoded(const std::filesystem::path& image,
                                     cv::Size source,
                                     QueryInputKind kind,
                                     const ImageEdgeOptions& options,
-                                    const HandLandmarker* landmarker) {
+                                    const HandLandmarker* landmarker,
+                                    int landmark_passes) {
   PictureEvidence out;
   if (kind == QueryInputKind::kAuto) {
     kind = LooksLikeEdgeImage(any) ? QueryInputKind::kEdges : QueryInputKind::kPhoto;
@@ -1005,7 +1012,9 @@ Result<PictureEvidence> FromDecoded(const std::filesystem::path& image,
     auto edges = FromPhoto(image, bgr, source, options);
     if (!edges.ok()) return edges.status();
     out.edges = std::move(edges).value();
-    if (landmarker != nullptr) out.landmarks = FindLandmarks(*landmarker, bgr, out.edges);
+    if (landmarker != nullptr) {
+      out.landmarks = FindLandmarks(*landmarker, landmark_passes, bgr, out.edges);
+    }
   }
   if (source != any.size()) {
     ScaleToSource(source, any.size(), &out.edges);
@@ -1046,6 +1055,12 @@ bool SkinModel::Check() const {
   CHECK_OPTION(0 <= y_min && y_min <= y_max && y_max <= 255);
   CHECK_OPTION(0 <= cr_min && cr_min <= cr_max && cr_max <= 255);
   CHECK_OPTION(0 <= cb_min && cb_min <= cb_max && cb_max <= 255);
+  return true;
+}
+
+bool PictureOptions::Check() const {
+  CHECK_OPTION(edges.Check());
+  CHECK_OPTION(landmark_passes == 1 || landmark_passes == 2);
   return true;
 }
 
@@ -1095,21 +1110,24 @@ std::vector<Point2f> QueryEdges::points_px() const {
 
 Result<QueryEdges> LoadQueryEdges(const std::filesystem::path& image,
                                   const ImageEdgeOptions& options) {
-  auto read = Read(image, options, nullptr);
+  auto read = Read(image, options, nullptr, 0);
   if (!read.ok()) return read.status();
   return std::move(read->edges);
 }
 
 Result<PictureEvidence> ReadPicture(const std::filesystem::path& image,
                                     const PictureOptions& options) {
-  return Read(image, options.edges, options.landmarker.get());
+  if (!options.Check()) {
+    return Status(StatusCode::kInvalidArgument, "invalid picture options (see the line above)");
+  }
+  return Read(image, options.edges, options.landmarker.get(), options.landmark_passes);
 }
 
 Result<PictureEvidence> ReadPicturePixels(const std::string& name,
                                           const PicturePixels& pixels,
                                           const PictureOptions& options) {
-  if (!options.edges.Check()) {
-    return Status(StatusCode::kInvalidArgument, "invalid image edge options (see the line above)");
+  if (!options.Check()) {
+    return Status(StatusCode::kInvalidArgument, "invalid picture options (see the line above)");
   }
   if (options.edges.kind == QueryInputKind::kLabels) {
     return Status(StatusCode::kInvalidArgument,
@@ -1133,8 +1151,13 @@ Result<PictureEvidence> ReadPicturePixels(const std::string& name,
                     CV_MAKETYPE(CV_8U, pixels.channels),
                     const_cast<uint8_t*>(pixels.data),
                     row_bytes);
-  return FromDecoded(
-      name, any, any.size(), options.edges.kind, options.edges, options.landmarker.get());
+  return FromDecoded(name,
+                     any,
+                     any.size(),
+                     options.edges.kind,
+                     options.edges,
+                     options.landmarker.get(),
+                     options.landmark_passes);
 }
 
 }  // namespace handdb

@@ -183,7 +183,12 @@ struct PictureOptions {
   // Run on a photo's segmented hand; its joints re-rank the search's nearest views
   // (pose/landmark_rank.h). Null: none. Edge images and label EXRs never get landmarks.
   std::shared_ptr<const HandLandmarker> landmarker;
-  bool Check() const { return edges.Check(); }
+  // How often the network runs: 1, on the crop the segmentation gives; 2, then again on the crop
+  // its joints give (MediaPipe's tracking crop, hand_landmarks.h), whose joints are the answer.
+  // The second run costs one more network run a photo (~7 ms on one core) and brings the fitted
+  // pose nearer the truth (docs/decisions/0027).
+  int landmark_passes = 2;
+  bool Check() const;
 };
 
 // What a picture says about the hand in it.
@@ -193,7 +198,7 @@ struct PictureEvidence {
   QueryEdges edges;
   // A photo read with PictureOptions::landmarker: the network's joints, in source px, found in
   // the crop the segmentation gave (the silhouette's centre, 1.5 diameters wide, turned so the
-  // hand points up: hand_landmarks.h).
+  // hand points up) or, with two passes, in the crop those joints gave (hand_landmarks.h).
   std::optional<HandLandmarks> landmarks;
 };
 

@@ -269,6 +269,11 @@ PictureOptions PictureOptionsFromKwargs(const py::kwargs& kw) {
       o.cut_forearm = py::cast<bool>(value);
     } else if (key == "landmarks") {
       landmarks = value.is_none() ? "off" : py::cast<std::string>(py::str(value));
+    } else if (key == "landmark_passes") {
+      picture.landmark_passes = py::cast<int>(value);
+      if (picture.landmark_passes != 1 && picture.landmark_passes != 2) {
+        throw py::value_error("landmark_passes must be 1 or 2");
+      }
     } else {
       throw py::type_error("unexpected keyword argument '" + key + "'");
     }
@@ -1052,7 +1057,8 @@ void BindQueryEdges(py::module_& m) {
       "mask=path, roi=(x, y, w, h), skin=(Ymin, Ymax, Crmin, Crmax, Cbmin, Cbmax), "
       "canny=(low, high), contour_clearance=2, edges_outside=False, work_diameter=128, "
       "wrist_cut=True, landmarks='auto' (the installed hand landmark model; 'off' or None: "
-      "none; or a .tflite file). database (a Database or "
+      "none; or a .tflite file), landmark_passes=2 (1: the network on the segmentation's crop "
+      "only). database (a Database or "
       "its path): label EXRs use the edge options it was converted with.");
 }
 

@@ -349,6 +349,7 @@ def test_search_many_is_search_per_picture_in_order(handdb, db, db_dir, view_ima
     (["--contour-clearance", "4", "--canny", "30,100", "--edges-outside"],
      {"contour_clearance": 4, "canny": (30, 100), "edges_outside": True}),
     (["--landmarks", "off"], {"landmarks": "off"}),
+    (["--landmark-passes", "1"], {"landmark_passes": 1}),
 ])
 def test_photo_search_equals_query_json(handdb, db, db_dir, flags, options):
     """A real photo (tests/data/photos) through the skin-colour path, with the command's photo
@@ -385,6 +386,15 @@ def test_photo_landmarks_rerank_like_the_cli(handdb, db, db_dir):
     plain = db.search(handdb.query_edges(photo, landmarks="off"), top_k=5, per_shape=1)
     assert all(m.score is None for m in plain)
     assert [m.distance for m in plain] == sorted(m.distance for m in plain)
+    # One pass: the network's joints on the segmentation's crop, 1.5 hand diameters wide, which
+    # the second pass replaces by the crop around those joints.
+    once = handdb.query_edges(photo, landmark_passes=1)
+    cli_once = handdb_json("query", db_dir, photo, "--json", "--landmark-passes", 1)
+    assert cli_once["query"]["landmarks"]["passes"] == 1 and cli["query"]["landmarks"]["passes"] == 2
+    assert once.landmarks["crop_side_px"] == pytest.approx(cli_once["query"]["landmarks"]["crop"]["side_px"])
+    assert once.landmarks["crop_side_px"] != pytest.approx(edges.landmarks["crop_side_px"])
+    with pytest.raises(ValueError, match="landmark_passes"):
+        handdb.query_edges(photo, landmark_passes=3)
 
 
 def test_coded_database_reads_and_searches_like_the_plain_one(handdb, db, tmp_path, view_image):
