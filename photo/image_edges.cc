@@ -465,7 +465,14 @@ HandLandmarks FindLandmarks(const HandLandmarker& landmarker,
   cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
   HandLandmarks found;
   for (int pass = 0; pass < passes; ++pass) {
-    if (pass > 0) crop = CropAroundLandmarks(found);
+    if (pass > 0) {
+      crop = CropAroundLandmarks(found);
+      // Joints that give no crop (not finite, or all in one place) keep the run before.
+      if (!std::isfinite(crop.centre.x) || !std::isfinite(crop.centre.y) ||
+          !std::isfinite(crop.angle_deg) || !(crop.side >= 4 && crop.side < 1e6f)) {
+        break;
+      }
+    }
     found = landmarker.Detect(
         rgb.data, rgb.cols, rgb.rows, rgb.step, crop.centre, crop.side, crop.angle_deg);
   }
