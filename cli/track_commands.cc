@@ -77,6 +77,11 @@ struct TrackFlags {
         ->capture_default_str();
     app.add_flag(
         "--full-search", full_search, "search the whole database every frame (no local search)");
+    app.add_flag_callback(
+        "--no-landmark-tracking",
+        [this] { track.landmark_tracking = false; },
+        "find each frame's landmarks as a picture alone's (by default the network runs once, on "
+        "the crop around the last frame's joints, while it finds the hand there)");
     app.add_option("--full-every",
                    track.full_every,
                    "a full search at least every N frames (0: only when the hand is lost or the "

@@ -202,6 +202,43 @@ TEST(HandLandmarkerTest, FindsTheJointsOfRealPhotos) {
   }
 }
 
+// A video's frame: the network runs once, on the crop around the last frame's joints, while it
+// finds a hand there; a crop without the hand starts the frame over from the segmentation.
+TEST(HandLandmarkerTest, ATrackedCropRunsTheNetworkOnceWhileItHoldsTheHand) {
+  auto landmarker = HandLandmarker::Open(Model());
+  ASSERT_TRUE(landmarker.ok()) << landmarker.status().ToString();
+  PictureOptions options;
+  options.landmarker = *landmarker;
+  const fs::path photo = Photo("asl-5", "IMG_1174.JPG");
+  auto alone = ReadPicture(photo, options);
+  ASSERT_TRUE(alone.ok() && alone->landmarks.has_value());
+
+  PictureOptions tracked = options;
+  tracked.landmark_start = CropAroundLandmarks(*alone->landmarks);
+  auto next = ReadPicture(photo, tracked);
+  ASSERT_TRUE(next.ok() && next->landmarks.has_value());
+  const HandLandmarks& l = *next->landmarks;
+  EXPECT_GE(l.presence, kTrackedCropPresence);
+  EXPECT_NEAR(l.crop_centre.x, tracked.landmark_start->centre.x, 1e-3);
+  EXPECT_NEAR(l.crop_centre.y, tracked.landmark_start->centre.y, 1e-3);
+  EXPECT_NEAR(l.crop_side_px, tracked.landmark_start->side, 1e-3);
+  EXPECT_NEAR(l.crop_angle_deg, tracked.landmark_start->angle_deg, 1e-3);
+  for (int k = 0; k < kNumLandmarks; ++k) {
+    const Point2f& a = alone->landmarks->image_px[k];
+    EXPECT_LT(std::hypot(a.x - l.image_px[k].x, a.y - l.image_px[k].y),
+              0.1 * alone->edges.diameter_px)
+        << k;
+  }
+
+  // A crop of the picture's corner holds no hand: the frame's joints are the picture's alone.
+  tracked.landmark_start = LandmarkCrop{{2, 2}, 8, 0};
+  auto lost = ReadPicture(photo, tracked);
+  ASSERT_TRUE(lost.ok() && lost->landmarks.has_value());
+  EXPECT_EQ(lost->landmarks->crop_side_px, alone->landmarks->crop_side_px);
+  EXPECT_EQ(lost->landmarks->image_px[12].x, alone->landmarks->image_px[12].x);
+  EXPECT_EQ(lost->landmarks->presence, alone->landmarks->presence);
+}
+
 // MediaPipe's crop around a hand's joints: turned so the hand points up, centred on the box of
 // the palm's and digits' first joints, a tenth of the box towards the fingers, twice it wide.
 // Turning and moving the joints turns and moves the crop with them.

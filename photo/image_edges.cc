@@ -434,6 +434,23 @@ WristCut CutForearm(cv::Mat* region, double radii, double reach_radii) {
   return out;
 }
 
+// What a photo's landmark step needs: the network (null: no landmarks), how often it runs and,
+// for a video, where its first run looks (PictureOptions).
+struct LandmarkStep {
+  const HandLandmarker* landmarker = nullptr;
+  int passes = 2;
+  std::optional<LandmarkCrop> start;
+};
+
+bool UsableCrop(const LandmarkCrop& c) {
+  return std::isfinite(c.centre.x) && std::isfinite(c.centre.y) && std::isfinite(c.angle_deg) &&
+         c.side >= 4 && c.side < 1e6f;
+}
+
+LandmarkStep StepOf(const PictureOptions& options) {
+  return {options.landmarker.get(), options.landmark_passes, options.landmark_start};
+}
+
 // The landmark network on the hand the photo path found (hand_landmarks.h). The first crop is
 // square, centred on the silhouette, 1.5 of its diameters wide (the whole hand with a margin),
 // turned so the hand points up: away from the forearm where one leaves the picture, else from
@@ -441,11 +458,20 @@ WristCut CutForearm(cv::Mat* region, double radii, double reach_radii) {
 // the wrist does); in 195 of the 199 development photos the turn comes from the arm. With
 // `passes` 2 the network runs again on the crop its first joints give (CropAroundLandmarks, the
 // crop MediaPipe Hands tracks a hand in) and the second run's joints are the answer: the hand
-// then sits in the crop as in the network's training (docs/decisions/0027).
-HandLandmarks FindLandmarks(const HandLandmarker& landmarker,
-                            int passes,
-                            const cv::Mat& bgr,
-                            const QueryEdges& q) {
+// then sits in the crop as in the network's training (docs/decisions/0027). With a start crop
+// (a video's previous frame's) the network runs there once; below kTrackedCropPresence the
+// frame starts over from the silhouette.
+HandLandmarks FindLandmarks(const LandmarkStep& step, const cv::Mat& bgr, const QueryEdges& q) {
+  cv::Mat rgb;
+  cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
+  auto detect = [&](const LandmarkCrop& c) {
+    return step.landmarker->Detect(
+        rgb.data, rgb.cols, rgb.rows, rgb.step, c.centre, c.side, c.angle_deg);
+  };
+  if (step.start && UsableCrop(*step.start)) {
+    HandLandmarks tracked = detect(*step.start);
+    if (tracked.presence >= kTrackedCropPresence) return tracked;
+  }
   double up_x = 0, up_y = -1;
   if (q.arm_found) {
     up_x = -q.arm_dir_x;
@@ -461,20 +487,12 @@ HandLandmarks FindLandmarks(const HandLandmarker& landmarker,
   crop.centre = {static_cast<float>(q.centre_x), static_cast<float>(q.centre_y)};
   crop.side = static_cast<float>(1.5 * q.diameter_px);
   crop.angle_deg = static_cast<float>(std::atan2(up_x, -up_y) * 180.0 / M_PI);
-  cv::Mat rgb;
-  cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
-  HandLandmarks found;
-  for (int pass = 0; pass < passes; ++pass) {
-    if (pass > 0) {
-      crop = CropAroundLandmarks(found);
-      // Joints that give no crop (not finite, or all in one place) keep the run before.
-      if (!std::isfinite(crop.centre.x) || !std::isfinite(crop.centre.y) ||
-          !std::isfinite(crop.angle_deg) || !(crop.side >= 4 && crop.side < 1e6f)) {
-        break;
-      }
-    }
-    found = landmarker.Detect(
-        rgb.data, rgb.cols, rgb.rows, rgb.step, crop.centre, crop.side, crop.angle_deg);
+  HandLandmarks found = detect(crop);
+  for (int pass = 1; pass < step.passes; ++pass) {
+    crop = CropAroundLandmarks(found);
+    // Joints that give no crop (not finite, or all in one place) keep the run before.
+    if (!UsableCrop(crop)) break;
+    found = detect(crop);
   }
   return found;
 }
@@ -946,16 +964,14 @@ Result<PictureEvidence> FromDecoded(const std::filesystem::path& image,
                                     cv::Size source,
                                     QueryInputKind kind,
                                     const ImageEdgeOptions& options,
-                                    const HandLandmarker* landmarker,
-                                    int landmark_passes);
+                                    const LandmarkStep& landmarks);
 
 // The picture decoded once: its edges, then (a photo, with a landmarker) the landmark network
 // on the same pixels and the hand the segmentation found, both in the decoded picture's pixels
 // until the last step maps them to the file's.
 Result<PictureEvidence> Read(const std::filesystem::path& image,
                              const ImageEdgeOptions& options,
-                             const HandLandmarker* landmarker,
-                             int landmark_passes) {
+                             const LandmarkStep& landmarks) {
   if (!options.Check()) {
     return Status(StatusCode::kInvalidArgument, "invalid image edge options (see the line above)");
   }
@@ -994,7 +1010,7 @@ Result<PictureEvidence> Read(const std::filesystem::path& image,
       flags == cv::IMREAD_UNCHANGED || !size
           ? any.size()
           : cv::Size(static_cast<int>(size->width), static_cast<int>(size->height));
-  return FromDecoded(image, any, source, kind, options, landmarker, landmark_passes);
+  return FromDecoded(image, any, source, kind, options, landmarks);
 }
 
 // A decoded picture (`source`: its size in its file) -> its evidence: the edges of an edge image
@@ -1004,8 +1020,7 @@ Result<PictureEvidence> FromDecoded(const std::filesystem::path& image,
                                     cv::Size source,
                                     QueryInputKind kind,
                                     const ImageEdgeOptions& options,
-                                    const HandLandmarker* landmarker,
-                                    int landmark_passes) {
+                                    const LandmarkStep& landmarks) {
   PictureEvidence out;
   if (kind == QueryInputKind::kAuto) {
     kind = LooksLikeEdgeImage(any) ? QueryInputKind::kEdges : QueryInputKind::kPhoto;
@@ -1019,8 +1034,16 @@ Result<PictureEvidence> FromDecoded(const std::filesystem::path& image,
     auto edges = FromPhoto(image, bgr, source, options);
     if (!edges.ok()) return edges.status();
     out.edges = std::move(edges).value();
-    if (landmarker != nullptr) {
-      out.landmarks = FindLandmarks(*landmarker, landmark_passes, bgr, out.edges);
+    if (landmarks.landmarker != nullptr) {
+      LandmarkStep step = landmarks;
+      if (step.start && source != any.size()) {
+        // The start crop is in the file's px; the network runs in the decoded picture's.
+        const double fx = double(any.cols) / source.width, fy = double(any.rows) / source.height;
+        step.start->centre = {static_cast<float>(step.start->centre.x * fx),
+                              static_cast<float>(step.start->centre.y * fy)};
+        step.start->side *= static_cast<float>(std::sqrt(fx * fy));
+      }
+      out.landmarks = FindLandmarks(step, bgr, out.edges);
     }
   }
   if (source != any.size()) {
@@ -1117,7 +1140,7 @@ std::vector<Point2f> QueryEdges::points_px() const {
 
 Result<QueryEdges> LoadQueryEdges(const std::filesystem::path& image,
                                   const ImageEdgeOptions& options) {
-  auto read = Read(image, options, nullptr, 0);
+  auto read = Read(image, options, LandmarkStep{});
   if (!read.ok()) return read.status();
   return std::move(read->edges);
 }
@@ -1127,7 +1150,7 @@ Result<PictureEvidence> ReadPicture(const std::filesystem::path& image,
   if (!options.Check()) {
     return Status(StatusCode::kInvalidArgument, "invalid picture options (see the line above)");
   }
-  return Read(image, options.edges, options.landmarker.get(), options.landmark_passes);
+  return Read(image, options.edges, StepOf(options));
 }
 
 Result<PictureEvidence> ReadPicturePixels(const std::string& name,
@@ -1158,13 +1181,7 @@ Result<PictureEvidence> ReadPicturePixels(const std::string& name,
                     CV_MAKETYPE(CV_8U, pixels.channels),
                     const_cast<uint8_t*>(pixels.data),
                     row_bytes);
-  return FromDecoded(name,
-                     any,
-                     any.size(),
-                     options.edges.kind,
-                     options.edges,
-                     options.landmarker.get(),
-                     options.landmark_passes);
+  return FromDecoded(name, any, any.size(), options.edges.kind, options.edges, StepOf(options));
 }
 
 }  // namespace handdb

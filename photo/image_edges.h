@@ -178,6 +178,10 @@ Result<QueryEdges> LoadQueryEdges(const std::filesystem::path& image,
 
 // How a picture becomes evidence: its edges and, for a photo, the hand landmark network
 // (photo/hand_landmarks.h), which runs beside the edge extraction on the same decoded pixels.
+// The presence at which the network's joints in a tracked crop (PictureOptions::landmark_start)
+// are kept: MediaPipe Hands' own tracking threshold.
+constexpr float kTrackedCropPresence = 0.5f;
+
 struct PictureOptions {
   ImageEdgeOptions edges;
   // Run on a photo's segmented hand; its joints re-rank the search's nearest views
@@ -188,6 +192,11 @@ struct PictureOptions {
   // The second run costs one more network run a photo (~7 ms on one core) and brings the fitted
   // pose nearer the truth (docs/decisions/0027).
   int landmark_passes = 2;
+  // A video's frame: the crop around the previous frame's joints (CropAroundLandmarks), where
+  // the network runs once, as MediaPipe Hands tracks a hand; when its presence there is below
+  // kTrackedCropPresence, the frame starts over from the segmentation's crop. None: a picture
+  // alone.
+  std::optional<LandmarkCrop> landmark_start;
   bool Check() const;
 };
 

@@ -752,6 +752,7 @@ py::list Track(const PyDatabase& self,
                const std::string& hand,
                const std::string& smooth,
                bool local_search,
+               bool landmark_tracking,
                int full_every,
                double fps,
                const std::string& fit,
@@ -766,6 +767,7 @@ py::list Track(const PyDatabase& self,
   if (!smoothing.ok()) throw py::value_error(smoothing.status().message());
   options.smoothing = *smoothing;
   options.local_search = local_search;
+  options.landmark_tracking = landmark_tracking;
   if (full_every < 0) throw py::value_error("full_every must be >= 0");
   options.full_every = full_every;
   FrameSourceOptions source;
@@ -1414,6 +1416,7 @@ void BindDatabase(py::module_& m) {
            py::arg("hand") = "either",
            py::arg("smooth") = std::string(SmoothingName(TrackOptions{}.smoothing)),
            py::arg("local_search") = true,
+           py::arg("landmark_tracking") = TrackOptions{}.landmark_tracking,
            py::arg("full_every") = TrackOptions{}.full_every,
            py::arg("fps") = FrameSourceOptions{}.folder_fps,
            py::arg("fit") = "auto",
@@ -1423,7 +1426,9 @@ void BindDatabase(py::module_& m) {
            "found ('full', 'local', 'carried' or 'none' with 'error'), matches, and pose (the "
            "chosen match, its keypoints in the frame's px) when one was found. smooth: "
            "'online' (default), 'offline' or 'off'; local_search=False searches the whole "
-           "database every frame; full_every: a full search at least every this many frames; "
+           "database every frame; landmark_tracking=False finds each frame's landmarks as a "
+           "picture alone's (by default the network looks around the last frame's joints); "
+           "full_every: a full search at least every this many frames; "
            "fps: a folder's frame rate. Photo options as in search().")
       .def("search_many",
            &SearchMany,

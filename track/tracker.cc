@@ -8,6 +8,7 @@
 #include <utility>
 
 #include "base/progress.h"
+#include "photo/hand_landmarks.h"
 #include "pose/landmark_rank.h"
 
 namespace handdb {
@@ -56,9 +57,16 @@ class Tracker {
       out.frame_height = p.height;
     }
     if (out.error.ok()) {
-      Result<PictureEvidence> evidence =
-          frame.has_pixels ? ReadPicturePixels(frame.name, frame.pixels, options_.picture.picture)
-                           : ReadPicture(frame.path, options_.picture.picture);
+      PictureOptions picture = options_.picture.picture;
+      picture.landmark_start = next_landmark_crop_;
+      next_landmark_crop_.reset();
+      Result<PictureEvidence> evidence = frame.has_pixels
+                                             ? ReadPicturePixels(frame.name, frame.pixels, picture)
+                                             : ReadPicture(frame.path, picture);
+      if (evidence.ok() && options_.landmark_tracking && evidence->landmarks &&
+          evidence->landmarks->presence >= kTrackedCropPresence) {
+        next_landmark_crop_ = CropAroundLandmarks(*evidence->landmarks);
+      }
       if (evidence.ok()) {
         out.evidence = std::move(evidence).value();
       } else {
@@ -214,6 +222,7 @@ class Tracker {
   std::vector<PointQ> previous_points_;
   std::vector<Match> previous_matches_;
   bool previous_landmarks_used_ = false;
+  std::optional<LandmarkCrop> next_landmark_crop_;
   int64_t last_full_ = std::numeric_limits<int64_t>::min() / 2;
   // The best D_c of the last frames answered: the local search's yardstick.
   static constexpr size_t kReferenceFrames = 4;

@@ -44,6 +44,10 @@ struct TrackOptions {
   // the candidates per frame the smoother chooses among.
   PictureSearchOptions picture;
   bool local_search = true;  // false: a full search every frame
+  // A frame's landmark network runs once, on the crop around the last frame's joints
+  // (PictureOptions::landmark_start), while it finds a hand there (presence >= 0.5), as MediaPipe
+  // Hands tracks one; false: each frame's landmarks are found as a picture alone's.
+  bool landmark_tracking = true;
   NeighbourhoodOptions local;
   // A full search at least every this many frames (0: only when the local search fails).
   int full_every = 30;

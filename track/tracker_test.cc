@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdlib>
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -10,6 +11,8 @@
 #include <vector>
 
 #include "base/testing.h"
+#include "photo/hand_landmarks.h"
+#include "photo/image_edges.h"
 #include "query/search_testing.h"
 
 namespace handdb {
@@ -163,6 +166,56 @@ TEST(TrackFrames, FullSearchEveryFrameAndOfflineSmoothingAgree) {
     run = f.found == FoundBy::kLocal ? run + 1 : 0;
     EXPECT_LT(run, 3) << f.index;
   }
+}
+
+// A real photo (tests/data/photos) and the same picture 3 px to the right: with landmark
+// tracking the second frame's network runs on the crop around the first frame's joints; without,
+// each frame's landmarks are its picture's alone.
+TEST(TrackFrames, TheLandmarkNetworkLooksWhereTheLastFramesJointsWere) {
+  const char* source_dir = std::getenv("HANDDB_SOURCE_DIR");
+  const fs::path root = source_dir != nullptr ? fs::path(source_dir) : fs::path(".");
+  auto landmarker = HandLandmarker::Open(HandLandmarker::DefaultModelPath());
+  ASSERT_TRUE(landmarker.ok()) << landmarker.status().ToString();
+  const cv::Mat photo = cv::imread(
+      (root / "tests/data/photos/asl-digits/asl-5/IMG_1174.JPG").string(), cv::IMREAD_COLOR);
+  ASSERT_FALSE(photo.empty());
+  const fs::path dir = testing::TempDir("track_landmarks");
+  cv::Mat moved;
+  cv::warpAffine(photo,
+                 moved,
+                 cv::Matx23d(1, 0, 3, 0, 1, 0),
+                 photo.size(),
+                 cv::INTER_NEAREST,
+                 cv::BORDER_REPLICATE);
+  ASSERT_TRUE(cv::imwrite((dir / "f000.png").string(), photo));
+  ASSERT_TRUE(cv::imwrite((dir / "f001.png").string(), moved));
+
+  TrackOptions options = Options();
+  options.picture.picture.landmarker = *landmarker;
+  const std::vector<TrackFrame> tracked = Track(dir, options);
+  options.landmark_tracking = false;
+  const std::vector<TrackFrame> alone = Track(dir, options);
+  ASSERT_EQ(tracked.size(), 2u);
+  ASSERT_EQ(alone.size(), 2u);
+  for (const auto* frames : {&tracked, &alone}) {
+    for (const TrackFrame& f : *frames) {
+      ASSERT_TRUE(f.evidence.has_value() && f.evidence->landmarks.has_value()) << f.index;
+    }
+  }
+  const HandLandmarks& first = *tracked[0].evidence->landmarks;
+  const HandLandmarks& second = *tracked[1].evidence->landmarks;
+  const LandmarkCrop crop = CropAroundLandmarks(first);
+  EXPECT_NEAR(second.crop_centre.x, crop.centre.x, 1e-3);
+  EXPECT_NEAR(second.crop_centre.y, crop.centre.y, 1e-3);
+  EXPECT_NEAR(second.crop_side_px, crop.side, 1e-3);
+  // The first frame has no frame before it: both ways it is the picture's alone.
+  EXPECT_EQ(first.crop_side_px, alone[0].evidence->landmarks->crop_side_px);
+  auto picture = ReadPicture(dir / "f001.png", options.picture.picture);
+  ASSERT_TRUE(picture.ok() && picture->landmarks.has_value());
+  EXPECT_EQ(alone[1].evidence->landmarks->crop_side_px, picture->landmarks->crop_side_px);
+  EXPECT_EQ(alone[1].evidence->landmarks->image_px[8].x, picture->landmarks->image_px[8].x);
+  EXPECT_NE(alone[1].evidence->landmarks->crop_side_px, second.crop_side_px);
+  fs::remove_all(dir);
 }
 
 TEST(TrackOptions, Check) {

@@ -468,3 +468,23 @@ def test_track_equals_the_track_command(handdb, db, db_dir, view_image, tmp_path
     with pytest.raises(handdb.Error) as e:
         db.track(str(tmp_path / "nothing-here"))
     assert e.value.code == "kNotFound"
+
+
+@pytest.mark.parametrize("tracking", [True, False])
+def test_track_landmark_tracking_equals_the_command(handdb, db, db_dir, tmp_path, tracking):
+    """Real photos as frames, the landmark network on the last frame's crop or on each frame's
+    own: the same frames as `handdb track` with or without --no-landmark-tracking."""
+    from handdb_testing import REPO
+    folder = os.path.join(REPO, "tests/data/photos/asl-digits/asl-5")
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    for i, name in enumerate(sorted(os.listdir(folder))[:3]):
+        shutil.copy(os.path.join(folder, name), frames / f"f{i:03d}.jpg")
+    got = db.track(str(frames), top_k=3, smooth="off", fit="off", landmark_tracking=tracking)
+    flags = [] if tracking else ["--no-landmark-tracking"]
+    out = run_handdb("track", db_dir, frames, "--top", 3, "--smooth", "off", "--quiet", "--fit", "off",
+                     *flags)
+    lines = [json.loads(line) for line in out.stdout.splitlines() if line]
+    assert len(lines) == len(got) == 3
+    for a, b in zip(got, lines):
+        assert a["matches"] == b["matches"]
