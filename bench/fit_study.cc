@@ -6,7 +6,8 @@
 // What is chosen from the lines (the answer among N fits, the 3D error in the plane and in depth)
 // is left to the reader of the lines (docs/decisions/0019-depth-from-the-landmark-network.md).
 //
-//   fit_study --db DB --testset TS --out lines.jsonl [--matches 10] [--variant name:key=v,...]
+//   fit_study --db DB --testset TS --out lines.jsonl [--matches 10] [--landmark-passes 2]
+//             [--variant name:key=v,...]
 //
 // Keys: joint_sigma, rotation_sigma, landmark_sigma, tolerance, depth_weight, depth_sigma,
 // depth_loss_scale, depth_from_wrist, min_presence, and for the silhouette term beside the
@@ -43,6 +44,7 @@ struct Args {
   int matches = 10;
   int threads = 1;
   int limit = 0;
+  int landmark_passes = PictureOptions{}.landmark_passes;
   std::vector<std::string> variants;
 };
 
@@ -138,6 +140,7 @@ int Run(const Args& args) {
   const LandmarkRankOptions rank;
   PictureOptions picture_options;
   picture_options.edges.kind = QueryInputKind::kPhoto;
+  picture_options.landmark_passes = args.landmark_passes;
   picture_options.landmarker = *landmarker;
   int done = 0;
   for (const TestView& view : testset->views) {
@@ -229,6 +232,11 @@ int main(int argc, char** argv) {
   app.add_option("--matches", args.matches, "matches fitted per view")->capture_default_str();
   app.add_option("--threads", args.threads, "search threads")->capture_default_str();
   app.add_option("--limit", args.limit, "the first N views only (0: all)");
+  app.add_option("--landmark-passes",
+                 args.landmark_passes,
+                 "runs of the landmark network a view (as `handdb query --landmark-passes`)")
+      ->check(CLI::Range(1, 2))
+      ->capture_default_str();
   app.add_option("--variant",
                  args.variants,
                  "name:key=value,... fit options refitted (keys: the file's first comment)");
