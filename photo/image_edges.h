@@ -176,12 +176,12 @@ struct QueryEdges {
 Result<QueryEdges> LoadQueryEdges(const std::filesystem::path& image,
                                   const ImageEdgeOptions& options);
 
-// How a picture becomes evidence: its edges and, for a photo, the hand landmark network
-// (photo/hand_landmarks.h), which runs beside the edge extraction on the same decoded pixels.
 // The presence at which the network's joints in a tracked crop (PictureOptions::landmark_start)
 // are kept: MediaPipe Hands' own tracking threshold.
 constexpr float kTrackedCropPresence = 0.5f;
 
+// How a picture becomes evidence: its edges and, for a photo, the hand landmark network
+// (photo/hand_landmarks.h), which runs beside the edge extraction on the same decoded pixels.
 struct PictureOptions {
   ImageEdgeOptions edges;
   // Run on a photo's segmented hand; its joints re-rank the search's nearest views
