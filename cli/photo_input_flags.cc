@@ -84,6 +84,13 @@ void PhotoInputFlags::Add(CLI::App& app, Which which) {
                  "one more run a photo)")
       ->check(CLI::Range(1, 2))
       ->capture_default_str();
+  app.add_option("--landmark-handedness",
+                 options.landmark_rank.handedness,
+                 "photo, --hand either: search only the hand the landmark network names when its "
+                 "handedness score is above this (right) or below 1 minus it (left); 1: always "
+                 "both hands")
+      ->check(CLI::Range(0.5, 1.0))
+      ->capture_default_str();
   app.add_option("--landmark-weight",
                  options.landmark_rank.weight,
                  "photo: weight of the landmark fit against D_c / best D_c in the ranking")
@@ -205,6 +212,8 @@ std::vector<std::string> PhotoInputFlags::Args() const {
                                           : std::string("off"),
                "--landmark-passes",
                std::to_string(options.picture.landmark_passes),
+               "--landmark-handedness",
+               std::to_string(options.landmark_rank.handedness),
                "--landmark-weight",
                std::to_string(options.landmark_rank.weight)});
   return args;
@@ -226,6 +235,7 @@ nlohmann::json PhotoInputFlags::ToJson() const {
        options.picture.landmarker ? nlohmann::json(options.picture.landmarker->path().string())
                                   : nlohmann::json(nullptr)},
       {"landmark_passes", options.picture.landmark_passes},
+      {"landmark_handedness", options.landmark_rank.handedness},
       {"landmark_weight", options.landmark_rank.weight}};
 }
 

@@ -17,6 +17,7 @@ HandLandmarker::HandLandmarker(std::filesystem::path path, std::unique_ptr<Tflit
   input_h_ = model_->input_shape()[1];
   input_w_ = model_->input_shape()[2];
   const std::vector<size_t> sizes = model_->output_sizes();
+  if (sizes.size() > 2 && sizes[2] == 1) handedness_output_ = 2;
   for (size_t i = sizes.size(); i-- > 2;) {
     if (sizes[i] == 3 * kNumLandmarks) {
       world_output_ = static_cast<int>(i);
@@ -99,6 +100,7 @@ HandLandmarks HandLandmarker::Detect(const uint8_t* rgb,
     }
   }
   lm.presence = out[1][0];
+  if (handedness_output_ >= 0) lm.handedness = out[static_cast<size_t>(handedness_output_)][0];
   lm.crop_centre = centre;
   lm.crop_side_px = side;
   lm.crop_angle_deg = angle_deg;

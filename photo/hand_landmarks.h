@@ -37,6 +37,9 @@ struct HandLandmarks {
   // The network's relative depth of each joint in the picture's px (its screen joints' z,
   // scaled from the crop as x and y are; away from the camera, the wrist near 0).
   std::array<float, kNumLandmarks> depth_px{};
+  // The network's handedness score, as it is trained (MediaPipe Hands: for a mirrored, selfie
+  // picture), -1 when the model has no such output.
+  float handedness = -1;
   // The crop the network saw, in source px: centre, side and the turn (degrees, clockwise in
   // the picture) that brought the hand's up to the crop's up.
   Point2f crop_centre{};
@@ -92,7 +95,8 @@ class HandLandmarker {
   std::filesystem::path path_;
   std::unique_ptr<TfliteModel> model_;
   int input_h_ = 0, input_w_ = 0;
-  int world_output_ = -1;  // the world joints' output, -1: none
+  int world_output_ = -1;       // the world joints' output, -1: none
+  int handedness_output_ = -1;  // the handedness score's output, -1: none
 };
 
 }  // namespace handdb

@@ -18,6 +18,7 @@ bool LandmarkRankOptions::Check() const {
   CHECK_OPTION(std::isfinite(weight));
   CHECK_OPTION_GE(weight, 0.0);
   CHECK_OPTION(min_presence >= 0.0f && min_presence <= 1.0f);
+  CHECK_OPTION(handedness >= 0.5f && handedness <= 1.0f);
   CHECK_OPTION_GE(pool_views, 1);
   CHECK_OPTION_LE(pool_views, 100000);
   CHECK_OPTION_GE(pool_per_shape, 1);
@@ -62,6 +63,14 @@ std::vector<Match> RerankByLandmarks(std::vector<Match> pool,
   return LimitPerShape(std::move(pool), search.top_k, search.max_per_shape);
 }
 
+Hand SearchedHand(const PictureEvidence& picture, Hand asked, const LandmarkRankOptions& options) {
+  if (asked != Hand::kEither || !UsesLandmarks(picture, options)) return asked;
+  const float h = picture.landmarks->handedness;
+  if (h > options.handedness && h <= 1) return Hand::kRight;
+  if (h >= 0 && h < 1 - options.handedness) return Hand::kLeft;
+  return asked;
+}
+
 Result<std::vector<Match>> SearchEvidence(const Searcher& searcher,
                                           const PictureEvidence& picture,
                                           const SearchOptions& search,
@@ -70,6 +79,7 @@ Result<std::vector<Match>> SearchEvidence(const Searcher& searcher,
   const std::vector<Point2f> points = picture.edges.points_px();
   if (!UsesLandmarks(picture, options)) return searcher.Search(points, search, stats);
   SearchOptions pool = search;
+  pool.hand = SearchedHand(picture, search.hand, options);
   pool.top_k = std::max(search.top_k, options.pool_views);
   if (search.max_per_shape > 0) {
     pool.max_per_shape = std::max(search.max_per_shape, options.pool_per_shape);

@@ -34,8 +34,17 @@ struct LandmarkRankOptions {
   // search costs 1.27x the top-10 one (docs/decisions/0004-landmark-reranking.md).
   int pool_views = 40;
   int pool_per_shape = 4;
+  // A search of either hand (SearchOptions::hand kEither) of a picture whose landmarks the
+  // re-ranking uses searches one hand when the network names it: a handedness score above
+  // `handedness` a right hand (the database's), below 1 - `handedness` a left one; else both.
+  // 1: both hands always. The score is as the network gives it: for the picture as it is, above
+  // 0.5 for a right hand (docs/decisions/0029).
+  float handedness = 0.9f;
   bool Check() const;
 };
+
+// The hand SearchEvidence searches `picture` as, for a search of `asked` (see handedness above).
+Hand SearchedHand(const PictureEvidence& picture, Hand asked, const LandmarkRankOptions& options);
 
 // E(v) of a match for the picture's landmarks (see above). THROW_CHECK: the picture has
 // landmarks.

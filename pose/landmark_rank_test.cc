@@ -102,6 +102,33 @@ TEST(LandmarkRankTest, UnsureOrMissingLandmarksAreNotUsed) {
   EXPECT_FALSE(bad.Check());
 }
 
+// A search of either hand takes the hand the network names with confidence, from landmarks the
+// re-ranking uses; a search of one hand, unsure or unused landmarks, or handedness 1 keep both.
+TEST(LandmarkRankTest, TheNetworksHandednessChoosesTheHandSearched) {
+  const std::vector<Match> pool = Pool();
+  PictureEvidence q = QueryOn(pool[0], 0.95f);
+  const LandmarkRankOptions options;
+  auto with = [&](float handedness) {
+    q.landmarks->handedness = handedness;
+    return SearchedHand(q, Hand::kEither, options);
+  };
+  EXPECT_EQ(with(0.97f), Hand::kRight);
+  EXPECT_EQ(with(0.03f), Hand::kLeft);
+  EXPECT_EQ(with(0.9f), Hand::kEither);  // not above the threshold
+  EXPECT_EQ(with(0.5f), Hand::kEither);
+  EXPECT_EQ(with(-1.0f), Hand::kEither);  // the model has no handedness output
+  q.landmarks->handedness = 0.03f;
+  EXPECT_EQ(SearchedHand(q, Hand::kRight, options), Hand::kRight);
+  LandmarkRankOptions both = options;
+  both.handedness = 1;
+  EXPECT_EQ(SearchedHand(q, Hand::kEither, both), Hand::kEither);
+  q.landmarks->presence = 0.5f;  // below min_presence: the landmarks are not used
+  EXPECT_EQ(SearchedHand(q, Hand::kEither, options), Hand::kEither);
+  LandmarkRankOptions bad = options;
+  bad.handedness = 0.4f;
+  EXPECT_FALSE(bad.Check());
+}
+
 // Through a real search: without usable landmarks SearchEvidence is Search; with them the list
 // is the pool's, re-ranked, and every match carries its score.
 TEST(LandmarkRankTest, SearchEvidenceReranksThePoolSearch) {
@@ -147,6 +174,14 @@ TEST(LandmarkRankTest, SearchEvidenceReranksThePoolSearch) {
   // The match whose keypoints the landmarks sit on moved up from 4th.
   ASSERT_GE(position, 0);
   EXPECT_LT(position, 3);
+  // Either hand asked, a left hand named: only left-hand matches.
+  SearchOptions either = search;
+  either.hand = Hand::kEither;
+  with.landmarks->handedness = 0.02f;
+  auto left = SearchEvidence(searcher, with, either, LandmarkRankOptions{});
+  ASSERT_TRUE(left.ok());
+  ASSERT_FALSE(left->empty());
+  for (const Match& m : *left) EXPECT_EQ(m.hand, Hand::kLeft);
 }
 
 }  // namespace

@@ -257,6 +257,9 @@ TEST_F(PictureSearchTest, EqualsReadingSearchingAndReranking) {
   EXPECT_TRUE(SamePoints(evidence->edges.points, edges->points));
   SearchOptions pool = options.search;
   pool.top_k = std::max(options.search.top_k, options.landmark_rank.pool_views);
+  // Either hand asked; the network names this photo's hand a right one, so only it is searched.
+  pool.hand = SearchedHand(*evidence, options.search.hand, options.landmark_rank);
+  EXPECT_EQ(pool.hand, Hand::kRight);
   auto pool_matches = searcher.Search(edges->points_px(), pool);
   ASSERT_TRUE(pool_matches.ok());
   const auto expected = RerankByLandmarks(

@@ -626,10 +626,13 @@ SearchOptions SearchOptionsFromArgs(int top_k,
   return options;
 }
 
-LandmarkRankOptions LandmarkRankFromArgs(double landmark_weight) {
+LandmarkRankOptions LandmarkRankFromArgs(double landmark_weight, float landmark_handedness) {
   LandmarkRankOptions landmark_rank;
   landmark_rank.weight = landmark_weight;
-  if (!landmark_rank.Check()) throw py::value_error("landmark_weight must be >= 0");
+  landmark_rank.handedness = landmark_handedness;
+  if (!landmark_rank.Check()) {
+    throw py::value_error("landmark_weight must be >= 0 and landmark_handedness in [0.5, 1]");
+  }
   return landmark_rank;
 }
 
@@ -688,12 +691,14 @@ py::object Search(const PyDatabase& self,
                   bool return_stats,
                   int per_shape,
                   double landmark_weight,
+                  float landmark_handedness,
                   const std::string& fit,
                   int fit_matches,
                   const py::kwargs& edge_kwargs) {
   const SearchOptions options = SearchOptionsFromArgs(
       top_k, threads, hand, brute_force, kdtree, dt_cell_px, coarse_bound, per_shape);
-  const LandmarkRankOptions landmark_rank = LandmarkRankFromArgs(landmark_weight);
+  const LandmarkRankOptions landmark_rank =
+      LandmarkRankFromArgs(landmark_weight, landmark_handedness);
 
   std::optional<PictureEvidence> picture;
   std::vector<Point2f> points;
@@ -812,6 +817,7 @@ py::list SearchMany(const PyDatabase& self,
                     bool return_stats,
                     int per_shape,
                     double landmark_weight,
+                    float landmark_handedness,
                     const std::string& fit,
                     int fit_matches,
                     bool return_exceptions,
@@ -828,7 +834,7 @@ py::list SearchMany(const PyDatabase& self,
   PictureSearchOptions options;
   options.search = SearchOptionsFromArgs(
       top_k, threads, hand, brute_force, kdtree, dt_cell_px, coarse_bound, per_shape);
-  options.landmark_rank = LandmarkRankFromArgs(landmark_weight);
+  options.landmark_rank = LandmarkRankFromArgs(landmark_weight, landmark_handedness);
   options.picture = PictureOptionsFromKwargs(edge_kwargs);
   FitFromArgs(self, fit, fit_matches, &options);
   const Searcher& searcher = self.searcher();
@@ -1390,6 +1396,7 @@ void BindDatabase(py::module_& m) {
           py::arg("return_stats") = false,
           py::arg("per_shape") = 0,
           py::arg("landmark_weight") = LandmarkRankOptions{}.weight,
+          py::arg("landmark_handedness") = LandmarkRankOptions{}.handedness,
           py::arg("fit") = "auto",
           py::arg("fit_matches") = MatchFitOptions{}.max_matches,
           "Exact top-k (view, roll) by the chamfer distance (docs/query.md), best first, as a list "
@@ -1404,7 +1411,9 @@ void BindDatabase(py::module_& m) {
           "top_k nearest shapes, each by its best view, as `handdb query --per-shape 1`). A photo "
           "whose QueryEdges carry hand landmarks (query_edges(landmarks='auto'), the default) is "
           "re-ranked by them as `handdb query` does (Match.score; landmark_weight as "
-          "--landmark-weight). fit: for an image path, 'auto' (default) fits the pose of the "
+          "--landmark-weight; with hand='either', landmark_handedness as --landmark-handedness "
+          "searches only the hand the network names). fit: for an image path, 'auto' (default) "
+          "fits the pose of the "
           "first fit_matches matches to the photo's landmarks (or, without them, to the "
           "picture's silhouette) as `handdb query --fit` does "
           "(Match.fit; 'on' raises if the database carries no rig, 'off' skips it).")
@@ -1443,6 +1452,7 @@ void BindDatabase(py::module_& m) {
            py::arg("return_stats") = false,
            py::arg("per_shape") = 0,
            py::arg("landmark_weight") = LandmarkRankOptions{}.weight,
+           py::arg("landmark_handedness") = LandmarkRankOptions{}.handedness,
            py::arg("fit") = "auto",
            py::arg("fit_matches") = MatchFitOptions{}.max_matches,
            py::arg("return_exceptions") = false,
