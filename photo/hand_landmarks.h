@@ -37,8 +37,9 @@ struct HandLandmarks {
   // The network's relative depth of each joint in the picture's px (its screen joints' z,
   // scaled from the crop as x and y are; away from the camera, the wrist near 0).
   std::array<float, kNumLandmarks> depth_px{};
-  // The network's handedness score, as it is trained (MediaPipe Hands: for a mirrored, selfie
-  // picture), -1 when the model has no such output.
+  // The network's handedness score: above 0.5 for a right hand in the picture as it is
+  // (measured on right- and left-hand renders, docs/decisions/0029); -1 when the model has no
+  // such output.
   float handedness = -1;
   // The crop the network saw, in source px: centre, side and the turn (degrees, clockwise in
   // the picture) that brought the hand's up to the crop's up.

@@ -1016,6 +1016,7 @@ void BindQueryEdges(py::module_& m) {
             const HandLandmarks& l = *q.picture.landmarks;
             py::dict d;
             d["presence"] = l.presence;
+            d["handedness"] = l.handedness;
             d["image_px"] =
                 Point2fArray(std::vector<Point2f>(l.image_px.begin(), l.image_px.end()));
             d["crop_centre_px"] = py::make_tuple(l.crop_centre.x, l.crop_centre.y);
@@ -1023,8 +1024,8 @@ void BindQueryEdges(py::module_& m) {
             d["crop_angle_deg"] = l.crop_angle_deg;
             return d;
           },
-          "photo: the hand landmark network's joints, {presence, image_px (21, 2), crop_*}, or "
-          "None (no model, or not a photo)")
+          "photo: the hand landmark network's joints, {presence, handedness, image_px (21, 2), "
+          "crop_*}, or None (no model, or not a photo)")
       .def(
           "image_from_normalised",
           [](const PyQueryEdges& q,

@@ -376,6 +376,7 @@ def test_photo_landmarks_rerank_like_the_cli(handdb, db, db_dir):
     edges = handdb.query_edges(photo)
     assert edges.landmarks is not None and edges.landmarks["presence"] > 0.9
     assert edges.landmarks["image_px"].shape == (21, 2)
+    assert edges.landmarks["handedness"] > 0.9  # a right hand, named by the network
     matches = db.search(edges, top_k=5, per_shape=1)
     scores = [m.score for m in matches]
     assert all(s is not None for s in scores) and scores == sorted(scores)
