@@ -40,6 +40,23 @@ fs::path Photo(const std::string& shape, const std::string& file) {
   return SourceDir() / "tests" / "data" / "photos" / "asl-digits" / shape / file;
 }
 
+// The landmarks were found in `crop`.
+void ExpectFoundIn(const HandLandmarks& l, const LandmarkCrop& crop) {
+  EXPECT_NEAR(l.crop_centre.x, crop.centre.x, 1e-3);
+  EXPECT_NEAR(l.crop_centre.y, crop.centre.y, 1e-3);
+  EXPECT_NEAR(l.crop_side_px, crop.side, 1e-3);
+  EXPECT_NEAR(l.crop_angle_deg, crop.angle_deg, 1e-3);
+}
+
+// Two runs found the same hand: no joint moved by `max_px` or more.
+void ExpectSameHand(const HandLandmarks& a, const HandLandmarks& b, double max_px) {
+  for (int k = 0; k < kNumLandmarks; ++k) {
+    EXPECT_LT(std::hypot(a.image_px[k].x - b.image_px[k].x, a.image_px[k].y - b.image_px[k].y),
+              max_px)
+        << k;
+  }
+}
+
 // The installed model; the README's test command installs it, so its absence is a failure.
 fs::path Model() {
   const fs::path model = HandLandmarker::DefaultModelPath();
@@ -158,17 +175,9 @@ TEST(HandLandmarkerTest, FindsTheJointsOfRealPhotos) {
     ASSERT_TRUE(first.ok() && first->landmarks.has_value());
     EXPECT_NEAR(first->landmarks->crop_side_px, 1.5 * q->diameter_px, 1e-3);
     EXPECT_GT(first->landmarks->presence, 0.9f);
-    const LandmarkCrop crop = CropAroundLandmarks(*first->landmarks);
-    EXPECT_NEAR(l.crop_centre.x, crop.centre.x, 1e-3);
-    EXPECT_NEAR(l.crop_centre.y, crop.centre.y, 1e-3);
-    EXPECT_NEAR(l.crop_side_px, crop.side, 1e-3);
-    EXPECT_NEAR(l.crop_angle_deg, crop.angle_deg, 1e-3);
+    ExpectFoundIn(l, CropAroundLandmarks(*first->landmarks));
     // The two runs find the same hand: no joint moves by more than a tenth of its diameter.
-    for (int k = 0; k < kNumLandmarks; ++k) {
-      const Point2f& a = first->landmarks->image_px[k];
-      EXPECT_LT(std::hypot(a.x - l.image_px[k].x, a.y - l.image_px[k].y), 0.1 * q->diameter_px)
-          << k;
-    }
+    ExpectSameHand(*first->landmarks, l, 0.1 * q->diameter_px);
     // Every joint in the picture (the wrist may lie a little past the border the arm leaves
     // by), near the hand (within its diameter of its centre).
     const double margin = 0.1 * q->diameter_px;
@@ -219,16 +228,8 @@ TEST(HandLandmarkerTest, ATrackedCropRunsTheNetworkOnceWhileItHoldsTheHand) {
   ASSERT_TRUE(next.ok() && next->landmarks.has_value());
   const HandLandmarks& l = *next->landmarks;
   EXPECT_GE(l.presence, kTrackedCropPresence);
-  EXPECT_NEAR(l.crop_centre.x, tracked.landmark_start->centre.x, 1e-3);
-  EXPECT_NEAR(l.crop_centre.y, tracked.landmark_start->centre.y, 1e-3);
-  EXPECT_NEAR(l.crop_side_px, tracked.landmark_start->side, 1e-3);
-  EXPECT_NEAR(l.crop_angle_deg, tracked.landmark_start->angle_deg, 1e-3);
-  for (int k = 0; k < kNumLandmarks; ++k) {
-    const Point2f& a = alone->landmarks->image_px[k];
-    EXPECT_LT(std::hypot(a.x - l.image_px[k].x, a.y - l.image_px[k].y),
-              0.1 * alone->edges.diameter_px)
-        << k;
-  }
+  ExpectFoundIn(l, *tracked.landmark_start);
+  ExpectSameHand(*alone->landmarks, l, 0.1 * alone->edges.diameter_px);
 
   // A crop of the picture's corner holds no hand: the frame's joints are the picture's alone.
   tracked.landmark_start = LandmarkCrop{{2, 2}, 8, 0};
