@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "pose/fit_kinematics.h"
+#include "pose/fit_landmark_cost.h"
 
 namespace handdb {
 namespace {
@@ -67,85 +68,27 @@ struct PoseBlocks {
   }
 };
 
-// One landmark: the rig's keypoint k, posed, turned into the camera and placed in the normalised
-// frame, minus the picture's landmark, over sigma. Only keypoint k's chain of bones is posed,
-// from its digit's angles (the wrist's from none).
-class LandmarkResidual {
- public:
-  LandmarkResidual(const FitKinematics* kinematics,
-                   int keypoint,
-                   const Vec3d& look_at,
-                   const Point2f& landmark,
-                   double inverse_sigma)
-      : kinematics_(kinematics),
-        keypoint_(keypoint),
-        look_at_(look_at),
-        landmark_{landmark.x, landmark.y},
-        inverse_sigma_(inverse_sigma) {}
-
-  // A digit's keypoint.
-  template <typename T>
-  bool operator()(
-      const T* digit, const T* cam_from_hand, const T* scale, const T* shift, T* residuals) const {
-    T point[3];
-    kinematics_->KeypointOfDigit(digit, keypoint_, point);
-    return Project(point, cam_from_hand, scale, shift, residuals);
+// The residual block of landmark k over its blocks (pose/fit_landmark_cost.h).
+ceres::ResidualBlockId AddLandmarkBlock(ceres::Problem* problem,
+                                        ceres::LossFunction* loss,
+                                        const PoseBlocks& blocks,
+                                        const FitKinematics* kinematics,
+                                        int keypoint,
+                                        const Vec3d& look_at,
+                                        const Point2f& landmark,
+                                        double inverse_sigma) {
+  auto* cost = new fit_internal::LandmarkCost(
+      fit_internal::LandmarkResidual(kinematics, keypoint, look_at, landmark, inverse_sigma));
+  if (keypoint == 0) {
+    return problem->AddResidualBlock(cost, loss, blocks.cam_from_hand, blocks.scale, blocks.shift);
   }
-
-  // The wrist, which no angle moves.
-  template <typename T>
-  bool operator()(const T* cam_from_hand, const T* scale, const T* shift, T* residuals) const {
-    T point[3];
-    kinematics_->KeypointOfDigit(static_cast<const T*>(nullptr), keypoint_, point);
-    return Project(point, cam_from_hand, scale, shift, residuals);
-  }
-
-  // The residual block of landmark k over its blocks.
-  static ceres::ResidualBlockId Add(ceres::Problem* problem,
-                                    ceres::LossFunction* loss,
-                                    const PoseBlocks& blocks,
-                                    const FitKinematics* kinematics,
-                                    int keypoint,
-                                    const Vec3d& look_at,
-                                    const Point2f& landmark,
-                                    double inverse_sigma) {
-    auto* functor = new LandmarkResidual(kinematics, keypoint, look_at, landmark, inverse_sigma);
-    if (keypoint == 0) {
-      return problem->AddResidualBlock(
-          new ceres::AutoDiffCostFunction<LandmarkResidual, 2, 4, 1, 2>(functor),
-          loss,
-          blocks.cam_from_hand,
-          blocks.scale,
-          blocks.shift);
-    }
-    return problem->AddResidualBlock(
-        new ceres::AutoDiffCostFunction<LandmarkResidual, 2, kDigitDofs, 4, 1, 2>(functor),
-        loss,
-        blocks.digit(FitKinematics::DigitOf(keypoint)),
-        blocks.cam_from_hand,
-        blocks.scale,
-        blocks.shift);
-  }
-
- private:
-  template <typename T>
-  bool Project(
-      T* point, const T* cam_from_hand, const T* scale, const T* shift, T* residuals) const {
-    for (int r = 0; r < 3; ++r) point[r] -= T(look_at_[r]);
-    T in_cam[3];
-    ceres::UnitQuaternionRotatePoint(cam_from_hand, point, in_cam);
-    for (int r = 0; r < 2; ++r) {
-      residuals[r] = (scale[0] * in_cam[r] + shift[r] - T(landmark_[r])) * inverse_sigma_;
-    }
-    return true;
-  }
-
-  const FitKinematics* kinematics_;
-  int keypoint_;
-  Vec3d look_at_;
-  std::array<double, 2> landmark_;
-  double inverse_sigma_;
-};
+  return problem->AddResidualBlock(cost,
+                                   loss,
+                                   blocks.digit(FitKinematics::DigitOf(keypoint)),
+                                   blocks.cam_from_hand,
+                                   blocks.scale,
+                                   blocks.shift);
+}
 
 // A digit's joints near the candidate's: per joint (angle - start) / sigma.
 class DigitPrior {
@@ -911,14 +854,14 @@ Result<PoseFit> FitPose(const HandRig& rig,
       // same error whatever its confidence.
       ceres::LossFunction* loss = new ceres::ScaledLoss(
           new ceres::HuberLoss(options.landmark_loss_scale), w, ceres::TAKE_OWNERSHIP);
-      landmark_blocks.push_back(LandmarkResidual::Add(&problem,
-                                                      loss,
-                                                      blocks,
-                                                      &kinematics,
-                                                      k,
-                                                      rig.look_at(),
-                                                      evidence.landmarks_px[k],
-                                                      1.0 / options.landmark_sigma_px));
+      landmark_blocks.push_back(AddLandmarkBlock(&problem,
+                                                 loss,
+                                                 blocks,
+                                                 &kinematics,
+                                                 k,
+                                                 rig.look_at(),
+                                                 evidence.landmarks_px[k],
+                                                 1.0 / options.landmark_sigma_px));
     }
   }
   std::vector<ceres::ResidualBlockId> silhouette_blocks;

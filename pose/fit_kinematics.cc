@@ -2,6 +2,7 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <array>
 #include <map>
 #include <string>
 
@@ -65,6 +66,69 @@ FitKinematics::FitKinematics(const HandRig& rig) {
       for (const Dof& dof : bones_[b].dofs) {
         if (k == 0 || dof.index < first || dof.index >= first + kDigitDofs) digit_blocks_ = false;
       }
+    }
+  }
+}
+
+void FitKinematics::KeypointOfDigitWithJacobian(const double* digit_joints,
+                                                int k,
+                                                double point_in_hand[3],
+                                                double jacobian[3][kDigitDofs]) const {
+  // Each turn's bone frame F (before the turn), origin o and axis a. With the keypoint at
+  // p = o + F R(a, t) v, d p / d t = F (a x R(a, t) v) = F (a x F^-1 (p - o)). The rig's rest
+  // frames are orthonormal only to float precision, so F^-1 is solved for, not taken as F^T.
+  struct Turn {
+    int column;
+    double frame[3][3];
+    double origin[3];
+    double axis[3];
+  };
+  std::array<Turn, kDigitDofs> turns;
+  int num_turns = 0;
+  Pose(digit_joints,
+       DigitOf(k) * kDigitDofs,
+       k,
+       point_in_hand,
+       [&](int column,
+           const double(&frame)[3][3],
+           const double(&origin)[3],
+           const double(&axis)[3]) {
+         Turn& turn = turns[num_turns++];  // a digit's chain has at most its kDigitDofs joints
+         turn.column = column;
+         for (int r = 0; r < 3; ++r) {
+           for (int c = 0; c < 3; ++c) turn.frame[r][c] = frame[r][c];
+           turn.origin[r] = origin[r];
+           turn.axis[r] = axis[r];
+         }
+       });
+  for (int r = 0; r < 3; ++r) {
+    for (int i = 0; i < kDigitDofs; ++i) jacobian[r][i] = 0;
+  }
+  for (int t = 0; t < num_turns; ++t) {
+    const Turn& turn = turns[t];
+    const double(&f)[3][3] = turn.frame;
+    const double d[3] = {point_in_hand[0] - turn.origin[0],
+                         point_in_hand[1] - turn.origin[1],
+                         point_in_hand[2] - turn.origin[2]};
+    // y = F^-1 d by the adjugate.
+    const double adj[3][3] = {{f[1][1] * f[2][2] - f[1][2] * f[2][1],
+                               f[0][2] * f[2][1] - f[0][1] * f[2][2],
+                               f[0][1] * f[1][2] - f[0][2] * f[1][1]},
+                              {f[1][2] * f[2][0] - f[1][0] * f[2][2],
+                               f[0][0] * f[2][2] - f[0][2] * f[2][0],
+                               f[0][2] * f[1][0] - f[0][0] * f[1][2]},
+                              {f[1][0] * f[2][1] - f[1][1] * f[2][0],
+                               f[0][1] * f[2][0] - f[0][0] * f[2][1],
+                               f[0][0] * f[1][1] - f[0][1] * f[1][0]}};
+    const double det = f[0][0] * adj[0][0] + f[0][1] * adj[1][0] + f[0][2] * adj[2][0];
+    double y[3];
+    for (int r = 0; r < 3; ++r)
+      y[r] = (adj[r][0] * d[0] + adj[r][1] * d[1] + adj[r][2] * d[2]) / det;
+    const double* a = turn.axis;
+    const double a_y[3] = {
+        a[1] * y[2] - a[2] * y[1], a[2] * y[0] - a[0] * y[2], a[0] * y[1] - a[1] * y[0]};
+    for (int r = 0; r < 3; ++r) {
+      jacobian[r][turn.column] += f[r][0] * a_y[0] + f[r][1] * a_y[1] + f[r][2] * a_y[2];
     }
   }
 }

@@ -41,6 +41,15 @@ class FitKinematics {
   // wrist, which has no angle.
   static constexpr int DigitOf(int k) { return k == 0 ? 0 : (k - 1) / kDigitDofs; }
 
+  // KeypointOfDigit in double (the same value, bit for bit), with its derivatives with respect to
+  // the digit's angles: jacobian[r][i] = d point[r] / d digit_joints[i], the Jets' dual parts to
+  // rounding (a joint turns everything after it about its axis at its bone's origin). Zero for
+  // the wrist and for a digit's joints below the keypoint. Valid when digit_blocks() holds.
+  void KeypointOfDigitWithJacobian(const double* digit_joints,
+                                   int k,
+                                   double point_in_hand[3],
+                                   double jacobian[3][kDigitDofs]) const;
+
   // Whether every keypoint's chain turns only by its own digit's DOFs, as docs/conventions.md
   // orders them (digit d: DOFs 4d..4d+3). A rig that breaks this cannot be fitted per digit.
   bool digit_blocks() const { return digit_blocks_; }
@@ -65,9 +74,20 @@ class FitKinematics {
     double length = 0;
   };
 
-  // Keypoint k posed from `joints`, whose first entry is DOF `first_dof`.
+  // Keypoint k posed from `joints`, whose first entry is DOF `first_dof`. Before each joint turns
+  // its bone, on_turn(column, frame, origin, axis) sees the joint's column in `joints`, the bone's
+  // rotation so far (bone frame -> hand frame), the bone's origin in the hand frame and the
+  // joint's unit axis in bone coordinates.
+  template <typename T, typename OnTurn>
+  void Pose(const T* joints, int first_dof, int k, T* point_in_hand, OnTurn&& on_turn) const;
   template <typename T>
-  void Pose(const T* joints, int first_dof, int k, T* point_in_hand) const;
+  void Pose(const T* joints, int first_dof, int k, T* point_in_hand) const {
+    Pose(joints,
+         first_dof,
+         k,
+         point_in_hand,
+         [](int, const T(&)[3][3], const T(&)[3], const double(&)[3]) {});
+  }
 
   std::vector<Bone> bones_;
   std::array<Chain, kNumKeypoints> chains_;
@@ -108,8 +128,9 @@ void AxisAngleRotation(const double (&axis)[3], const T& angle, T (&r)[3][3]) {
 
 }  // namespace fit_internal
 
-template <typename T>
-void FitKinematics::Pose(const T* joints, int first_dof, int k, T* point_in_hand) const {
+template <typename T, typename OnTurn>
+void FitKinematics::Pose(
+    const T* joints, int first_dof, int k, T* point_in_hand, OnTurn&& on_turn) const {
   const Chain& chain = chains_[k];
   // The posed transform of the chain so far (bone frame -> hand frame).
   T rotation[3][3];
@@ -136,6 +157,7 @@ void FitKinematics::Pose(const T* joints, int first_dof, int k, T* point_in_hand
       fit_internal::MatMul3(rotation, bone.local_rotation, with_local);
     }
     for (const Dof& dof : bone.dofs) {
+      on_turn(dof.index - first_dof, with_local, translation, dof.axis);
       T turn[3][3];
       T turned[3][3];
       fit_internal::AxisAngleRotation(dof.axis, joints[dof.index - first_dof], turn);
