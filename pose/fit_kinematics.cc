@@ -6,6 +6,8 @@
 #include <map>
 #include <string>
 
+#include "base/status.h"
+
 namespace handdb {
 namespace {
 
@@ -93,7 +95,9 @@ void FitKinematics::KeypointOfDigitWithJacobian(const double* digit_joints,
            const double(&frame)[3][3],
            const double(&origin)[3],
            const double(&axis)[3]) {
-         Turn& turn = turns[num_turns++];  // a digit's chain has at most its kDigitDofs joints
+         // A digit's chain turns by its own joints only, each once (digit_blocks()).
+         THROW_CHECK(num_turns < kDigitDofs && column >= 0 && column < kDigitDofs);
+         Turn& turn = turns[num_turns++];
          turn.column = column;
          for (int r = 0; r < 3; ++r) {
            for (int c = 0; c < 3; ++c) turn.frame[r][c] = frame[r][c];
@@ -122,8 +126,9 @@ void FitKinematics::KeypointOfDigitWithJacobian(const double* digit_joints,
                                f[0][0] * f[1][1] - f[0][1] * f[1][0]}};
     const double det = f[0][0] * adj[0][0] + f[0][1] * adj[1][0] + f[0][2] * adj[2][0];
     double y[3];
-    for (int r = 0; r < 3; ++r)
+    for (int r = 0; r < 3; ++r) {
       y[r] = (adj[r][0] * d[0] + adj[r][1] * d[1] + adj[r][2] * d[2]) / det;
+    }
     const double* a = turn.axis;
     const double a_y[3] = {
         a[1] * y[2] - a[2] * y[1], a[2] * y[0] - a[0] * y[2], a[0] * y[1] - a[1] * y[0]};
