@@ -455,9 +455,9 @@ json ResultJson(const QueryFlags& flags,
           {"weight", flags.picture.options.landmark_rank.weight},
           {"image_px", px},
           {"crop",
-           {{"centre_px", {l.crop_centre.x, l.crop_centre.y}},
-            {"side_px", l.crop_side_px},
-            {"angle_deg", l.crop_angle_deg}}}};
+           {{"centre_px", {l.crop.centre.x, l.crop.centre.y}},
+            {"side_px", l.crop.side},
+            {"angle_deg", l.crop.angle_deg}}}};
     }
   }
   json doc = {{"format", "handdb-query-result"},

@@ -52,28 +52,25 @@ Result<std::shared_ptr<const HandLandmarker>> HandLandmarker::Open(
       new HandLandmarker(model, std::make_unique<TfliteModel>(std::move(m).value())));
 }
 
-HandLandmarks HandLandmarker::Detect(const uint8_t* rgb,
-                                     int width,
-                                     int height,
-                                     size_t stride,
-                                     Point2f centre,
-                                     float side,
-                                     float angle_deg) const {
+HandLandmarks HandLandmarker::Detect(
+    const uint8_t* rgb, int width, int height, size_t stride, const LandmarkCrop& crop) const {
+  const Point2f centre = crop.centre;
+  const float side = crop.side;
   const cv::Mat picture(height, width, CV_8UC3, const_cast<uint8_t*>(rgb), stride);
   // picture -> crop: turn by -angle about `centre`, scale to the network's input, centre it.
   // OpenCV's pixel centres are at integers; ours at integer + 0.5.
-  const double a = angle_deg * M_PI / 180.0;
+  const double a = crop.angle_deg * M_PI / 180.0;
   const double s = static_cast<double>(input_w_) / side;
   const double sy = static_cast<double>(input_h_) / side;
   cv::Matx23d m(std::cos(a) * s, std::sin(a) * s, 0, -std::sin(a) * sy, std::cos(a) * sy, 0);
   const double cx = centre.x - 0.5, cy = centre.y - 0.5;
   m(0, 2) = input_w_ / 2.0 - (m(0, 0) * cx + m(0, 1) * cy);
   m(1, 2) = input_h_ / 2.0 - (m(1, 0) * cx + m(1, 1) * cy);
-  cv::Mat crop;
+  cv::Mat pixels;
   cv::warpAffine(
-      picture, crop, m, cv::Size(input_w_, input_h_), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+      picture, pixels, m, cv::Size(input_w_, input_h_), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
   std::vector<float> input(static_cast<size_t>(input_w_) * input_h_ * 3);
-  crop.convertTo(cv::Mat(input_h_, input_w_, CV_32FC3, input.data()), CV_32F, 1.0 / 255.0);
+  pixels.convertTo(cv::Mat(input_h_, input_w_, CV_32FC3, input.data()), CV_32F, 1.0 / 255.0);
   // One workspace per thread and model: buffers are reused from photo to photo.
   thread_local std::map<const TfliteModel*, std::unique_ptr<TfliteModel::Workspace>> workspaces;
   std::unique_ptr<TfliteModel::Workspace>& ws = workspaces[model_.get()];
@@ -101,9 +98,7 @@ HandLandmarks HandLandmarker::Detect(const uint8_t* rgb,
   }
   lm.presence = out[1][0];
   if (handedness_output_ >= 0) lm.handedness = out[static_cast<size_t>(handedness_output_)][0];
-  lm.crop_centre = centre;
-  lm.crop_side_px = side;
-  lm.crop_angle_deg = angle_deg;
+  lm.crop = crop;
   return lm;
 }
 

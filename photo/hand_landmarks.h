@@ -20,6 +20,14 @@ namespace handdb {
 
 inline constexpr int kNumLandmarks = 21;
 
+// A square crop of a picture, turned: centre and side in the picture's px, and the turn
+// (degrees, clockwise in the picture) that brings the hand's up to the crop's up.
+struct LandmarkCrop {
+  Point2f centre{};
+  float side = 0;
+  float angle_deg = 0;
+};
+
 struct HandLandmarks {
   // The joints in the source picture's px (pixel centres at integer + 0.5, like
   // QueryEdges::ImageFromNormalised), in the order of docs/conventions.md.
@@ -41,19 +49,8 @@ struct HandLandmarks {
   // (measured on right- and left-hand renders, docs/decisions/0029); -1 when the model has no
   // such output.
   float handedness = -1;
-  // The crop the network saw, in source px: centre, side and the turn (degrees, clockwise in
-  // the picture) that brought the hand's up to the crop's up.
-  Point2f crop_centre{};
-  float crop_side_px = 0;
-  float crop_angle_deg = 0;
-};
-
-// A square crop of a picture, turned: centre and side in the picture's px, and the turn
-// (degrees, clockwise in the picture) that brings the hand's up to the crop's up.
-struct LandmarkCrop {
-  Point2f centre{};
-  float side = 0;
-  float angle_deg = 0;
+  // The crop the network saw, in source px.
+  LandmarkCrop crop;
 };
 
 // The crop MediaPipe Hands takes around a hand it has found (its landmarks-to-ROI rule, with
@@ -81,15 +78,9 @@ class HandLandmarker {
   const std::filesystem::path& path() const { return path_; }
 
   // The landmarks of the hand in `rgb` (8-bit RGB rows, `width` x `height`, `stride` bytes per
-  // row) inside the square crop centred at `centre` (px), `side` px wide, turned by
-  // `angle_deg`. Thread-safe.
-  HandLandmarks Detect(const uint8_t* rgb,
-                       int width,
-                       int height,
-                       size_t stride,
-                       Point2f centre,
-                       float side,
-                       float angle_deg) const;
+  // row) inside `crop` (px). Thread-safe.
+  HandLandmarks Detect(
+      const uint8_t* rgb, int width, int height, size_t stride, const LandmarkCrop& crop) const;
 
  private:
   HandLandmarker(std::filesystem::path path, std::unique_ptr<TfliteModel> model);

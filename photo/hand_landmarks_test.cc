@@ -42,10 +42,10 @@ fs::path Photo(const std::string& shape, const std::string& file) {
 
 // The landmarks were found in `crop`.
 void ExpectFoundIn(const HandLandmarks& l, const LandmarkCrop& crop) {
-  EXPECT_NEAR(l.crop_centre.x, crop.centre.x, 1e-3);
-  EXPECT_NEAR(l.crop_centre.y, crop.centre.y, 1e-3);
-  EXPECT_NEAR(l.crop_side_px, crop.side, 1e-3);
-  EXPECT_NEAR(l.crop_angle_deg, crop.angle_deg, 1e-3);
+  EXPECT_NEAR(l.crop.centre.x, crop.centre.x, 1e-3);
+  EXPECT_NEAR(l.crop.centre.y, crop.centre.y, 1e-3);
+  EXPECT_NEAR(l.crop.side, crop.side, 1e-3);
+  EXPECT_NEAR(l.crop.angle_deg, crop.angle_deg, 1e-3);
 }
 
 // Two runs found the same hand: no joint moved by `max_px` or more.
@@ -173,7 +173,7 @@ TEST(HandLandmarkerTest, FindsTheJointsOfRealPhotos) {
     once.landmark_passes = 1;
     auto first = ReadPicture(Photo(shape, file), once);
     ASSERT_TRUE(first.ok() && first->landmarks.has_value());
-    EXPECT_NEAR(first->landmarks->crop_side_px, 1.5 * q->diameter_px, 1e-3);
+    EXPECT_NEAR(first->landmarks->crop.side, 1.5 * q->diameter_px, 1e-3);
     EXPECT_GT(first->landmarks->presence, 0.9f);
     ExpectFoundIn(l, CropAroundLandmarks(*first->landmarks));
     // The two runs find the same hand: no joint moves by more than a tenth of its diameter.
@@ -235,7 +235,7 @@ TEST(HandLandmarkerTest, ATrackedCropRunsTheNetworkOnceWhileItHoldsTheHand) {
   tracked.landmark_start = LandmarkCrop{{2, 2}, 8, 0};
   auto lost = ReadPicture(photo, tracked);
   ASSERT_TRUE(lost.ok() && lost->landmarks.has_value());
-  EXPECT_EQ(lost->landmarks->crop_side_px, alone->landmarks->crop_side_px);
+  EXPECT_EQ(lost->landmarks->crop.side, alone->landmarks->crop.side);
   EXPECT_EQ(lost->landmarks->image_px[12].x, alone->landmarks->image_px[12].x);
   EXPECT_EQ(lost->landmarks->presence, alone->landmarks->presence);
 }

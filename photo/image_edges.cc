@@ -465,8 +465,7 @@ HandLandmarks FindLandmarks(const LandmarkStep& step, const cv::Mat& bgr, const 
   cv::Mat rgb;
   cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
   auto detect = [&](const LandmarkCrop& c) {
-    return step.landmarker->Detect(
-        rgb.data, rgb.cols, rgb.rows, rgb.step, c.centre, c.side, c.angle_deg);
+    return step.landmarker->Detect(rgb.data, rgb.cols, rgb.rows, rgb.step, c);
   };
   if (step.start && UsableCrop(*step.start)) {
     HandLandmarks tracked = detect(*step.start);
@@ -947,15 +946,20 @@ void ScaleToSource(cv::Size source, cv::Size decoded, QueryEdges* q) {
   q->scale /= f;
 }
 
+// A crop in a picture of size `from`'s px -> the same crop in the picture resized to `to`.
+void ScaleCrop(cv::Size from, cv::Size to, LandmarkCrop* crop) {
+  const double fx = double(to.width) / from.width, fy = double(to.height) / from.height;
+  crop->centre = {static_cast<float>(crop->centre.x * fx), static_cast<float>(crop->centre.y * fy)};
+  crop->side *= static_cast<float>(std::sqrt(fx * fy));
+}
+
 // The same for the landmarks found in the reduced picture.
 void ScaleToSource(cv::Size source, cv::Size decoded, HandLandmarks* l) {
   const double fx = double(source.width) / decoded.width;
   const double fy = double(source.height) / decoded.height;
   const double f = std::sqrt(fx * fy);
   for (Point2f& p : l->image_px) p = {static_cast<float>(p.x * fx), static_cast<float>(p.y * fy)};
-  l->crop_centre = {static_cast<float>(l->crop_centre.x * fx),
-                    static_cast<float>(l->crop_centre.y * fy)};
-  l->crop_side_px *= static_cast<float>(f);
+  ScaleCrop(decoded, source, &l->crop);
   for (float& z : l->depth_px) z *= static_cast<float>(f);
 }
 
@@ -1036,13 +1040,8 @@ Result<PictureEvidence> FromDecoded(const std::filesystem::path& image,
     out.edges = std::move(edges).value();
     if (landmarks.landmarker != nullptr) {
       LandmarkStep step = landmarks;
-      if (step.start && source != any.size()) {
-        // The start crop is in the file's px; the network runs in the decoded picture's.
-        const double fx = double(any.cols) / source.width, fy = double(any.rows) / source.height;
-        step.start->centre = {static_cast<float>(step.start->centre.x * fx),
-                              static_cast<float>(step.start->centre.y * fy)};
-        step.start->side *= static_cast<float>(std::sqrt(fx * fy));
-      }
+      // The start crop is in the file's px; the network runs in the decoded picture's.
+      if (step.start && source != any.size()) ScaleCrop(source, any.size(), &*step.start);
       out.landmarks = FindLandmarks(step, bgr, out.edges);
     }
   }

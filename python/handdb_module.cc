@@ -1019,9 +1019,9 @@ void BindQueryEdges(py::module_& m) {
             d["handedness"] = l.handedness;
             d["image_px"] =
                 Point2fArray(std::vector<Point2f>(l.image_px.begin(), l.image_px.end()));
-            d["crop_centre_px"] = py::make_tuple(l.crop_centre.x, l.crop_centre.y);
-            d["crop_side_px"] = l.crop_side_px;
-            d["crop_angle_deg"] = l.crop_angle_deg;
+            d["crop_centre_px"] = py::make_tuple(l.crop.centre.x, l.crop.centre.y);
+            d["crop_side_px"] = l.crop.side;
+            d["crop_angle_deg"] = l.crop.angle_deg;
             return d;
           },
           "photo: the hand landmark network's joints, {presence, handedness, image_px (21, 2), "

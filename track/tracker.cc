@@ -63,11 +63,11 @@ class Tracker {
       Result<PictureEvidence> evidence = frame.has_pixels
                                              ? ReadPicturePixels(frame.name, frame.pixels, picture)
                                              : ReadPicture(frame.path, picture);
-      if (evidence.ok() && options_.landmark_tracking && evidence->landmarks &&
-          evidence->landmarks->presence >= kTrackedCropPresence) {
-        next_landmark_crop_ = CropAroundLandmarks(*evidence->landmarks);
-      }
       if (evidence.ok()) {
+        if (options_.landmark_tracking && evidence->landmarks &&
+            evidence->landmarks->presence >= kTrackedCropPresence) {
+          next_landmark_crop_ = CropAroundLandmarks(*evidence->landmarks);
+        }
         out.evidence = std::move(evidence).value();
       } else {
         out.error = evidence.status();

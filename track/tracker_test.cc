@@ -205,16 +205,16 @@ TEST(TrackFrames, TheLandmarkNetworkLooksWhereTheLastFramesJointsWere) {
   const HandLandmarks& first = *tracked[0].evidence->landmarks;
   const HandLandmarks& second = *tracked[1].evidence->landmarks;
   const LandmarkCrop crop = CropAroundLandmarks(first);
-  EXPECT_NEAR(second.crop_centre.x, crop.centre.x, 1e-3);
-  EXPECT_NEAR(second.crop_centre.y, crop.centre.y, 1e-3);
-  EXPECT_NEAR(second.crop_side_px, crop.side, 1e-3);
+  EXPECT_NEAR(second.crop.centre.x, crop.centre.x, 1e-3);
+  EXPECT_NEAR(second.crop.centre.y, crop.centre.y, 1e-3);
+  EXPECT_NEAR(second.crop.side, crop.side, 1e-3);
   // The first frame has no frame before it: both ways it is the picture's alone.
-  EXPECT_EQ(first.crop_side_px, alone[0].evidence->landmarks->crop_side_px);
+  EXPECT_EQ(first.crop.side, alone[0].evidence->landmarks->crop.side);
   auto picture = ReadPicture(dir / "f001.png", options.picture.picture);
   ASSERT_TRUE(picture.ok() && picture->landmarks.has_value());
-  EXPECT_EQ(alone[1].evidence->landmarks->crop_side_px, picture->landmarks->crop_side_px);
+  EXPECT_EQ(alone[1].evidence->landmarks->crop.side, picture->landmarks->crop.side);
   EXPECT_EQ(alone[1].evidence->landmarks->image_px[8].x, picture->landmarks->image_px[8].x);
-  EXPECT_NE(alone[1].evidence->landmarks->crop_side_px, second.crop_side_px);
+  EXPECT_NE(alone[1].evidence->landmarks->crop.side, second.crop.side);
   fs::remove_all(dir);
 }
 
