@@ -108,33 +108,14 @@ void FitKinematics::KeypointOfDigitWithJacobian(const double* digit_joints,
   for (int r = 0; r < 3; ++r) {
     for (int i = 0; i < kDigitDofs; ++i) jacobian[r][i] = 0;
   }
+  using RowMajor3d = Eigen::Matrix<double, 3, 3, Eigen::RowMajor>;
+  const Eigen::Map<const Eigen::Vector3d> p(point_in_hand);
   for (int t = 0; t < num_turns; ++t) {
     const Turn& turn = turns[t];
-    const double(&f)[3][3] = turn.frame;
-    const double d[3] = {point_in_hand[0] - turn.origin[0],
-                         point_in_hand[1] - turn.origin[1],
-                         point_in_hand[2] - turn.origin[2]};
-    // y = F^-1 d by the adjugate.
-    const double adj[3][3] = {{f[1][1] * f[2][2] - f[1][2] * f[2][1],
-                               f[0][2] * f[2][1] - f[0][1] * f[2][2],
-                               f[0][1] * f[1][2] - f[0][2] * f[1][1]},
-                              {f[1][2] * f[2][0] - f[1][0] * f[2][2],
-                               f[0][0] * f[2][2] - f[0][2] * f[2][0],
-                               f[0][2] * f[1][0] - f[0][0] * f[1][2]},
-                              {f[1][0] * f[2][1] - f[1][1] * f[2][0],
-                               f[0][1] * f[2][0] - f[0][0] * f[2][1],
-                               f[0][0] * f[1][1] - f[0][1] * f[1][0]}};
-    const double det = f[0][0] * adj[0][0] + f[0][1] * adj[1][0] + f[0][2] * adj[2][0];
-    double y[3];
-    for (int r = 0; r < 3; ++r) {
-      y[r] = (adj[r][0] * d[0] + adj[r][1] * d[1] + adj[r][2] * d[2]) / det;
-    }
-    const double* a = turn.axis;
-    const double a_y[3] = {
-        a[1] * y[2] - a[2] * y[1], a[2] * y[0] - a[0] * y[2], a[0] * y[1] - a[1] * y[0]};
-    for (int r = 0; r < 3; ++r) {
-      jacobian[r][turn.column] += f[r][0] * a_y[0] + f[r][1] * a_y[1] + f[r][2] * a_y[2];
-    }
+    const Eigen::Map<const RowMajor3d> f(&turn.frame[0][0]);
+    const Eigen::Map<const Eigen::Vector3d> a(turn.axis), o(turn.origin);
+    const Eigen::Vector3d column = f * a.cross(f.inverse() * (p - o));
+    for (int r = 0; r < 3; ++r) jacobian[r][turn.column] += column[r];
   }
 }
 

@@ -155,25 +155,19 @@ class LandmarkCost final : public ceres::CostFunction {
   }
 
  private:
-  static void Cross(const double* a, const double* b, double* out) {
-    out[0] = a[1] * b[2] - a[2] * b[1];
-    out[1] = a[2] * b[0] - a[0] * b[2];
-    out[2] = a[0] * b[1] - a[1] * b[0];
-  }
-
   // d/dq of p + 2 w (u x p) + 2 u x (u x p) for q = (w, u): column 0 is 2 (u x p); column 1 + i is
   // 2 w (e_i x p) + 2 (e_i x (u x p) + u x (e_i x p)).
   static void RotationJacobian(const double* q, const double* p, double (&out)[3][4]) {
     const double* u = q + 1;
     double u_p[3];
-    Cross(u, p, u_p);
+    ceres::CrossProduct(u, p, u_p);
     for (int r = 0; r < 3; ++r) out[r][0] = 2 * u_p[r];
     for (int i = 0; i < 3; ++i) {
       const double e[3] = {i == 0 ? 1.0 : 0.0, i == 1 ? 1.0 : 0.0, i == 2 ? 1.0 : 0.0};
       double e_p[3], e_u_p[3], u_e_p[3];
-      Cross(e, p, e_p);
-      Cross(e, u_p, e_u_p);
-      Cross(u, e_p, u_e_p);
+      ceres::CrossProduct(e, p, e_p);
+      ceres::CrossProduct(e, u_p, e_u_p);
+      ceres::CrossProduct(u, e_p, u_e_p);
       for (int r = 0; r < 3; ++r) out[r][1 + i] = 2 * (q[0] * e_p[r] + e_u_p[r] + u_e_p[r]);
     }
   }
