@@ -78,7 +78,7 @@ void FitKinematics::KeypointOfDigitWithJacobian(const double* digit_joints,
                                                 double jacobian[3][kDigitDofs]) const {
   // Each turn's bone frame F (before the turn), origin o and axis a. With the keypoint at
   // p = o + F R(a, t) v, d p / d t = F (a x R(a, t) v) = F (a x F^-1 (p - o)). The rig's rest
-  // frames are orthonormal only to float precision, so F^-1 is solved for, not taken as F^T.
+  // frames are orthonormal only to float precision, so F is inverted, not transposed.
   struct Turn {
     int column;
     double frame[3][3];
